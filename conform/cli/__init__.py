@@ -1,0 +1,1 @@
+"""The ``conform`` command line: one small module per subcommand group."""
