@@ -69,7 +69,7 @@ def _load(root: Path) -> Spec:
 
     questions = _questions(*docs["questions"])
     commands = _commands(*docs["commands"], questions)
-    errors, inta_bit = _errors(*docs["errors"])
+    errors, inta_bit = _errors(*docs["errors"], commands)
     status = _status(*docs["status"])
     eeprom_maps = _eeprom(*docs["eeprom"])
     variants = _variants(*docs["variants"], commands, eeprom_maps, status)
@@ -163,18 +163,22 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
 
 # --- errors, status, eeprom -------------------------------------------------------------------
 
-def _errors(path: Path, text: str, data: dict) -> tuple[dict[int, ErrorCode], int]:
+def _errors(path: Path, text: str, data: dict, commands: dict[str, CommandSpec]) -> tuple[dict[int, ErrorCode], int]:
     top = Row(data, path, "top level", None)
     inta_bit = top.get("inta_bit", int)
     out: dict[int, ErrorCode] = {}
     for row in each(data.get("error"), path, text, "error", _label):
-        row.check_keys({"code", "name", "meaning", "clause"})
+        row.check_keys({"code", "name", "meaning", "clause", "raised_by"})
         code = row.get("code", int)
+        raised_by = row.str_list("raised_by")
+        for cid in raised_by:
+            if cid != "*" and cid not in commands:
+                row.fail("raised_by", f"unknown command {cid!r}")
         if not 0 <= code <= 7:
             row.fail("code", "error codes are 3 bits (0..7)")
         if code in out:
             row.fail("code", f"duplicate code {code}")
-        out[code] = ErrorCode(code, row.get("name", str), row.get("meaning", str), row.clauses())
+        out[code] = ErrorCode(code, row.get("name", str), row.get("meaning", str), row.clauses(), raised_by)
     missing = set(range(8)) - set(out)
     if missing:
         raise SpecError(f"{path.name}: error codes missing: {sorted(missing)}")
@@ -310,6 +314,14 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
                            "addresses", "status_words", "eeprom_map"):
             if field_name not in m:
                 row.fail(field_name, "missing (neither here nor in a base)")
+        types = {"title": str, "manual": str, "firmware": str, "axes": list, "queue": int,
+                 "max_rate": int, "bauds": list, "addresses": dict, "status_words": list,
+                 "eeprom_map": str, "default_baud": int, "input_bits": dict, "processor_id": str}
+        for field_name, ftype in types.items():
+            if field_name in m and (not isinstance(m[field_name], ftype) or isinstance(m[field_name], bool)):
+                row.fail(field_name, f"expected {ftype.__name__}, got {m[field_name]!r}")
+        if m["manual"] not in ("GVE64", "GVE124"):
+            row.fail("manual", f"{m['manual']!r} is not GVE64 or GVE124")
         ranges = {}
         for name, rng in m["ranges"].items():
             if (not isinstance(rng, list) or len(rng) != 2

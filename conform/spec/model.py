@@ -78,6 +78,7 @@ class ErrorCode:
     name: str
     meaning: str
     clauses: tuple[str, ...]
+    raised_by: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
