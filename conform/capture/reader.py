@@ -1,0 +1,168 @@
+"""Read a conform capture back: raw chunks, frames, exchanges, link events, logs, metadata.
+
+For the analyser and the CLI. Tolerant by design: a truncated or partly damaged file gives
+everything that is intact, and ``capture.truncated`` / ``capture.status`` say what was
+missing. Only a file that is not an MCAP at all raises ``UserError``::
+
+    cap = open_capture("run.mcap")
+    for chunk in cap.raw_chunks("host"):      # dicts as in docs/capture-format.md,
+        chunk["bytes"]                        # plus the decoded bytes
+    df = cap.table("/exchanges")              # a pandas DataFrame, one row per message
+    cap.metadata["conform.session"]["baud"]
+    cap.truncated                             # True if the recorder never finished
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mcap.records import Channel, Message, Metadata
+
+from conform.capture.scan import ScanStatus, check_magic, iter_records
+from conform.capture.schemas import (
+    DIRECTION_TOPIC,
+    TOPIC_EXCHANGES,
+    TOPIC_FRAMES,
+    TOPIC_LINK,
+    TOPIC_LOG,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+@dataclass(frozen=True)
+class CaptureMessage:
+    topic: str
+    log_time: int  # ns since the epoch
+    sequence: int
+    payload: dict[str, Any]
+
+
+class Capture:
+    """One capture file; every iterator makes its own pass over the file."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = check_magic(path)
+        self._status: ScanStatus | None = None
+        self._metadata: dict[str, dict[str, str]] | None = None
+        self.bad_messages = 0
+
+    # -- low level -------------------------------------------------------------------------
+    def _pass(self, topics: set[str] | None) -> Iterator[tuple[Channel, Message]]:
+        status = ScanStatus(self.path)
+        channels: dict[int, Channel] = {}
+        metadata: dict[str, dict[str, str]] = {}
+        for rec in iter_records(status):
+            if isinstance(rec, Message):
+                channel = channels.get(rec.channel_id)
+                if channel is not None and (topics is None or channel.topic in topics):
+                    yield channel, rec
+            elif isinstance(rec, Channel):
+                channels.setdefault(rec.id, rec)
+            elif isinstance(rec, Metadata):
+                metadata[rec.name] = dict(rec.metadata)
+        self._status = status
+        self._metadata = metadata
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[CaptureMessage]:
+        """JSON messages on ``topics`` (all if ``None``), in file order."""
+        wanted = set(topics) if topics is not None else None
+        bad = 0
+        for channel, msg in self._pass(wanted):
+            if channel.message_encoding != "json":
+                continue
+            try:
+                payload = json.loads(msg.data)
+            except (ValueError, RecursionError):
+                bad += 1
+                continue
+            if not isinstance(payload, dict):
+                bad += 1
+                continue
+            yield CaptureMessage(channel.topic, msg.log_time, msg.sequence, payload)
+        self.bad_messages = bad
+
+    @property
+    def status(self) -> ScanStatus:
+        """What the last full pass found (makes one if none has run)."""
+        if self._status is None:
+            for _ in self._pass(set()):
+                pass
+        assert self._status is not None
+        return self._status
+
+    @property
+    def truncated(self) -> bool:
+        return self.status.truncated
+
+    @property
+    def clean(self) -> bool:
+        return self.status.clean
+
+    @property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """MCAP Metadata records by name (``conform.session``, ``conform.session_end``...)."""
+        if self._metadata is None:
+            self.status  # noqa: B018 - a pass fills it
+        assert self._metadata is not None
+        return self._metadata
+
+    # -- typed views -----------------------------------------------------------------------
+    def raw_chunks(self, direction: str | None = None) -> Iterator[dict[str, Any]]:
+        """Raw chunk payloads (both directions merged in file order) with ``bytes`` added."""
+        if direction is not None and direction not in DIRECTION_TOPIC:
+            raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
+        topics = [DIRECTION_TOPIC[direction]] if direction else list(DIRECTION_TOPIC.values())
+        for m in self.messages(topics):
+            payload = dict(m.payload)
+            try:
+                payload["bytes"] = base64.b64decode(payload.get("data", ""), validate=True)
+            except (binascii.Error, ValueError, TypeError):
+                self.bad_messages += 1
+                continue
+            payload["log_time"] = m.log_time
+            yield payload
+
+    def _topic(self, topic: str) -> Iterator[dict[str, Any]]:
+        for m in self.messages([topic]):
+            yield {**m.payload, "log_time": m.log_time}
+
+    def frames(self) -> Iterator[dict[str, Any]]:
+        return self._topic(TOPIC_FRAMES)
+
+    def exchanges(self) -> Iterator[dict[str, Any]]:
+        return self._topic(TOPIC_EXCHANGES)
+
+    def link_events(self) -> Iterator[dict[str, Any]]:
+        return self._topic(TOPIC_LINK)
+
+    def logs(self) -> Iterator[dict[str, Any]]:
+        return self._topic(TOPIC_LOG)
+
+    def stream(self, direction: str) -> bytes:
+        """Every byte of one direction, concatenated (gaps are not filled)."""
+        return b"".join(c["bytes"] for c in self.raw_chunks(direction))
+
+    def table(self, topic: str) -> pd.DataFrame:
+        """A topic (or ``"host"``/``"unit"``) as a DataFrame; ``log_time`` in ns."""
+        import pandas as pd
+
+        by_topic = {t: d for d, t in DIRECTION_TOPIC.items()}
+        if topic in DIRECTION_TOPIC or topic in by_topic:
+            rows: Iterable[dict[str, Any]] = self.raw_chunks(by_topic.get(topic, topic))
+        else:
+            rows = self._topic(topic)
+        return pd.DataFrame.from_records(list(rows))
+
+
+def open_capture(path: str | os.PathLike[str]) -> Capture:
+    """A ``Capture`` for ``path``; ``UserError`` if it is missing or not an MCAP file."""
+    return Capture(Path(path))

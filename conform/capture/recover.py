@@ -1,0 +1,202 @@
+"""``capture info`` and ``capture recover``: summarise a capture, salvage a killed one.
+
+Recovery is a rewrite: every intact schema, channel, message and metadata record of the
+damaged file goes, in order, into a fresh MCAP written by the normal writer (so it has a
+summary, indexes and a footer), plus a ``conform.recovery`` metadata record saying what was
+lost. The damaged file is left untouched.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.records import Channel, Header, Message, Metadata, Schema
+from mcap.writer import CompressionType, Writer
+
+from conform import __version__
+from conform.capture.recorder import PART_SUFFIX
+from conform.capture.scan import ScanStatus, iter_records
+from conform.capture.schemas import DIRECTION_TOPIC
+from conform.errors import UserError
+
+_RAW_TOPICS = {topic: d for d, topic in DIRECTION_TOPIC.items()}
+
+
+@dataclass
+class CaptureInfo:
+    path: Path
+    status: ScanStatus
+    first_ns: int | None = None
+    last_ns: int | None = None
+    messages: Counter[str] = field(default_factory=Counter)
+    bytes: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
+    gaps: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    bad_messages: int = 0
+
+    @property
+    def duration(self) -> float:
+        if self.first_ns is None or self.last_ns is None:
+            return 0.0
+        return (self.last_ns - self.first_ns) / 1e9
+
+    @property
+    def state(self) -> str:
+        if self.status.clean:
+            return "recovered" if "conform.recovery" in self.metadata else "clean"
+        if self.status.complete:
+            return "damaged"
+        return "truncated"
+
+
+def resolve_source(path: str | os.PathLike[str]) -> Path:
+    """``FILE.mcap`` falls back to ``FILE.mcap.part`` when only the unfinished one exists."""
+    p = Path(path)
+    if not p.exists():
+        part = p.with_name(p.name + PART_SUFFIX)
+        if part.exists():
+            return part
+    return p
+
+
+def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
+    """One pass over the file: duration, bytes each way, messages per channel, state."""
+    src = resolve_source(path)
+    info = CaptureInfo(src, ScanStatus(src))
+    channels: dict[int, str] = {}
+    expected = dict.fromkeys(DIRECTION_TOPIC, 0)
+    for rec in iter_records(info.status):
+        if isinstance(rec, Message):
+            topic = channels.get(rec.channel_id, f"<channel {rec.channel_id}>")
+            info.messages[topic] += 1
+            t = rec.log_time
+            info.first_ns = t if info.first_ns is None else min(info.first_ns, t)
+            info.last_ns = t if info.last_ns is None else max(info.last_ns, t)
+            direction = _RAW_TOPICS.get(topic)
+            if direction is not None:
+                try:
+                    payload = json.loads(rec.data)
+                    length, offset = int(payload["length"]), int(payload["offset"])
+                except (ValueError, KeyError, TypeError, RecursionError):
+                    info.bad_messages += 1
+                    continue
+                info.bytes[direction] += length
+                if offset != expected[direction]:
+                    info.gaps[direction] += 1
+                expected[direction] = offset + length
+        elif isinstance(rec, Channel):
+            channels.setdefault(rec.id, rec.topic)
+        elif isinstance(rec, Metadata):
+            info.metadata[rec.name] = dict(rec.metadata)
+    return info
+
+
+def format_info(info: CaptureInfo) -> str:
+    s = info.status
+    pad = " " * 16
+    lines = [f"{'file:':<16}{info.path}", f"{'state:':<16}{info.state}"]
+    if s.problem and not s.complete:
+        lines.append(f"{pad}{s.problem}; intact up to byte {s.valid_bytes} of {s.size}")
+    for note in s.notes[:5]:
+        lines.append(f"{pad}{note}")
+    session = info.metadata.get("conform.session", {})
+    for key in ("capture_method", "variant", "baud", "host_port", "unit_port", "started"):
+        if session.get(key):
+            lines.append(f"{key + ':':<16}{session[key]}")
+    lines.append(f"{'duration:':<16}{info.duration:.3f} s")
+    for d in DIRECTION_TOPIC:
+        gap = f"  ({info.gaps[d]} gaps in offsets)" if info.gaps[d] else ""
+        lines.append(f"{'bytes ' + d + ':':<16}{info.bytes[d]}{gap}")
+    lines.append("messages:")
+    for topic, n in sorted(info.messages.items()):
+        lines.append(f"  {topic:<14}{n}")
+    if info.bad_messages:
+        lines.append(f"unreadable raw messages: {info.bad_messages}")
+    return "\n".join(lines)
+
+
+@dataclass
+class RecoverResult:
+    source: Path
+    output: Path
+    status: ScanStatus
+    messages: int
+    last_ns: int | None
+
+
+def default_output(src: Path) -> Path:
+    if src.name.endswith(PART_SUFFIX):
+        return src.with_name(src.name[: -len(PART_SUFFIX)])
+    stem = src.name[:-5] if src.name.endswith(".mcap") else src.name
+    return src.with_name(stem + ".recovered.mcap")
+
+
+def recover(
+    path: str | os.PathLike[str], output: str | os.PathLike[str] | None = None, *,
+    force: bool = False,
+) -> RecoverResult:
+    """Rewrite what is intact in ``path`` as a complete MCAP at ``output``."""
+    src = resolve_source(path)
+    status = ScanStatus(src)
+    records = iter_records(status)  # raises UserError now if src is not an MCAP at all
+    first = next(records, None)
+    dst = Path(output) if output is not None else default_output(src)
+    if dst.resolve() == src.resolve():
+        raise UserError(f"{dst}: output would overwrite the file being recovered")
+    if dst.exists() and not force:
+        raise UserError(f"{dst}: already exists (use --force to replace it)")
+    tmp = dst.with_name(dst.name + ".tmp")
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    metadata: list[Metadata] = []
+    count = 0
+    last_ns: int | None = None
+    try:
+        with open(tmp, "wb") as f:
+            writer = Writer(f, chunk_size=1024 * 1024, compression=CompressionType.ZSTD)
+            library = first.library if isinstance(first, Header) else ""
+            profile = first.profile if isinstance(first, Header) else ""
+            writer.start(profile=profile, library=library or f"conform {__version__}")
+            pending = [first] if first is not None and not isinstance(first, Header) else []
+            for rec in _chain(pending, records):
+                if isinstance(rec, Schema) and rec.id not in schemas:
+                    schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+                elif isinstance(rec, Channel) and rec.id not in channels:
+                    channels[rec.id] = writer.register_channel(
+                        rec.topic, rec.message_encoding, schemas.get(rec.schema_id, 0),
+                        dict(rec.metadata),
+                    )
+                elif isinstance(rec, Message) and rec.channel_id in channels:
+                    writer.add_message(channels[rec.channel_id], rec.log_time, rec.data,
+                                       rec.publish_time, rec.sequence)
+                    count += 1
+                    last_ns = rec.log_time if last_ns is None else max(last_ns, rec.log_time)
+                elif isinstance(rec, Metadata):
+                    metadata.append(rec)
+            for m in metadata:
+                writer.add_metadata(m.name, m.metadata)
+            writer.add_metadata("conform.recovery", {
+                "source": str(src),
+                "tool_version": __version__,
+                "source_complete": "true" if status.complete else "false",
+                "problem": status.problem or "",
+                "intact_bytes": str(status.valid_bytes),
+                "source_bytes": str(status.size),
+                "damaged_chunks": str(status.damaged_chunks),
+                "messages": str(count),
+            })
+            writer.finish()
+        os.replace(tmp, dst)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise UserError(f"{dst}: cannot write: {exc.strerror}") from None
+    return RecoverResult(src, dst, status, count, last_ns)
+
+
+def _chain(first: list, rest):  # type: ignore[no-untyped-def]
+    yield from first
+    yield from rest

@@ -1,0 +1,222 @@
+"""Walk an MCAP file record by record, trusting nothing in it.
+
+A killed recorder leaves a file that stops mid-record; a hostile or foreign file may claim
+lengths it does not have, chunks that decompress to gigabytes, or strings that are not
+UTF-8. ``iter_records`` bounds every length by what the file really holds, verifies chunk
+CRCs, skips a damaged chunk and stops at the first damaged top-level record, and reports
+what it saw in a ``ScanStatus`` instead of raising. Only "this is not an MCAP file at all"
+is an error (``UserError``), because there is nothing to salvage.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import EndOfFile
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Footer, Header, Message, Metadata, Schema
+
+from conform.errors import UserError
+
+MAGIC = b"\x89MCAP0\r\n"
+MAX_RECORD = 256 * 1024 * 1024  # larger records are treated as damage, not allocated
+MAX_CHUNK_UNCOMPRESSED = 256 * 1024 * 1024
+
+Item = Header | Schema | Channel | Message | Metadata
+
+
+@dataclass
+class ScanStatus:
+    """What a pass over the file found; filled in while ``iter_records`` runs."""
+
+    path: Path
+    size: int = 0
+    complete: bool = False  # footer and closing magic reached
+    problem: str | None = None  # why the walk stopped early, if it did
+    damaged_chunks: int = 0
+    damaged_records: int = 0
+    valid_bytes: int = 0  # end of the last intact top-level record
+    library: str = ""
+    profile: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def clean(self) -> bool:
+        return self.complete and self.problem is None and not self.damaged_chunks \
+            and not self.damaged_records
+
+    @property
+    def truncated(self) -> bool:
+        return not self.complete
+
+
+class _Strict(io.BytesIO):
+    """A body that refuses to hand out fewer bytes than a field claims."""
+
+    def read(self, n: int | None = -1) -> bytes:
+        data = super().read(n)
+        if n is not None and n >= 0 and len(data) < n:
+            raise EndOfFile()
+        return data
+
+
+def _parse(opcode: int, body: bytes) -> object | None:
+    stream = ReadDataStream(_Strict(body))
+    if opcode == Opcode.HEADER:
+        return Header.read(stream)
+    if opcode == Opcode.SCHEMA:
+        return Schema.read(stream)
+    if opcode == Opcode.CHANNEL:
+        return Channel.read(stream)
+    if opcode == Opcode.MESSAGE:
+        return Message.read(stream, len(body))
+    if opcode == Opcode.METADATA:
+        return Metadata.read(stream)
+    if opcode == Opcode.CHUNK:
+        return Chunk.read(stream)
+    if opcode == Opcode.FOOTER:
+        return Footer.read(stream)
+    if opcode == Opcode.DATA_END:
+        return _DATA_END
+    return None  # indexes, statistics, summary offsets, attachments: not needed here
+
+
+_DATA_END = object()
+_PARSE_ERRORS = (EndOfFile, struct.error, UnicodeDecodeError, ValueError, OverflowError)
+
+
+def check_magic(path: str | os.PathLike[str]) -> Path:
+    """The path, if it names a readable file that starts like an MCAP; else ``UserError``."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(len(MAGIC))
+    except IsADirectoryError:
+        raise UserError(f"{p}: is a directory, not an MCAP file") from None
+    except FileNotFoundError:
+        raise UserError(f"{p}: no such file") from None
+    except OSError as exc:
+        raise UserError(f"{p}: cannot read: {exc.strerror}") from None
+    if head != MAGIC:
+        what = "empty" if not head else "not an MCAP file (bad magic at offset 0)"
+        raise UserError(f"{p}: {what}")
+    return p
+
+
+def _chunk_records(chunk: Chunk) -> list[object]:
+    if chunk.uncompressed_size > MAX_CHUNK_UNCOMPRESSED:
+        raise ValueError(f"chunk claims {chunk.uncompressed_size} bytes uncompressed")
+    if chunk.compression == "zstd":
+        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data))
+        data = reader.read(chunk.uncompressed_size + 1)
+    elif chunk.compression == "":
+        data = chunk.data
+    elif chunk.compression == "lz4":
+        try:
+            import lz4.frame  # type: ignore[import-not-found]
+        except ImportError:
+            raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
+        data = lz4.frame.decompress(chunk.data)
+    else:
+        raise ValueError(f"unknown chunk compression {chunk.compression[:20]!r}")
+    if len(data) != chunk.uncompressed_size:
+        raise ValueError("chunk size does not match its header")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("chunk CRC mismatch")
+    out: list[object] = []
+    pos = 0
+    while pos < len(data):
+        if pos + 9 > len(data):
+            raise ValueError("chunk ends inside a record header")
+        opcode = data[pos]
+        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        if pos + 9 + length > len(data):
+            raise ValueError("chunk record runs past the chunk")
+        rec = _parse(opcode, data[pos + 9 : pos + 9 + length])
+        if isinstance(rec, (Schema, Channel, Message)):
+            out.append(rec)
+        pos += 9 + length
+    return out
+
+
+def iter_records(status: ScanStatus) -> Iterator[Item]:
+    """Header, schemas, channels, messages and metadata in file order (chunks opened).
+
+    Stops quietly at the first damaged top-level record or at the end of the data;
+    ``status`` says which, and how far the file was intact.
+    """
+    path = check_magic(status.path)
+    with open(path, "rb") as f:
+        size = status.size = os.fstat(f.fileno()).st_size
+        pos = len(MAGIC)
+        f.seek(pos)
+        status.valid_bytes = pos
+        in_summary = False  # the summary repeats schemas and channels: skip them there
+        while True:
+            if pos == size:
+                status.problem = status.problem or "file ends without a footer"
+                return
+            head = f.read(9)
+            if len(head) < 9:
+                status.problem = f"file ends inside a record header at byte {pos}"
+                return
+            opcode = head[0]
+            (length,) = struct.unpack("<Q", head[1:])
+            if length > MAX_RECORD:
+                status.problem = f"record at byte {pos} claims {length} bytes"
+                return
+            if pos + 9 + length > size:
+                status.problem = f"file ends inside a record at byte {pos} " \
+                    f"({size - pos - 9} of {length} bytes present)"
+                return
+            body = f.read(length)
+            try:
+                rec = _parse(opcode, body)
+            except _PARSE_ERRORS as exc:
+                status.damaged_records += 1
+                status.problem = f"damaged record (opcode 0x{opcode:02x}) at byte {pos}: " \
+                    f"{_short(exc)}"
+                return
+            pos += 9 + length
+            if isinstance(rec, Footer):
+                tail = f.read(len(MAGIC))
+                if tail != MAGIC:
+                    status.problem = "footer is not followed by the closing magic"
+                    return
+                status.valid_bytes = pos + len(MAGIC)
+                status.complete = True
+                if pos + len(MAGIC) != size:
+                    status.notes.append(f"{size - pos - len(MAGIC)} bytes after the end")
+                return
+            status.valid_bytes = pos
+            if rec is _DATA_END:
+                in_summary = True
+            elif in_summary:
+                continue
+            elif isinstance(rec, Header):
+                status.library, status.profile = rec.library, rec.profile
+                yield rec
+            elif isinstance(rec, Chunk):
+                try:
+                    inner = _chunk_records(rec)
+                except (*_PARSE_ERRORS, zstandard.ZstdError, MemoryError) as exc:
+                    status.damaged_chunks += 1
+                    status.notes.append(f"damaged chunk at byte {pos - 9 - length} skipped: "
+                                        f"{_short(exc)}")
+                    continue
+                yield from inner  # type: ignore[misc]
+            elif isinstance(rec, (Schema, Channel, Message, Metadata)):
+                yield rec
+
+
+def _short(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:160]

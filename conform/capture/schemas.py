@@ -1,0 +1,161 @@
+"""Topics and JSON schemas of a conform capture (see docs/capture-format.md).
+
+Every channel is ``message_encoding="json"`` with a ``jsonschema`` schema, so Foxglove and
+the ``mcap`` CLI show each one without plugins. ``/log`` uses Foxglove's published
+``foxglove.Log`` JSON schema so the Log panel picks it up.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+FORMAT_VERSION = "1"
+PROFILE = ""  # plain MCAP, JSON messages (no ROS profile)
+
+TOPIC_HOST = "/serial/host"
+TOPIC_UNIT = "/serial/unit"
+TOPIC_FRAMES = "/frames"
+TOPIC_EXCHANGES = "/exchanges"
+TOPIC_LINK = "/link"
+TOPIC_LOG = "/log"
+
+DIRECTION_TOPIC = {"host": TOPIC_HOST, "unit": TOPIC_UNIT}
+DIRECTIONS = ("host", "unit")
+
+LOG_LEVELS = {"unknown": 0, "debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
+LINK_KINDS = ("open", "close", "error", "disconnect", "reconnect", "baud")
+
+_TIME = {"type": "number", "description": "seconds since the Unix epoch (clock in metadata)"}
+_NULLABLE_TIME = {"type": ["number", "null"], "description": _TIME["description"]}
+
+RAW_CHUNK: dict[str, Any] = {
+    "title": "conform.RawChunk",
+    "description": "Bytes as one read returned them, in one direction",
+    "type": "object",
+    "properties": {
+        "direction": {"type": "string", "enum": list(DIRECTIONS)},
+        "data": {"type": "string", "contentEncoding": "base64", "description": "the bytes"},
+        "hex": {"type": "string", "description": "the bytes as space-separated hex pairs"},
+        "text": {"type": "string", "description": "printable ASCII, others escaped (\\r, \\xNN)"},
+        "length": {"type": "integer", "minimum": 0},
+        "offset": {"type": "integer", "minimum": 0, "description": "index of the first byte "
+                   "in this direction's stream"},
+        "t_read": _TIME | {"description": "when the read returned"},
+        "t_first": _TIME | {"description": "estimated arrival of the first byte "
+                            "(t_read - length*10/baud when estimated)"},
+        "seq": {"type": "integer", "description": "chunk number in this direction"},
+    },
+    "required": ["direction", "data", "hex", "text", "length", "offset", "t_read", "t_first"],
+}
+
+FRAME: dict[str, Any] = {
+    "title": "conform.Frame",
+    "description": "One decoded line: a command from the host or an answer from the unit",
+    "type": "object",
+    "properties": {
+        "direction": {"type": "string", "enum": list(DIRECTIONS)},
+        "kind": {"type": "string", "enum": ["command", "rejection", "answer", "garbled"]},
+        "text": {"type": "string", "description": "the line, escaped, without its terminator"},
+        "offset": {"type": "integer", "description": "byte offset of the line's first byte"},
+        "length": {"type": "integer", "description": "bytes including the terminator"},
+        "t_first": _TIME | {"description": "estimated time of the line's first byte"},
+        "t_last": _TIME | {"description": "time the read holding its terminator returned"},
+        "address": {"type": ["integer", "null"]},
+        "name": {"type": ["string", "null"], "description": "command mnemonic"},
+        "args": {"type": "array", "description": "command parameters as parsed"},
+        "code": {"type": ["integer", "null"], "description": "answer error code (bits 2..0)"},
+        "inta": {"type": ["boolean", "null"], "description": "answer INTA bit (bit 3)"},
+        "fields": {"type": "array", "items": {"type": "string"}},
+        "checksum": {"type": ["string", "null"], "description": "checksum as sent, hex"},
+        "checksum_status": {"type": "string", "enum": ["none", "ok", "bad", "missing"]},
+        "checksum_mode": {"type": "boolean", "description": "checksums were on for this line"},
+        "packet": {"type": ["integer", "null"], "description": "packet number (*S..*E)"},
+        "packet_role": {"type": ["string", "null"],
+                        "enum": ["start", "member", "end", "answer", None]},
+        "error": {"type": ["string", "null"], "description": "why a line was rejected/garbled"},
+    },
+    "required": ["direction", "kind", "text", "offset", "length", "t_first", "t_last"],
+}
+
+EXCHANGE: dict[str, Any] = {
+    "title": "conform.Exchange",
+    "description": "A command paired with its answer (or its lack of one)",
+    "type": "object",
+    "properties": {
+        "status": {"type": "string",
+                   "enum": ["answered", "unanswered", "unsolicited"]},
+        "command": {"type": ["string", "null"], "description": "command line, escaped"},
+        "name": {"type": ["string", "null"]},
+        "answer": {"type": ["string", "null"], "description": "answer line, escaped"},
+        "code": {"type": ["integer", "null"]},
+        "inta": {"type": ["boolean", "null"]},
+        "t_command": _NULLABLE_TIME | {"description": "when the command's terminator arrived"},
+        "t_answer": _NULLABLE_TIME | {"description": "estimated first byte of the answer"},
+        "latency": {"type": ["number", "null"], "description": "t_answer - t_command, s"},
+        "command_offset": {"type": ["integer", "null"]},
+        "answer_offset": {"type": ["integer", "null"]},
+        "packet": {"type": ["integer", "null"]},
+        "packet_commands": {"type": ["integer", "null"],
+                            "description": "commands inside the packet this answer closes"},
+    },
+    "required": ["status", "command", "answer", "latency"],
+}
+
+LINK_EVENT: dict[str, Any] = {
+    "title": "conform.LinkEvent",
+    "description": "Something that happened to a port, not to the bytes on it",
+    "type": "object",
+    "properties": {
+        "kind": {"type": "string", "enum": list(LINK_KINDS)},
+        "side": {"type": "string", "description": "host, unit or session"},
+        "detail": {"type": "string"},
+        "t": _TIME,
+    },
+    "required": ["kind", "side", "detail", "t"],
+}
+
+# Foxglove's published foxglove.Log JSON schema (the fields every Log panel reads).
+FOXGLOVE_LOG: dict[str, Any] = {
+    "title": "foxglove.Log",
+    "description": "A log message",
+    "type": "object",
+    "properties": {
+        "timestamp": {
+            "type": "object",
+            "title": "time",
+            "properties": {
+                "sec": {"type": "integer", "minimum": 0},
+                "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+            },
+            "description": "Timestamp of log message",
+        },
+        "level": {
+            "title": "foxglove.LogLevel",
+            "description": "Log level",
+            "oneOf": [
+                {"title": title.upper(), "const": value}
+                for title, value in LOG_LEVELS.items()
+            ],
+        },
+        "message": {"type": "string", "description": "Log message"},
+        "name": {"type": "string", "description": "Process or node name"},
+        "file": {"type": "string", "description": "Filename"},
+        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
+    },
+    "required": ["timestamp", "level", "message", "name", "file", "line"],
+}
+
+# topic -> (schema name, schema)
+CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
+    TOPIC_HOST: ("conform.RawChunk", RAW_CHUNK),
+    TOPIC_UNIT: ("conform.RawChunk", RAW_CHUNK),
+    TOPIC_FRAMES: ("conform.Frame", FRAME),
+    TOPIC_EXCHANGES: ("conform.Exchange", EXCHANGE),
+    TOPIC_LINK: ("conform.LinkEvent", LINK_EVENT),
+    TOPIC_LOG: ("foxglove.Log", FOXGLOVE_LOG),
+}
+
+
+def schema_bytes(schema: dict[str, Any]) -> bytes:
+    return json.dumps(schema, separators=(",", ":"), sort_keys=True).encode()

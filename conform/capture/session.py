@@ -1,0 +1,159 @@
+"""The sans-I/O heart of a recording: chunks and events in, MCAP-ready records out.
+
+``CaptureSession`` keeps the running byte offsets, estimates first-byte times from the baud
+rate, runs the frame decoder and builds the JSON payload of every message. It never touches
+a file, a clock or a thread; ``Recorder`` feeds it and writes what it returns, and tests
+drive it directly with made-up times.
+"""
+
+from __future__ import annotations
+
+import base64
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from conform.capture.schemas import (
+    DIRECTION_TOPIC,
+    DIRECTIONS,
+    LINK_KINDS,
+    LOG_LEVELS,
+    TOPIC_LINK,
+    TOPIC_LOG,
+)
+
+BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
+
+
+@dataclass(frozen=True)
+class Record:
+    """One MCAP message to write: topic, log time in ns, JSON-able payload."""
+
+    topic: str
+    log_time: int
+    payload: dict[str, Any]
+
+
+class Decoder(Protocol):
+    """What ``CaptureSession`` needs from a frame decoder (see ``conform.capture.decode``)."""
+
+    def feed(
+        self, direction: str, data: bytes, offset: int, t_read: float, t_first: float
+    ) -> list[Record]: ...
+
+    def finish(self, t: float) -> list[Record]: ...
+
+
+def to_ns(t: float) -> int:
+    return max(0, round(t * 1e9))
+
+
+_ESCAPES = {0x0D: "\\r", 0x0A: "\\n", 0x09: "\\t", 0x5C: "\\\\"}
+
+
+def escape_bytes(data: bytes) -> str:
+    """Printable ASCII as is, CR/LF/TAB/backslash as C escapes, everything else ``\\xNN``."""
+    out = []
+    for b in data:
+        esc = _ESCAPES.get(b)
+        if esc is not None:
+            out.append(esc)
+        elif 0x20 <= b < 0x7F:
+            out.append(chr(b))
+        else:
+            out.append(f"\\x{b:02x}")
+    return "".join(out)
+
+
+def unescape_text(text: str) -> bytes:
+    """Inverse of ``escape_bytes``."""
+    return text.encode("latin-1").decode("unicode_escape").encode("latin-1")
+
+
+def wire_time(n_bytes: int, baud: int | None) -> float:
+    """Seconds ``n_bytes`` take on an 8N1 line at ``baud`` (0 without a baud)."""
+    return n_bytes * BITS_PER_BYTE / baud if baud else 0.0
+
+
+def log_payload(level: str | int, message: str, t: float, name: str, file: str = "",
+                line: int = 0) -> dict[str, Any]:
+    """A ``foxglove.Log`` message."""
+    ns = to_ns(t)
+    if isinstance(level, str):
+        lvl = LOG_LEVELS.get(level.lower(), 0)
+    else:
+        lvl = int(level) if 0 <= int(level) <= 5 else 0
+    return {
+        "timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000},
+        "level": lvl,
+        "message": message,
+        "name": name,
+        "file": file,
+        "line": max(0, int(line)),
+    }
+
+
+class CaptureSession:
+    """Turns what a recorder sees into records for every topic of a capture."""
+
+    def __init__(
+        self, *, baud: int | None = None, decoder: Decoder | None = None, name: str = "conform"
+    ) -> None:
+        self.baud = baud
+        self.decoder = decoder
+        self.name = name
+        self.offsets = dict.fromkeys(DIRECTIONS, 0)
+        self.seq = dict.fromkeys(DIRECTIONS, 0)
+        self._last_read = dict.fromkeys(DIRECTIONS, float("-inf"))
+
+    def estimate_first(self, direction: str, n_bytes: int, t_read: float) -> float:
+        """First-byte time: ``len*10/baud`` before the read, never before the previous read."""
+        t_first = t_read - wire_time(n_bytes, self.baud)
+        return max(t_first, min(self._last_read[direction], t_read))
+
+    def chunk(
+        self, direction: str, data: bytes, t_read: float, t_first: float | None = None
+    ) -> list[Record]:
+        if direction not in DIRECTION_TOPIC:
+            raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
+        if not data:
+            return []
+        if t_first is None:
+            t_first = self.estimate_first(direction, len(data), t_read)
+        offset = self.offsets[direction]
+        self.offsets[direction] = offset + len(data)
+        self.seq[direction] += 1
+        self._last_read[direction] = max(self._last_read[direction], t_read)
+        payload = {
+            "direction": direction,
+            "data": base64.b64encode(data).decode("ascii"),
+            "hex": data.hex(" ").upper(),
+            "text": escape_bytes(data),
+            "length": len(data),
+            "offset": offset,
+            "t_read": t_read,
+            "t_first": t_first,
+            "seq": self.seq[direction],
+        }
+        records = [Record(DIRECTION_TOPIC[direction], to_ns(t_read), payload)]
+        if self.decoder is not None:
+            records.extend(self.decoder.feed(direction, data, offset, t_read, t_first))
+        return records
+
+    def link_event(self, kind: str, side: str, detail: str, t: float) -> list[Record]:
+        if kind not in LINK_KINDS:
+            raise ValueError(f"link event kind must be one of {LINK_KINDS}, not {kind!r}")
+        level = "info" if kind in ("open", "close", "reconnect", "baud") else "warning"
+        return [
+            Record(TOPIC_LINK, to_ns(t), {"kind": kind, "side": side, "detail": detail, "t": t}),
+            Record(TOPIC_LOG, to_ns(t), log_payload(level, f"{side}: {kind}: {detail}", t,
+                                                     self.name)),
+        ]
+
+    def log(self, level: str | int, text: str, t: float, *, name: str | None = None,
+            file: str = "", line: int = 0) -> list[Record]:
+        return [Record(TOPIC_LOG, to_ns(t),
+                       log_payload(level, text, t, name or self.name, file, line))]
+
+    def finish(self, t: float) -> list[Record]:
+        """Whatever the decoder still holds (a command never answered, a partial line)."""
+        return self.decoder.finish(t) if self.decoder is not None else []

@@ -1,0 +1,54 @@
+"""``conform capture info|recover``: look inside a capture, salvage a killed one."""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime
+
+import click
+
+from conform.capture.recover import capture_info, format_info, recover
+
+
+@click.group(name="capture")
+def cli() -> None:
+    """Inspect and repair MCAP capture files."""
+
+
+@cli.command()
+@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+def info(file: str, as_json: bool) -> None:
+    """Duration, bytes each way, messages per channel, clean or truncated."""
+    result = capture_info(file)
+    if as_json:
+        s = result.status
+        click.echo(json.dumps({
+            "file": str(result.path), "state": result.state, "problem": s.problem,
+            "intact_bytes": s.valid_bytes, "size": s.size, "duration": result.duration,
+            "bytes": result.bytes, "gaps": result.gaps, "messages": dict(result.messages),
+            "metadata": result.metadata,
+        }, indent=2))
+    else:
+        click.echo(format_info(result))
+
+
+@cli.command(name="recover")
+@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Where to write (default: FILE without .part, or FILE.recovered.mcap).")
+@click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
+def recover_cmd(file: str, output: str | None, force: bool) -> None:
+    """Rewrite the intact part of a killed or damaged recording as a complete MCAP."""
+    res = recover(file, output, force=force)
+    s = res.status
+    last = "-"
+    if res.last_ns is not None:
+        last = datetime.fromtimestamp(res.last_ns / 1e9, UTC).isoformat(timespec="milliseconds")
+    click.echo(f"{res.output}: {res.messages} messages salvaged, last at {last}")
+    if s.complete and s.clean:
+        click.echo(f"{res.source} was already complete; rewritten unchanged")
+    else:
+        lost = s.size - s.valid_bytes
+        click.echo(f"lost: {s.problem or 'damaged chunks'} ({lost} bytes after the intact part"
+                   f", {s.damaged_chunks} damaged chunks skipped)")
