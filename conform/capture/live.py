@@ -1,0 +1,224 @@
+"""Live captures: the proxy (man in the middle on a pty) and the sniffer (Y-cable tap).
+
+Both are thin adapters: a ``Forwarder`` or ``Tap`` from ``conform.link`` moves and
+timestamps the bytes, a ``Recorder`` writes them, and (for the sniffer) a ``Merger`` puts
+the two directions in causal order. The CLI commands wrap these with signal handling; tests
+and other tools can run them in-process::
+
+    with ProxyCapture(unit_url, "run.mcap", baud=115200) as proxy:
+        print(proxy.host_path)       # the sender opens this
+        proxy.wait()                 # until stop() or the unit is lost for good
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable
+
+from conform.capture.merge import Merger
+from conform.capture.recorder import Recorder
+from conform.capture.session import wire_time
+from conform.link.endpoint import Endpoint
+from conform.link.forward import Forwarder, Tap
+from conform.link.ports import open_port
+from conform.link.pty import PtyEndpoint
+
+
+class _Live:
+    runner: Forwarder | Tap
+    recorder: Recorder
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until stopped; ``True`` if it has stopped."""
+        return self.runner.wait(timeout)
+
+    def stop(self) -> None:
+        self.runner.stop()
+
+    @property
+    def failure(self) -> str | None:
+        """Why the capture ended by itself (a port lost for good), else ``None``."""
+        return self.runner.failure
+
+    def _event(self, kind: str, side: str, detail: str) -> None:
+        self.recorder.link_event(kind, detail, side=side)
+
+    def __enter__(self):  # type: ignore[no-untyped-def]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+
+class ProxyCapture(_Live):
+    """A pty for the sender, forwarded both ways to the unit, every byte recorded."""
+
+    def __init__(
+        self,
+        unit_url: str,
+        output: str | os.PathLike[str],
+        *,
+        baud: int = 115200,
+        variant: str | None = None,
+        decode: bool = True,
+        reconnect: bool = False,
+        link: str | None = None,
+        flush_interval: float = 0.25,
+        open_unit: Callable[[], Endpoint] | None = None,
+    ) -> None:
+        self.unit_url = unit_url
+        self.baud = baud
+        self._last = {"host": float("-inf"), "unit": float("-inf")}
+        opener = open_unit or (lambda: open_port(unit_url, baud))
+        unit = opener()
+        try:
+            self.host = PtyEndpoint(link=link)
+        except OSError:
+            unit.close()
+            raise
+        self.host_path = self.host.path
+        try:
+            self.recorder = Recorder(
+                output,
+                {"capture_method": "proxy", "host_port": self.host_path,
+                 "unit_port": unit_url, "baud": baud, "variant": variant or "",
+                 "reconnect": reconnect},
+                baud=baud, variant=variant, decode=decode, flush_interval=flush_interval,
+            )
+        except Exception:
+            self.host.close()
+            unit.close()
+            raise
+        self.recorder.link_event("open", f"sender pty {self.host_path}", side="host")
+        self.recorder.link_event("open", f"{unit_url} at {baud} Bd", side="unit")
+        self.runner = Forwarder(
+            self.host, unit, on_chunk=self._chunk, on_event=self._event,
+            clock=self.recorder.now, reopen_unit=opener if reconnect else None,
+        )
+        self.runner.start()
+
+    def _chunk(self, direction: str, data: bytes, t_read: float) -> None:
+        if direction == "host":
+            # the sender's side is a pty: its bytes arrive at once, no wire time to subtract
+            self._last["host"] = t_read
+            self.recorder.chunk("host", data, t_read, t_read)
+            return
+        # the unit's bytes took len*10/baud on the wire, but an answer cannot have begun
+        # before the proxy forwarded the command (an emulator's pty has no wire time at all)
+        t_first = t_read - wire_time(len(data), self.baud)
+        t_first = max(t_first, min(max(self._last["host"], self._last["unit"]), t_read))
+        self._last["unit"] = t_read
+        self.recorder.chunk("unit", data, t_read, t_first)
+
+    def close(self) -> None:
+        self.runner.join()
+        dropped = dict(self.runner.dropped)
+        for side in ("host", "unit"):
+            self.runner.endpoint(side).close()
+        self.recorder.link_event("close", "capture finished", side="session")
+        if any(dropped.values()):
+            self.recorder.log("warning", f"bytes not delivered (port down): {dropped}")
+        self.recorder.close({"dropped_to_host": dropped["host"],
+                             "dropped_to_unit": dropped["unit"],
+                             "ended_by": self.failure or "stop"})
+
+
+class SniffCapture(_Live):
+    """Two receive-only ports on a Y-cable, merged in time and recorded."""
+
+    def __init__(
+        self,
+        host_url: str,
+        unit_url: str,
+        output: str | os.PathLike[str],
+        *,
+        baud: int = 115200,
+        variant: str | None = None,
+        decode: bool = True,
+        reconnect: bool = False,
+        flush_interval: float = 0.25,
+        read_size: int = 256,
+    ) -> None:
+        def opener(url: str) -> Callable[[], Endpoint]:
+            return lambda: open_port(url, baud)
+
+        host = opener(host_url)()
+        try:
+            unit = opener(unit_url)()
+        except Exception:
+            host.close()
+            raise
+        try:
+            self.recorder = Recorder(
+                output,
+                {"capture_method": "sniff", "host_port": host_url, "unit_port": unit_url,
+                 "baud": baud, "variant": variant or "", "reconnect": reconnect},
+                baud=baud, variant=variant, decode=decode, flush_interval=flush_interval,
+            )
+        except Exception:
+            host.close()
+            unit.close()
+            raise
+        self.merger = Merger(baud, read_size=read_size)
+        self._lock = threading.Lock()
+        self.recorder.link_event("open", f"{host_url} at {baud} Bd (host->unit tap)",
+                                 side="host")
+        self.recorder.link_event("open", f"{unit_url} at {baud} Bd (unit->host tap)",
+                                 side="unit")
+        self.runner = Tap(
+            host, unit, on_chunk=self._chunk, on_event=self._event, clock=self.recorder.now,
+            reopen_host=opener(host_url) if reconnect else None,
+            reopen_unit=opener(unit_url) if reconnect else None, read_size=read_size,
+        )
+        self._ticker = threading.Thread(target=self._tick, name="merge-tick", daemon=True)
+        self.runner.start()
+        self._ticker.start()
+
+    def _emit(self, chunks: list) -> None:  # type: ignore[type-arg]
+        for c in chunks:
+            self.recorder.chunk(c.direction, c.data, c.t_read, c.t_first)
+
+    def _chunk(self, direction: str, data: bytes, t_read: float) -> None:
+        with self._lock:
+            self._emit(self.merger.push(direction, data, t_read))
+
+    def _tick(self) -> None:
+        while not self.runner.wait(0.05):
+            with self._lock:
+                self._emit(self.merger.tick(self.recorder.now()))
+
+    def close(self) -> None:
+        self.runner.join()
+        self._ticker.join(1.0)
+        with self._lock:
+            self._emit(self.merger.flush())
+        for side in ("host", "unit"):
+            self.runner.endpoint(side).close()
+        self.recorder.link_event("close", "capture finished", side="session")
+        self.recorder.close({"late_chunks": self.merger.late,
+                             "ended_by": self.failure or "stop"})
+
+
+def run_until_signal(live: _Live) -> str | None:
+    """Run until SIGINT/SIGTERM or a port lost for good; close cleanly; return the failure."""
+    import signal
+
+    previous = {}
+
+    def stop(signum: int, frame: object) -> None:
+        live.stop()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, stop)
+    try:
+        while not live.wait(0.2):
+            pass
+    finally:
+        live.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return live.failure

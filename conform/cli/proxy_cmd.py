@@ -1,0 +1,42 @@
+"""``conform proxy``: sit between a sender program and the unit, recording both ways."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from conform.capture.live import ProxyCapture, run_until_signal
+from conform.errors import LinkError
+
+
+@click.command(name="proxy")
+@click.option("--unit", "unit_url", required=True,
+              help="The unit: a device path, an emulator's pty, or any pyserial URL "
+                   "(socket://host:port, rfc2217://...).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The MCAP file to write (FILE.part until finished).")
+@click.option("--baud", default=115200, show_default=True, type=click.IntRange(min=1),
+              help="Baud rate of the unit's port (also used for wire-time estimates).")
+@click.option("--variant", default=None,
+              help="Decode frames with this variant's tables (e.g. gve64-v19).")
+@click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
+@click.option("--reconnect", is_flag=True,
+              help="If the unit's port vanishes, wait for it to come back and go on.")
+@click.option("--link", default=None, type=click.Path(dir_okay=False),
+              help="Also make this symlink to the sender's pty (a stable name).")
+def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: bool,
+        reconnect: bool, link: str | None) -> None:
+    """Create a pty for the sender, forward it to the unit and record until SIGINT/SIGTERM.
+
+    The first line on stdout is the pty's device path.
+    """
+    proxy = ProxyCapture(unit_url, output, baud=baud, variant=variant, decode=not no_decode,
+                         reconnect=reconnect, link=link)
+    sys.stdout.write(proxy.host_path + "\n")
+    sys.stdout.flush()
+    failure = run_until_signal(proxy)
+    click.echo(f"conform proxy: recorded {proxy.recorder.path}", err=True)
+    if failure:
+        raise LinkError(f"{failure} (recording finished cleanly in {proxy.recorder.path})",
+                        exit_code=1)

@@ -1,0 +1,34 @@
+"""``conform sniff``: passive tap on a Y-cable with two receive-only adapters."""
+
+from __future__ import annotations
+
+import click
+
+from conform.capture.live import SniffCapture, run_until_signal
+from conform.errors import LinkError
+
+
+@click.command(name="sniff")
+@click.option("--host-port", required=True,
+              help="Adapter that receives what the sender transmits (device or pyserial URL).")
+@click.option("--unit-port", required=True,
+              help="Adapter that receives what the unit transmits.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The MCAP file to write (FILE.part until finished).")
+@click.option("--baud", default=115200, show_default=True, type=click.IntRange(min=1))
+@click.option("--variant", default=None,
+              help="Decode frames with this variant's tables (e.g. gve64-v19).")
+@click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
+@click.option("--reconnect", is_flag=True,
+              help="If an adapter vanishes, wait for it to come back and go on.")
+def cli(host_port: str, unit_port: str, output: str, baud: int, variant: str | None,
+        no_decode: bool, reconnect: bool) -> None:
+    """Record both directions of a live link without sending a byte, until SIGINT/SIGTERM."""
+    tap = SniffCapture(host_port, unit_port, output, baud=baud, variant=variant,
+                       decode=not no_decode, reconnect=reconnect)
+    click.echo(f"conform sniff: recording {host_port} + {unit_port} to {output}", err=True)
+    failure = run_until_signal(tap)
+    click.echo(f"conform sniff: recorded {tap.recorder.path}", err=True)
+    if failure:
+        raise LinkError(f"{failure} (recording finished cleanly in {tap.recorder.path})",
+                        exit_code=1)
