@@ -6,6 +6,7 @@ import json
 import os
 import struct
 import threading
+import time
 
 import pytest
 from mcap.reader import make_reader
@@ -243,3 +244,35 @@ def test_cli_info_and_recover_and_bad_input(tmp_path, capsys):
         main(["capture", "info", str(tmp_path / "missing.mcap")])
     assert ex.value.code == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def _records(data: bytes):
+    """(offset, opcode, length) of each top-level record."""
+    pos = 8
+    while pos + 9 <= len(data):
+        opcode = data[pos]
+        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        yield pos, opcode, length
+        pos += 9 + length
+
+
+def test_a_lost_first_chunk_does_not_lose_the_rest(tmp_path):
+    path = tmp_path / "many.mcap"
+    rec = Recorder(path, {"capture_method": "test"}, flush_interval=0)
+    for i in range(40):
+        rec.chunk("host", b"!0C%d,0,0\r" % i)
+        time.sleep(0.002)
+    rec.close()
+    data = bytearray(path.read_bytes())
+    first_chunk = next(pos for pos, opcode, _ in _records(bytes(data)) if opcode == 0x06)
+    data[first_chunk + 60] ^= 0xFF  # inside the chunk that holds schemas and channels
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data))
+    full = b"".join(b"!0C%d,0,0\r" % i for i in range(40))
+    cap = open_capture(broken)
+    host = cap.stream("host")
+    assert host == full  # the data came in later chunks; only their channel records were lost
+    assert cap.status.damaged_chunks == 1
+    assert capture_info(broken).bytes["host"] == len(host)
+    fixed = open_capture(recover(broken).output)
+    assert fixed.clean and fixed.stream("host") == host

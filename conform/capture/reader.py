@@ -33,6 +33,7 @@ from conform.capture.schemas import (
     TOPIC_LINK,
     TOPIC_LOG,
 )
+from conform.capture.sink import default_layout
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -60,9 +61,12 @@ class Capture:
         status = ScanStatus(self.path)
         channels: dict[int, Channel] = {}
         metadata: dict[str, dict[str, str]] = {}
+        fallback = default_layout()[1]
         for rec in iter_records(status):
             if isinstance(rec, Message):
                 channel = channels.get(rec.channel_id)
+                if channel is None and status.library.startswith("conform"):
+                    channel = fallback.get(rec.channel_id)  # its first chunk was lost
                 if channel is not None and (topics is None or channel.topic in topics):
                     yield channel, rec
             elif isinstance(rec, Channel):

@@ -136,6 +136,7 @@ class Recorder:
         self._close_lock = threading.Lock()
         self.error: BaseException | None = None
         self.bytes = dict.fromkeys(DIRECTIONS, 0)
+        self.max_backlog = 0  # most items ever waiting for the writer thread
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
 
@@ -198,7 +199,7 @@ class Recorder:
                 end = {"ended": datetime.fromtimestamp(t, UTC).isoformat(),
                        "bytes_host": self._session.offsets["host"],
                        "bytes_unit": self._session.offsets["unit"],
-                       "messages": self._sink.count}
+                       "messages": self._sink.count, "max_backlog": self.max_backlog}
                 end.update(summary or {})
                 self._sink.metadata("conform.session_end", end)
                 self._sink.finish()
@@ -249,6 +250,7 @@ class Recorder:
                     for rec in self._records(item):
                         self._sink.write(rec)
                     dirty = True
+                    self.max_backlog = max(self.max_backlog, self._queue.qsize())
                 if dirty and time.monotonic() - last_flush >= self.flush_interval:
                     self._sink.flush()
                     last_flush = time.monotonic()

@@ -21,6 +21,7 @@ from conform import __version__
 from conform.capture.recorder import PART_SUFFIX
 from conform.capture.scan import ScanStatus, iter_records
 from conform.capture.schemas import DIRECTION_TOPIC
+from conform.capture.sink import default_layout
 from conform.errors import UserError
 
 _RAW_TOPICS = {topic: d for d, topic in DIRECTION_TOPIC.items()}
@@ -69,9 +70,13 @@ def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
     info = CaptureInfo(src, ScanStatus(src))
     channels: dict[int, str] = {}
     expected = dict.fromkeys(DIRECTION_TOPIC, 0)
+    fallback = {cid: ch.topic for cid, ch in default_layout()[1].items()}
     for rec in iter_records(info.status):
         if isinstance(rec, Message):
-            topic = channels.get(rec.channel_id, f"<channel {rec.channel_id}>")
+            topic = channels.get(rec.channel_id)
+            if topic is None and info.status.library.startswith("conform"):
+                topic = fallback.get(rec.channel_id)
+            topic = topic or f"<channel {rec.channel_id}>"
             info.messages[topic] += 1
             t = rec.log_time
             info.first_ns = t if info.first_ns is None else min(info.first_ns, t)
@@ -155,6 +160,7 @@ def recover(
     metadata: list[Metadata] = []
     count = 0
     last_ns: int | None = None
+    fallback_schemas, fallback_channels = default_layout()
     try:
         with open(tmp, "wb") as f:
             writer = Writer(f, chunk_size=1024 * 1024, compression=CompressionType.ZSTD)
@@ -170,6 +176,22 @@ def recover(
                         rec.topic, rec.message_encoding, schemas.get(rec.schema_id, 0),
                         dict(rec.metadata),
                     )
+                elif isinstance(rec, Message) and rec.channel_id not in channels \
+                        and status.library.startswith("conform") \
+                        and rec.channel_id in fallback_channels:
+                    # the chunk holding this conform file's channels was lost: use the
+                    # layout every conform recorder writes
+                    for sid, schema in fallback_schemas.items():
+                        if sid not in schemas:
+                            schemas[sid] = writer.register_schema(schema.name, schema.encoding,
+                                                                  schema.data)
+                    ch = fallback_channels[rec.channel_id]
+                    channels[rec.channel_id] = writer.register_channel(
+                        ch.topic, ch.message_encoding, schemas[ch.schema_id])
+                    writer.add_message(channels[rec.channel_id], rec.log_time, rec.data,
+                                       rec.publish_time, rec.sequence)
+                    count += 1
+                    last_ns = rec.log_time if last_ns is None else max(last_ns, rec.log_time)
                 elif isinstance(rec, Message) and rec.channel_id in channels:
                     writer.add_message(channels[rec.channel_id], rec.log_time, rec.data,
                                        rec.publish_time, rec.sequence)

@@ -12,6 +12,7 @@ import os
 from collections.abc import Mapping
 from typing import IO, Any
 
+from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, Writer
 
 from conform import __version__
@@ -80,6 +81,25 @@ class McapSink:
         """Summary, footer, closing magic; the stream is left open for the caller."""
         self._writer.finish()
         self._stream.flush()
+
+
+def default_layout() -> tuple[dict[int, Schema], dict[int, Channel]]:
+    """The schema and channel records ``McapSink`` writes, with the ids it gives them.
+
+    A conform file whose first chunk (where these live) is damaged can still be read and
+    recovered with them: the ids are assigned the same way every time.
+    """
+    schemas: dict[int, Schema] = {}
+    by_name: dict[str, int] = {}
+    channels: dict[int, Channel] = {}
+    for topic, (schema_name, schema) in CHANNELS.items():
+        if schema_name not in by_name:
+            by_name[schema_name] = len(by_name) + 1
+            schemas[by_name[schema_name]] = Schema(by_name[schema_name], schema_bytes(schema),
+                                                   "jsonschema", schema_name)
+        cid = len(channels) + 1
+        channels[cid] = Channel(cid, topic, "json", {}, by_name[schema_name])
+    return schemas, channels
 
 
 def _text(value: object) -> str:

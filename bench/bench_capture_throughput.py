@@ -1,0 +1,125 @@
+"""Zero bytes lost through ``conform proxy`` at a sustained 921 600 Bd-equivalent rate.
+
+A sender streams GVE command lines at 92 160 B/s into the proxy's pty; a fake unit process
+behind another pty counts and checksums what arrives and answers ``0`` to every line; the
+proxy records everything. Afterwards the unit's count and CRC, the answers the sender got,
+and both directions in the MCAP file are compared with what was sent.
+
+    python bench/bench_capture_throughput.py --seconds 30      # the target run is 600 s
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import tempfile
+import threading
+import time
+import zlib
+from pathlib import Path
+
+from bench_capture_common import start_proxy, start_unit, stop_unit
+
+from conform.capture.reader import open_capture
+from conform.capture.recover import capture_info
+from conform.link import open_port
+
+TARGET_RATE = 92_160  # bytes/s: 921 600 Bd, 8N1
+
+
+def command_stream():
+    i = 0
+    while True:
+        yield b"!0C%d,%d,0\r" % (i % 100_000, (i * 7) % 1000)
+        i += 1
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=600.0)
+    ap.add_argument("--rate", type=int, default=TARGET_RATE, help="bytes/s from the sender")
+    ap.add_argument("--no-decode", action="store_true", help="record raw bytes only")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the capture here")
+    args = ap.parse_args()
+
+    workdir = Path(tempfile.mkdtemp(prefix="bench-capture-"))
+    output = args.keep or workdir / "throughput.mcap"
+    unit, unit_path = start_unit()
+    extra = ["--baud", "921600"] + (["--no-decode"] if args.no_decode else
+                                    ["--variant", "gve64-v19"])
+    proxy, host_path = start_proxy(unit_path, output, *extra)
+    sender = open_port(host_path, 921600, write_timeout=None)
+
+    answers = bytearray()
+    done = threading.Event()
+
+    def drain() -> None:
+        while not done.is_set():
+            answers.extend(sender.read(65536, 0.05))
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+
+    sent, crc, n_lines = 0, 0, 0
+    lines = command_stream()
+    tick = 0.01
+    t0 = time.monotonic()
+    next_t = t0
+    max_behind = 0.0
+    while time.monotonic() - t0 < args.seconds:
+        target = int((time.monotonic() - t0 + tick) * args.rate)
+        block = bytearray()
+        while sent + len(block) < target:
+            block += next(lines)
+        sender.write(bytes(block))
+        sent += len(block)
+        n_lines += block.count(b"\r")
+        crc = zlib.crc32(block, crc)
+        next_t += tick
+        behind = time.monotonic() - next_t
+        max_behind = max(max_behind, behind)
+        if behind < 0:
+            time.sleep(-behind)
+    elapsed = time.monotonic() - t0
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and len(answers) < 2 * n_lines:
+        time.sleep(0.2)  # let the last answers come back
+    done.set()
+    reader.join()
+    proxy.send_signal(signal.SIGTERM)
+    proxy.wait(120)
+    sender.close()
+    unit_total, unit_crc = stop_unit(unit)
+
+    cap = open_capture(output)
+    info = capture_info(output)
+    host_stream_crc = 0
+    host_len = 0
+    for c in cap.raw_chunks("host"):
+        host_stream_crc = zlib.crc32(c["bytes"], host_stream_crc)
+        host_len += len(c["bytes"])
+    unit_len = info.bytes["unit"]
+
+    lost_to_unit = sent - unit_total
+    lost_in_file = sent - host_len
+    rate = sent / elapsed
+    print(f"ran {elapsed:.1f} s (target 600 s), decode={'off' if args.no_decode else 'on'}")
+    print(f"sender rate      {rate:,.0f} B/s  (target {TARGET_RATE:,} B/s, ratio "
+          f"{rate / TARGET_RATE:.3f}); sender fell behind its schedule by at most "
+          f"{max_behind * 1000:.1f} ms")
+    print(f"sent             {sent:,} bytes in {n_lines:,} lines")
+    print(f"unit received    {unit_total:,} bytes, crc {'match' if unit_crc == crc else 'MISMATCH'}"
+          f"  -> lost {lost_to_unit}")
+    print(f"recorded host    {host_len:,} bytes, crc "
+          f"{'match' if host_stream_crc == crc else 'MISMATCH'}  -> lost {lost_in_file}")
+    print(f"answers          {len(answers):,} bytes at the sender, {unit_len:,} recorded "
+          f"(expected {2 * n_lines:,})")
+    print(f"capture          {output.stat().st_size / 1e6:.1f} MB, state {info.state}, "
+          f"{sum(info.messages.values()):,} messages, gaps {info.gaps}")
+    ok = (lost_to_unit == 0 and lost_in_file == 0 and unit_crc == crc
+          and host_stream_crc == crc and unit_len == 2 * n_lines == len(answers))
+    print(f"zero bytes lost: {'YES' if ok else 'NO'}")
+
+
+if __name__ == "__main__":
+    main()
