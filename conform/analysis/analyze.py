@@ -1,0 +1,442 @@
+"""The analyser's entry point: a capture file in, tables, metrics and findings out.
+
+    a = analyze("run.mcap")
+    a.exchanges            # pandas DataFrame, one row per command line
+    a.frames("host")       # decoded lines of one direction
+    a.findings             # list[Finding], sorted by time
+    a.metrics              # dict: latency, throughput, queue, counts
+
+Steps: read the raw chunks (``rawread``), choose the baud (the capture's claim, checked
+against what the bytes show), cut and decode lines (``frames``), pair them into exchanges
+(``exchanges``), time them, replay the queue (``queue``), detect findings (``findings``,
+``positions``). Bad input is analysed as far as it goes and the problem becomes a finding.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from conform.analysis import exchanges as exm
+from conform.analysis import frames as fr
+from conform.analysis.findings import Context, Finding, Findings, protocol_findings, recovery_analysis
+from conform.analysis.positions import check_positions
+from conform.analysis.queue import QueueReplay, replay, supply_consumption, whatif
+from conform.analysis.rawread import RawCapture, read_raw
+from conform.capture.session import escape_bytes
+from conform.errors import UserError
+
+STANDARD_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
+DEFAULT_VARIANT = "gve64-v19"
+Step = Callable[[str], None]
+
+
+@dataclass
+class Analysis:
+    path: str
+    raw: RawCapture
+    variant: Any
+    dialect: Any
+    baud: float | None
+    host: fr.DecodedLines
+    unit: fr.DecodedLines
+    exchanges: pd.DataFrame
+    unsolicited: np.ndarray
+    findings: list[Finding]
+    metrics: dict[str, Any]
+    series: pd.DataFrame
+    queue: QueueReplay | None
+    t0: float
+    notes: list[str] = field(default_factory=list)
+
+    def frames(self, direction: str) -> pd.DataFrame:
+        """The decoded lines of one direction as a DataFrame (text escaped)."""
+        d = self.host if direction == "host" else self.unit
+        return frames_frame(d, self.t0)
+
+    def host_text(self, i: int) -> str:
+        return escape_bytes(self.host.raw(i))
+
+    def unit_text(self, i: int) -> str:
+        return escape_bytes(self.unit.raw(i))
+
+    def hazards(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == "hazard"]
+
+    def kinds(self) -> dict[str, int]:
+        return dict(self.metrics.get("finding_counts", {}))
+
+
+def frames_frame(d: fr.DecodedLines, t0: float) -> pd.DataFrame:
+    return pd.DataFrame({
+        "direction": d.direction,
+        "line": np.arange(len(d)),
+        "offset": d.lines.start,
+        "length": d.lines.end - d.lines.start + d.lines.term,
+        "t_first": d.t_first - t0,
+        "t_last": d.t_last - t0,
+        "kind": d.kind,
+        "name": d.name,
+        "code": d.code,
+        "inta": d.inta,
+        "checksum_status": fr.CHECKSUM_NAMES[d.checksum.astype(np.int64)],
+        "checksum_mode": d.checksum_mode,
+        "detail": d.detail,
+        "text": [escape_bytes(b) for b in d.lines.bodies.to_pylist()],
+    })
+
+
+def _session_value(raw: RawCapture, key: str) -> str:
+    return str(raw.metadata.get("conform.session", {}).get(key, "") or "")
+
+
+def _dialect_from(spec: Any, text: str) -> Any:
+    choices = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        k, _, v = part.partition("=")
+        choices[k.strip()] = v.strip()
+    return spec.dialect(choices)
+
+
+def _round_baud(b: float) -> int:
+    return min(STANDARD_BAUDS, key=lambda s: abs(np.log(s / b)))
+
+
+def baud_evidence(raw: RawCapture) -> float | None:
+    """A lower bound on the true baud: bytes that arrived between two reads took that long."""
+    best = []
+    for d in (raw.host, raw.unit):
+        if d.chunks < 3:
+            continue
+        dt = np.diff(d.t_read)
+        n = d.length[1:]
+        ok = (dt > 0) & (n >= 4)
+        if ok.sum() >= 3:
+            rates = 10.0 * n[ok] / dt[ok]
+            best.append(float(np.quantile(rates, 0.98)))
+    return max(best) if best else None
+
+
+def slope_baud(ex: pd.DataFrame) -> float | None:
+    """The baud from how answer time grows with answer length (10 bits a byte)."""
+    ok = ex["status"].to_numpy() == "answered"
+    if ok.sum() < 10:
+        return None
+    y = (ex["t_ans_last"].to_numpy() - ex["t_cmd_last"].to_numpy())[ok]
+    x = ex["ans_bytes"].to_numpy()[ok]
+    lens = np.unique(x)
+    pts = []
+    for L in lens.tolist():
+        sel = y[x == L]
+        if len(sel) >= 3:
+            pts.append((L, float(np.quantile(sel, 0.05))))
+    if len(pts) < 2 or pts[-1][0] - pts[0][0] < 3:
+        return None
+    px, py = np.array(pts).T
+    slope = np.polyfit(px, py, 1)[0]
+    if slope <= 0:
+        return None
+    return 10.0 / slope
+
+
+def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
+            baud: float | None = None, dialect: str | None = None,
+            progress: Callable[[int, int], None] | None = None, step: Step | None = None,
+            whatif_replays: bool = True) -> Analysis:
+    """Analyse one capture file (see the module docstring)."""
+    from conform.spec import load_spec
+
+    say = step or (lambda _s: None)
+    say("reading")
+    raw = read_raw(path, progress)
+    spec = load_spec()
+    notes: list[str] = []
+    vid = variant or _session_value(raw, "variant") or DEFAULT_VARIANT
+    try:
+        var = spec.variant(vid)
+    except UserError:
+        notes.append(f"variant {vid!r} unknown; decoded as {DEFAULT_VARIANT}")
+        var = spec.variant(DEFAULT_VARIANT)
+    if not (variant or _session_value(raw, "variant")):
+        notes.append(f"the capture names no variant; decoded as {var.id}")
+    dia = _dialect_from(spec, dialect or _session_value(raw, "dialect"))
+    declared = baud
+    source = "option"
+    if declared is None:
+        try:
+            declared = float(_session_value(raw, "baud")) or None
+            source = "capture"
+        except ValueError:
+            declared = None
+    if declared is None:
+        declared = float(var.default_baud)
+        source = "variant default"
+        notes.append(f"the capture names no baud; assumed {int(declared)}")
+
+    say("decoding")
+    mode = dia["A1"]
+    hl = fr.split_lines(raw.host.data, mode)
+    ul = fr.split_lines(raw.unit.data, mode)
+    parser = _parser(var, dia)
+
+    def timed(b: float, trust: bool) -> tuple:
+        ht = fr.line_times(raw.host, hl, fr.chunk_first_times(raw.host, b, trust))
+        ut = fr.line_times(raw.unit, ul, fr.chunk_first_times(raw.unit, b, trust))
+        return ht, ut
+
+    ht, ut = timed(declared, True)
+    ev_idx, ev_state = fr.mode_events(raw.host.data, hl)
+    init = fr.infer_initial_mode(raw.host.data, hl, int(ev_idx[0]) if len(ev_idx) else -1)
+    host_mode = _step(ev_idx, ev_state, np.arange(len(hl)), init)
+    host = fr.decode_host(raw.host, hl, ht, var, dia, parser, host_mode)
+    # answers: the mode after the last switching command the tap saw before them
+    hr, ur = exm.merged_rank(host, _order_only(raw.unit, ul, ut))
+    ev_rank = hr[ev_idx] if len(ev_idx) else np.zeros(0, np.int64)
+    unit_mode = _step(ev_rank, ev_state, ur, init, strict=True)
+    unit = fr.decode_unit(raw.unit, ul, ut, unit_mode)
+    packets = exm.find_packets(host)
+    ex, unsolicited = exm.build_exchanges(host, unit, packets, declared)
+
+    # is the baud the capture claims possible?
+    used = declared
+    low = baud_evidence(raw)
+    slope = slope_baud(ex)
+    est = None
+    if low is not None and low > declared * 1.3:
+        est = _round_baud(max(low, slope or 0))
+    elif slope is not None and (slope < declared / 1.5 or slope > declared * 1.5) and baud is None:
+        est = _round_baud(slope)
+    if est is not None and est != declared:
+        used = float(est)
+        ht, ut = timed(used, False)
+        host.t_first, host.t_last = ht
+        unit.t_first, unit.t_last = ut
+        ex, unsolicited = exm.build_exchanges(host, unit, packets, used)
+
+    t_all = np.concatenate([host.t_first, unit.t_first])
+    t_all = t_all[np.isfinite(t_all)]
+    t0 = float(t_all.min()) if len(t_all) else 0.0
+    t_end = float(np.concatenate([host.t_last, unit.t_last]).max()) if len(t_all) else 0.0
+    out = Findings(t0)
+    _capture_findings(raw, out, t0, declared, used, source, low, slope)
+
+    say("findings")
+    ctx = Context(ex, lambda i: escape_bytes(host.raw(i)), lambda i: escape_bytes(unit.raw(i)),
+                  used, dict(spec.errors))
+    protocol_findings(ctx, host, unit, unsolicited, out)
+    rec = recovery_analysis(ctx, out)
+    pos = check_positions(ctx, unit, rec, out)
+
+    say("queue replay")
+    accepted = accepted_vectors(ex)
+    rep: QueueReplay | None = None
+    try:
+        rep = replay(ex, accepted, host.result, var)
+    except Exception as exc:  # noqa: BLE001 - a replay failure must not lose the analysis
+        notes.append(f"queue replay failed: {type(exc).__name__}: {exc}")
+    if rep is not None:
+        _starvation_findings(rep, out)
+        if whatif_replays:
+            try:
+                rep.whatif = whatif(ex, accepted, host.result, var, used, rep)
+            except Exception as exc:  # noqa: BLE001
+                notes.append(f"what-if replay failed: {type(exc).__name__}: {exc}")
+        notes.extend(rep.notes[:10])
+
+    say("metrics")
+    for link in raw.link_events:
+        kind = str(link.get("kind", ""))
+        if kind in ("disconnect", "reconnect", "error"):
+            out.add("reset" if kind == "reconnect" else "capture-damaged",
+                    float(link.get("t", t0)), "warning",
+                    f"link {kind} ({link.get('side', '')}): {link.get('detail', '')}",
+                    cause=f"link-{kind}")
+    metrics, series = compute_metrics(ex, host, unit, used, t0, t_end, rep, accepted)
+    metrics["baud"] = {"declared": declared, "source": source, "used": used,
+                       "lower_bound_from_reads": low, "from_answer_lengths": slope}
+    metrics["positions"] = pos
+    metrics["finding_counts"] = dict(sorted(out.counts.items()))
+    metrics["hazards"] = sum(out.counts.get(k, 0) for k in ("blind-resend", "double-move",
+                                                             "lost-vector"))
+    metrics["capture"] = {"complete": raw.status.complete, "problem": raw.status.problem,
+                          "damaged_chunks": raw.status.damaged_chunks,
+                          "bytes": raw.status.size, "topics": raw.topics,
+                          "variant": var.id, "dialect_changes": dia.changed()}
+    return Analysis(str(path), raw, var, dia, used, host, unit, ex, unsolicited, out.sorted(),
+                    metrics, series, rep, t0, notes)
+
+
+def _parser(var: Any, dia: Any) -> Any:
+    from conform.protocol import CommandParser
+
+    return CommandParser(var, dia)
+
+
+def _order_only(d: Any, lines: fr.Lines, times: tuple) -> fr.DecodedLines:
+    """Just enough of a DecodedLines to rank unit lines before they are decoded."""
+    n = len(lines)
+    z = np.zeros(n, object)
+    return fr.DecodedLines("unit", lines, times[0], times[1], fr._term_order(d, lines), z, z,
+                           np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, np.int8),
+                           np.zeros(n, bool), z, np.zeros((n, 4), np.int64))
+
+
+def _step(ev_pos: np.ndarray, ev_state: np.ndarray, at: np.ndarray, init: bool,
+          strict: bool = False) -> np.ndarray:
+    """The state set by the last event strictly before each position."""
+    if len(ev_pos) == 0:
+        return np.full(len(at), init, bool)
+    k = np.searchsorted(ev_pos, at, side="left") - 1
+    return np.where(k >= 0, ev_state[np.maximum(k, 0)] == 1, init)
+
+
+def accepted_vectors(ex: pd.DataFrame) -> np.ndarray:
+    """Vectors the unit took: answered 0, or inside a packet whose answer counts them."""
+    name = ex["name"].to_numpy()
+    is_vec = np.isin(name, ("C", "L")) & (ex["kind"].to_numpy() == "command")
+    packet = ex["packet"].to_numpy()
+    ok = (ex["status"].to_numpy() == "answered") & (ex["code"].to_numpy() == 0)
+    acc = is_vec & (packet < 0) & ok
+    role = ex["packet_role"].to_numpy()
+    ends = np.flatnonzero(role == "end")
+    if len(ends):
+        members = np.flatnonzero(is_vec & (role == "member"))
+        npk = int(packet.max()) + 1
+        limit = np.zeros(npk, np.int64)  # members accepted per packet
+        code = ex["code"].to_numpy()
+        st = ex["status"].to_numpy()
+        for r in ends.tolist():
+            if st[r] == "answered":
+                limit[packet[r]] = 1 << 30 if code[r] == 0 else 0
+        if len(members):
+            pk = packet[members]
+            first = np.searchsorted(pk, pk, side="left")
+            rank = np.arange(len(members)) - first
+            acc[members] = rank < limit[pk]
+    return acc
+
+
+def _capture_findings(raw: RawCapture, out: Findings, t0: float, declared: float, used: float,
+                      source: str, low: float | None, slope: float | None) -> None:
+    st = raw.status
+    if not st.complete:
+        out.add("capture-damaged", t0, "warning",
+                f"the capture is incomplete ({st.problem}); analysed what is intact",
+                problem=st.problem)
+    for note in st.notes[:5]:
+        out.add("capture-damaged", t0, "warning", note)
+    for d in (raw.host, raw.unit):
+        if d.chunks > 1:
+            claimed = d.offset
+            real = np.concatenate([[0], np.cumsum(d.length)[:-1]])
+            gaps = np.flatnonzero((claimed >= 0) & (claimed != real))
+            if len(gaps):
+                out.add("capture-damaged", float(d.t_read[gaps[0]]), "warning",
+                        f"{d.name} stream: {len(gaps)} chunk(s) whose offset does not follow "
+                        "the previous one (bytes missing or repeated)", gaps=int(len(gaps)))
+    if used != declared:
+        why = (f"bytes arrived faster than {int(declared)} baud allows (at least "
+               f"{low:.0f} baud)" if low and low > declared * 1.3 else
+               f"answer times grow with their length as at about {slope:.0f} baud")
+        out.add("baud-mismatch", t0, "warning",
+                f"the {source} says {int(declared)} baud but {why}; timed as {int(used)} baud",
+                declared=declared, used=used)
+
+
+def _starvation_findings(rep: QueueReplay, out: Findings) -> None:
+    ev = rep.starvations
+
+    def mk(i: int) -> tuple:
+        e = ev[i]
+        return (e["t"], f"the queue ran dry for {e['gap'] * 1000:.1f} ms while the job went "
+                "on: the motion stopped at a junction it would have passed at the B speed",
+                [f"host:{e['row']}"] if e["row"] >= 0 else [], {"gap_s": e["gap"]})
+
+    out.many("starvation", np.arange(len(ev)), "warning", mk)
+
+
+def compute_metrics(ex: pd.DataFrame, host: fr.DecodedLines, unit: fr.DecodedLines,
+                    baud: float | None, t0: float, t_end: float, rep: QueueReplay | None,
+                    accepted: np.ndarray) -> tuple[dict[str, Any], pd.DataFrame]:
+    duration = max(t_end - t0, 1e-9)
+    answered = ex["status"].to_numpy() == "answered"
+    n_ex = int(answered.sum())
+    n_vec = int(accepted.sum())
+    hb = int(ex["cmd_bytes"].sum())
+    ub = int((unit.lines.end - unit.lines.start + unit.lines.term).sum()) if len(unit) else 0
+    m: dict[str, Any] = {
+        "duration_s": duration,
+        "frames": {"host": len(host), "unit": len(unit)},
+        "exchanges": n_ex,
+        "commands": len(ex),
+        "vectors_accepted": n_vec,
+        "exchanges_per_s": n_ex / duration,
+        "vectors_per_s": n_vec / duration,
+        "bytes": {"host": hb, "unit": ub},
+        "bytes_per_s": {"host": hb / duration, "unit": ub / duration},
+        "utilisation": {"host": hb * 10 / baud / duration if baud else None,
+                        "unit": ub * 10 / baud / duration if baud else None},
+        "status": {k: int(v) for k, v in ex["status"].value_counts().items()},
+        "codes": {int(k): int(v) for k, v in ex.loc[answered, "code"].value_counts().items()},
+    }
+    lat = {}
+    for col in ("rtt", "unit_time", "host_time", "wire_cmd", "wire_ans"):
+        v = ex[col].to_numpy()[answered]
+        v = v[np.isfinite(v)]
+        if len(v):
+            q = np.quantile(v, [0.5, 0.95, 0.99])
+            lat[col] = {"median": float(q[0]), "p95": float(q[1]), "p99": float(q[2]),
+                        "max": float(v.max()), "mean": float(v.mean())}
+    m["latency"] = lat
+    by = ex.loc[answered].groupby("name", dropna=True)["rtt"]
+    m["latency_by_command"] = {str(k): {"n": int(g.size), "median": float(g.median()),
+                                        "max": float(g.max())} for k, g in by}
+    nb = int(min(600, max(10, duration)))
+    edges = np.linspace(t0, t0 + duration, nb + 1)
+    width = np.diff(edges)
+    t_cmd = ex["t_cmd_first"].to_numpy()
+    exc, _ = np.histogram(t_cmd[answered], bins=edges)
+    vec_t = ex["t_cmd_last"].to_numpy()[accepted]
+    vc, _ = np.histogram(vec_t, bins=edges)
+    hbs, _ = np.histogram(host.t_last, bins=edges,
+                          weights=host.lines.end - host.lines.start + host.lines.term)
+    ubs, _ = np.histogram(unit.t_last, bins=edges,
+                          weights=unit.lines.end - unit.lines.start + unit.lines.term)
+    series = pd.DataFrame({
+        "t": edges[:-1] - t0, "exchanges_per_s": exc / width, "vectors_per_s": vc / width,
+        "host_bytes_per_s": hbs / width, "unit_bytes_per_s": ubs / width,
+    })
+    if baud:
+        series["utilisation_host"] = series["host_bytes_per_s"] * 10 / baud
+        series["utilisation_unit"] = series["unit_bytes_per_s"] * 10 / baud
+    if rep is not None:
+        sc = supply_consumption(rep, edges)
+        series["supplied_per_s"] = sc["supplied_per_s"].to_numpy()
+        series["consumed_per_s"] = sc["consumed_per_s"].to_numpy()
+        dur = rep.ends - rep.starts
+        m["queue"] = {
+            "capacity": rep.capacity,
+            "vectors_replayed": rep.vectors,
+            "vectors_completed": int(len(rep.ends)),
+            "max_depth": int(rep.depth.max()) if len(rep.depth) else 0,
+            "mean_depth": float(_time_mean(rep.depth_t, rep.depth)),
+            "starvations": len(rep.starvations),
+            "starved_s": float(sum(e["gap"] for e in rep.starvations)),
+            "median_vector_s": float(np.median(dur)) if len(dur) else None,
+            "motion_end_s": float(rep.ends.max() - t0) if len(rep.ends) else None,
+            "whatif": rep.whatif,
+        }
+    return m, series
+
+
+def _time_mean(t: np.ndarray, v: np.ndarray) -> float:
+    if len(t) < 2:
+        return float(v[0]) if len(v) else 0.0
+    dt = np.diff(t)
+    total = dt.sum()
+    return float((v[:-1] * dt).sum() / total) if total > 0 else float(v.mean())

@@ -1,0 +1,422 @@
+"""Findings: what a session did wrong (or right), each tied to the manual clause it concerns.
+
+Every finding has a stable ``kind``, a time (seconds from the start of the capture), a
+severity, the frames it refers to (``host:<line>`` / ``unit:<line>``) and a message. The
+severities: ``info`` (good practice, notable events), ``warning`` (cost or link trouble),
+``error`` (the sender broke a protocol rule), ``hazard`` (the machine may have moved other
+than the job says). A careful sender on a clean or noisy line produces no ``hazard``.
+Detectors are vectorised over the exchange table; only the rows they report are visited in
+Python, and each kind lists at most ``MAX_LISTED`` rows (the metrics keep the full counts).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from conform.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
+
+MAX_LISTED = 50
+SEVERITIES = ("info", "warning", "error", "hazard")
+HAZARDS = ("blind-resend", "double-move", "lost-vector")
+MOTION = ("C", "L")
+
+CLAUSES = {
+    "simplex-violation": "GVE64 §13.3 (strictly simplex: wait for the answer)",
+    "checksum-error": "GVE64 §13.3.2 (checksums)",
+    "garbled-answer": "GVE64 §13.7 (answer: hex digit, fields, CR)",
+    "error-code": "GVE64 §13.7 (error codes)",
+    "queue-full-polling": "GVE64 §13.5.2, §13.7 code 1 (vector not accepted, send again)",
+    "repeat-used": "GVE64 §13.5.13 (`>` repeats the last command and its answer)",
+    "index-checked": "GVE64 §13.5.13 (`@` index of the last command)",
+    "blind-resend": "GVE64 §13.5.13 (`@` / `>` tell whether a vector arrived)",
+    "double-move": "GVE64 §13.5.2 (relative vectors: executed twice moves twice)",
+    "lost-vector": "GVE64 §13.5.2, §13.7 (a vector not accepted is not executed)",
+    "long-wait": "GVE64 §13.3, §13.5.9 (HALT and W answer when the motion has ended)",
+    "reset": "GVE64 §13.4 (reset state: position, checksums, modal values)",
+    "starvation": "GVE64 §13.5.3 (C vectors join at B only if the next one is queued)",
+    "no-answer": "GVE64 §13.3 (the unit answers every command)",
+    "unsolicited-answer": "GVE64 §13.3 (answers come only after commands)",
+    "garbage-sent": "GVE64 §13.5 (command: `!`, address, mnemonic)",
+    "baud-mismatch": "GVE64 §13.3 (baud rate by DIP switch)",
+    "capture-damaged": "docs/capture-format.md",
+    "position-mismatch": "GVE64 §13.5.6 (P, PF, P4 report the position counters)",
+}
+
+
+@dataclass
+class Finding:
+    kind: str
+    t: float
+    severity: str
+    message: str
+    clause: str = ""
+    frames: list[str] = field(default_factory=list)
+    row: int | None = None
+    count: int = 1
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.update(d.pop("extra"))
+        return d
+
+
+class Findings:
+    """Collects findings, keeping the full count of each kind but listing at most a few."""
+
+    def __init__(self, t0: float) -> None:
+        self.t0 = t0
+        self.items: list[Finding] = []
+        self.counts: dict[str, int] = {}
+
+    def add(self, kind: str, t: float, severity: str, message: str, *,
+            frames: list[str] | None = None, row: int | None = None, count: int = 1,
+            listed: bool = True, **extra: Any) -> None:
+        assert severity in SEVERITIES, severity
+        self.counts[kind] = self.counts.get(kind, 0) + count
+        if not listed:
+            return
+        t_rel = float(t - self.t0) if t == t else float("nan")
+        self.items.append(Finding(kind, round(t_rel, 6), severity, message,
+                                  CLAUSES.get(kind, ""), frames or [], row, count, extra))
+
+    def many(self, kind: str, rows: np.ndarray, severity: str, make: Any) -> None:
+        """Add one finding per row (listing the first MAX_LISTED), ``make(row) -> (t, msg, frames)``."""
+        rows = np.asarray(rows)
+        for k, r in enumerate(rows.tolist()):
+            if k >= MAX_LISTED:
+                self.counts[kind] = self.counts.get(kind, 0) + len(rows) - k
+                self.items.append(Finding(kind, self.items[-1].t if self.items else 0.0,
+                                          severity, f"… and {len(rows) - k} more like these",
+                                          CLAUSES.get(kind, ""), [], None, len(rows) - k))
+                return
+            t, msg, frames, extra = make(r)
+            row = int(extra.pop("row", r))
+            self.add(kind, t, severity, msg, frames=frames, row=row, **extra)
+
+    def sorted(self) -> list[Finding]:
+        return sorted(self.items, key=lambda f: (f.t if f.t == f.t else 0.0, f.kind))
+
+    def hazards(self) -> list[Finding]:
+        return [f for f in self.items if f.severity == "hazard"]
+
+
+def _fr(side: str, i: int) -> str:
+    return f"{side}:{int(i)}"
+
+
+class Context:
+    """What the detectors share: the exchange table and how to print a row."""
+
+    def __init__(self, ex: pd.DataFrame, host_text: Any, unit_text: Any, baud: float | None,
+                 errors: dict[int, Any]) -> None:
+        self.ex = ex
+        self.host_text = host_text
+        self.unit_text = unit_text
+        self.baud = baud
+        self.errors = errors
+        self.name = ex["name"].to_numpy()
+        self.status = ex["status"].to_numpy()
+        self.code = ex["code"].to_numpy()
+        self.t = ex["t_cmd_first"].to_numpy()
+        self.answer = ex["answer_frame"].to_numpy()
+
+    def cmd(self, r: int) -> str:
+        return self.host_text(int(r))
+
+    def ans(self, r: int) -> str:
+        a = int(self.answer[r])
+        return self.unit_text(a) if a >= 0 else "(no answer)"
+
+    def frames(self, r: int) -> list[str]:
+        out = [_fr("host", r)]
+        if self.answer[r] >= 0:
+            out.append(_fr("unit", self.answer[r]))
+        return out
+
+
+def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
+    """Rows that deliver motion: single vectors and whole packets (their ``*E`` row).
+
+    ``sig`` identifies the content (same vector or same packet content = same signature).
+    """
+    name = ex["name"].to_numpy()
+    packet = ex["packet"].to_numpy()
+    role = ex["packet_role"].to_numpy()
+    single = np.isin(name, MOTION) & (packet < 0) & (ex["kind"].to_numpy() == "command")
+    end = role == "end"
+    rows = np.flatnonzero(single | end)
+    sig = np.zeros((len(rows), 6), np.int64)
+    vec = ex[["dx", "dy", "dz", "da"]].to_numpy()
+    sig[:, :4] = vec[rows]
+    sig[:, 4] = np.where(name[rows] == "L", 1, 0)
+    if end.any():
+        members = (role == "member") & np.isin(name, MOTION)
+        pk = packet[members]
+        npk = int(packet.max()) + 1
+        sums = np.zeros((npk, 4), np.int64)
+        for j in range(4):
+            sums[:, j] = np.bincount(pk, weights=vec[members, j], minlength=npk)
+        cnt = np.bincount(pk, minlength=npk)
+        ends = np.flatnonzero(end[rows])
+        p = packet[rows[ends]]
+        sig[ends, :4] = sums[p]
+        sig[ends, 5] = cnt[p] + 1000  # never equal to a single vector's signature
+    return pd.DataFrame({"row": rows, "s0": sig[:, 0], "s1": sig[:, 1], "s2": sig[:, 2],
+                         "s3": sig[:, 3], "s4": sig[:, 4], "s5": sig[:, 5]})
+
+
+def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
+    """blind-resend, lost-vector (possible), index-checked, repeat-used, queue-full polling."""
+    ex = ctx.ex
+    mu = motion_units(ex)
+    rows = mu["row"].to_numpy()
+    uncertain = ex["uncertain"].to_numpy()
+    name = ctx.name
+    expects = np.isin(ctx.status, ("answered", "unanswered"))
+    is_rec = expects & np.isin(name, ("@", ">"))
+    cum_rec = np.cumsum(is_rec)
+    res: dict[str, np.ndarray] = {"doubles": np.zeros(0, np.int64),
+                                  "lost": np.zeros(0, np.int64),
+                                  "contrib": np.zeros(len(ex), bool)}
+    if len(rows) == 0:
+        _repeat_used(ctx, out, uncertain, is_rec)
+        return res
+    sig = mu[["s0", "s1", "s2", "s3", "s4", "s5"]].to_numpy()
+    nxt = np.concatenate([rows[1:], [-1]])
+    same_next = np.zeros(len(rows), bool)
+    same_next[:-1] = (sig[1:] == sig[:-1]).all(axis=1)
+    rec_between = np.zeros(len(rows), bool)
+    rec_between[:-1] = cum_rec[rows[1:]] - cum_rec[rows[:-1]] > 0
+    # after the last unit: any recovery at all later?
+    rec_between[-1] = cum_rec[-1] - cum_rec[rows[-1]] > 0
+    unc = uncertain[rows]
+    code = ctx.code[rows]
+    answered_clean = (ctx.status[rows] == "answered") & ~unc
+    has_next = nxt >= 0
+
+    blind = unc & same_next & ~rec_between
+    moved_on = unc & has_next & ~same_next & ~rec_between
+    refused = answered_clean & np.isin(code, (1, 2, 4, 5, 7)) & has_next & ~same_next
+    checked = unc & rec_between
+
+    def mk_blind(i: int) -> tuple:
+        r = rows[i]
+        return (ctx.t[nxt[i]],
+                f"`{ctx.cmd(r)}` got {ctx.ans(r)}; the sender sent the same motion again "
+                f"(host:{nxt[i]}) without asking `@` or `>` first: if the first one was "
+                "accepted the machine moves twice",
+                [_fr("host", r), _fr("host", nxt[i])], {"resent_row": int(nxt[i]), "row": int(r)})
+
+    out.many("blind-resend", np.flatnonzero(blind), "hazard", mk_blind)
+
+    def mk_lost(i: int) -> tuple:
+        r = rows[i]
+        return (ctx.t[nxt[i]],
+                f"`{ctx.cmd(r)}` got {ctx.ans(r)}; the sender moved on to `{ctx.cmd(nxt[i])}` "
+                "without asking `@` or `>`: if the unit did not take it, this motion is lost.",
+                [_fr("host", r), _fr("host", nxt[i])], {"confirmed": False, "row": int(r)})
+
+    out.many("lost-vector", np.flatnonzero(moved_on), "hazard", mk_lost)
+
+    def mk_refused(i: int) -> tuple:
+        r = rows[i]
+        meaning = ctx.errors.get(int(code[i]))
+        why = meaning.meaning if meaning is not None else f"error {code[i]}"
+        return (ctx.t[nxt[i]],
+                f"`{ctx.cmd(r)}` was answered {ctx.ans(r)} ({why}) and the sender moved on to "
+                f"`{ctx.cmd(nxt[i])}` without sending it again: this motion is lost",
+                [_fr("host", r), _fr("host", nxt[i])], {"confirmed": True, "row": int(r)})
+
+    out.many("lost-vector", np.flatnonzero(refused), "hazard", mk_refused)
+
+    def mk_checked(i: int) -> tuple:
+        r = rows[i]
+        lo = r + 1
+        hi = nxt[i] if nxt[i] >= 0 else len(ex)
+        which = [k for k in range(lo, hi) if is_rec[k]][:3]
+        asked = ", ".join(f"`{ctx.cmd(k)}` → {ctx.ans(k)}" for k in which)
+        then = "sent it again" if same_next[i] else "moved on"
+        return (ctx.t[which[0]] if which else ctx.t[r],
+                f"`{ctx.cmd(r)}` got {ctx.ans(r)}; the sender asked {asked} and then {then}",
+                [_fr("host", r)] + [_fr("host", k) for k in which], {"row": int(r)})
+
+    idx_checked = np.flatnonzero(checked)
+    uses_at = np.zeros(len(idx_checked), bool)
+    for j, i in enumerate(idx_checked.tolist()):
+        hi = nxt[i] if nxt[i] >= 0 else len(ex)
+        seg = name[rows[i] + 1 : hi]
+        uses_at[j] = bool((seg == "@").any())
+    out.many("index-checked", idx_checked[uses_at], "info", mk_checked)
+    _repeat_used(ctx, out, uncertain, is_rec)
+    _queue_full(ctx, out, rows, sig, code, answered_clean)
+
+    # what the sender meant to move: every unit once, except one replaced by a resend
+    contrib = np.zeros(len(ex), bool)
+    contrib[rows] = (answered_clean & (code == 0)) | (unc & ~same_next)
+    res["contrib"] = contrib
+    res["doubles"] = rows[blind]
+    res["lost"] = rows[moved_on]
+    return res
+
+
+def _repeat_used(ctx: Context, out: Findings, uncertain: np.ndarray, is_rec: np.ndarray) -> None:
+    """``>`` sent right after an uncertain answer: the careful way to learn what happened."""
+    rep = np.flatnonzero(is_rec & (ctx.name == ">"))
+    if len(rep) == 0:
+        return
+    exp_rows = np.flatnonzero(np.isin(ctx.status, ("answered", "unanswered")))
+    pos = np.searchsorted(exp_rows, rep) - 1
+    prev = np.where(pos >= 0, exp_rows[np.maximum(pos, 0)], -1)
+    good = (prev >= 0) & uncertain[np.maximum(prev, 0)]
+
+    def mk(r: int) -> tuple:
+        p = int(prev[np.searchsorted(rep, r)])
+        return (ctx.t[r], f"after `{ctx.cmd(p)}` got {ctx.ans(p)}, the sender asked `>` "
+                f"and got {ctx.ans(r)}", [_fr("host", p)] + ctx.frames(r), {})
+
+    out.many("repeat-used", rep[good], "info", mk)
+
+
+def _queue_full(ctx: Context, out: Findings, rows: np.ndarray, sig: np.ndarray,
+                code: np.ndarray, clean: np.ndarray) -> None:
+    full = clean & (code == 1)
+    if not full.any():
+        return
+    ex = ctx.ex
+    polls = rows[full]
+    starts = full & ~np.concatenate([[False], full[:-1]])
+    runs = int(starts.sum())
+    nbytes = int(ex["cmd_bytes"].to_numpy()[polls].sum() + ex["ans_bytes"].to_numpy()[polls].sum())
+    host_total = int(ex["cmd_bytes"].sum()) or 1
+    span = float(np.nanmax(ex["t_cmd_first"]) - np.nanmin(ex["t_cmd_first"])) or 1.0
+    line_time = nbytes * 10.0 / ctx.baud if ctx.baud else float("nan")
+    ht = ex["host_time"].to_numpy()[polls]
+    gap = float(np.nanmedian(ht)) if np.isfinite(ht).any() else float("nan")
+    pattern = "immediate" if gap == gap and gap < 0.002 else "paced"
+    share = float(ex["cmd_bytes"].to_numpy()[polls].sum()) / host_total
+    sev = "warning" if share > 0.10 else "info"
+    out.add("queue-full-polling", ctx.t[polls[0]], sev,
+            f"{len(polls)} vector(s) answered 1 (queue full) in {runs} run(s), "
+            f"{len(polls) / max(runs, 1):.1f} tries per run, resent {pattern} "
+            f"(median {gap * 1000:.2f} ms after the answer); the retries took "
+            f"{share:.0%} of the bytes sent and {line_time / span:.1%} of the line time",
+            frames=[_fr("host", polls[0])], row=int(polls[0]), count=len(polls),
+            runs=runs, polls=len(polls), bytes=nbytes, share_of_host_bytes=share,
+            pattern=pattern, median_retry_gap_s=gap)
+
+
+def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarray,
+                      out: Findings) -> None:
+    ex = ctx.ex
+    n = len(ex)
+    byte_t = 10.0 / ctx.baud if ctx.baud else 0.0
+    answered = ctx.status == "answered"
+    # simplex: the next line started before this answer had arrived
+    t_next = np.concatenate([ctx.t[1:], [np.inf]])
+    t_ans_last = ex["t_ans_last"].to_numpy()
+    viol = answered & (t_next < t_ans_last - 0.5 * byte_t)
+    viol &= ctx.name != "J"
+
+    def mk_viol(r: int) -> tuple:
+        return (ctx.t[r + 1], f"`{ctx.cmd(r + 1)}` was sent before the answer to "
+                f"`{ctx.cmd(r)}` ({ctx.ans(r)}) had arrived",
+                [_fr("host", r), _fr("host", r + 1)] + ctx.frames(r)[1:], {})
+
+    out.many("simplex-violation", np.flatnonzero(viol), "error", mk_viol)
+
+    # checksum errors, both directions
+    bad_cmd = np.flatnonzero(np.isin(host.checksum, (CS_BAD, CS_MISSING)))
+
+    def mk_cs_cmd(r: int) -> tuple:
+        what = "does not match" if host.checksum[r] == CS_BAD else "is missing"
+        return (host.t_first[r], f"command `{ctx.cmd(r)}`: checksum {what}; the unit "
+                f"answered {ctx.ans(r)}", ctx.frames(r), {"direction": "host"})
+
+    out.many("checksum-error", bad_cmd, "warning", mk_cs_cmd)
+    bad_ans = np.flatnonzero(np.isin(unit.checksum, (CS_BAD, CS_MISSING))
+                             & (unit.kind == ANSWER))
+
+    def mk_cs_ans(u: int) -> tuple:
+        what = "does not match" if unit.checksum[u] == CS_BAD else "is missing"
+        return (unit.t_first[u], f"answer `{ctx.unit_text(u)}`: checksum {what}",
+                [_fr("unit", u)], {"direction": "unit"})
+
+    out.many("checksum-error", bad_ans, "warning", mk_cs_ans)
+
+    garbled = np.flatnonzero(np.isin(unit.kind, (GARBLED, PARTIAL)))
+
+    def mk_garbled(u: int) -> tuple:
+        return (unit.t_first[u], f"`{ctx.unit_text(u)}` is not an answer: {unit.detail[u]}",
+                [_fr("unit", u)], {})
+
+    out.many("garbled-answer", garbled, "warning", mk_garbled)
+
+    # error codes (queue-full on motion is reported as polling)
+    clean = answered & (ex["answer_kind"].to_numpy() == ANSWER)
+    err = clean & (ctx.code > 0)
+    err &= ~((ctx.code == 1) & np.isin(ctx.name, ("C", "L", "*E")))
+
+    def mk_err(r: int) -> tuple:
+        c = int(ctx.code[r])
+        meaning = ctx.errors.get(c)
+        why = meaning.meaning if meaning is not None else "unknown code"
+        prev = f" after `{ctx.cmd(r - 1)}`" if r > 0 else ""
+        cause = ""
+        if host.checksum[r] in (CS_BAD, CS_MISSING):
+            cause = " (the command's checksum was wrong)"
+        elif host.kind[r] == "rejection" and host.detail[r]:
+            cause = f" ({host.detail[r]})"
+        return (ctx.t[r], f"`{ctx.cmd(r)}`{prev} answered {ctx.ans(r)}: error {c}, {why}"
+                f"{cause}", ctx.frames(r), {"code": c})
+
+    out.many("error-code", np.flatnonzero(err), "warning", mk_err)
+
+    # unanswered commands
+    unans = np.flatnonzero((ctx.status == "unanswered") & (ctx.name != "J"))
+
+    def mk_unans(r: int) -> tuple:
+        return (ctx.t[r], f"`{ctx.cmd(r)}` got no answer", [_fr("host", r)], {})
+
+    out.many("no-answer", unans, "warning", mk_unans)
+
+    def mk_unsol(u: int) -> tuple:
+        return (unit.t_first[u], f"`{ctx.unit_text(u)}` arrived before any command",
+                [_fr("unit", u)], {})
+
+    out.many("unsolicited-answer", unsolicited[unit.kind[unsolicited] != ECHO]
+             if len(unsolicited) else unsolicited, "warning", mk_unsol)
+
+    garbage = np.flatnonzero((host.kind == "rejection") & (host.code < 0))
+
+    def mk_garbage(r: int) -> tuple:
+        return (ctx.t[r], f"`{ctx.cmd(r)}` is not a command the unit answers: "
+                f"{host.detail[r]}", [_fr("host", r)], {})
+
+    out.many("garbage-sent", garbage, "warning", mk_garbage)
+
+    # long waits: HALT and W answer when the motion has ended
+    lw = np.flatnonzero(np.isin(ctx.name, ("H", "W")) & answered
+                        & (ex["unit_time"].to_numpy() > 0.02))
+
+    def mk_lw(r: int) -> tuple:
+        ut = float(ex["unit_time"].to_numpy()[r])
+        return (ctx.t[r], f"`{ctx.cmd(r)}` answered {ctx.ans(r)} after {ut * 1000:.0f} ms "
+                "(it answers when the motion has stopped; the line is busy meanwhile)",
+                ctx.frames(r), {"wait_s": ut})
+
+    out.many("long-wait", lw, "info", mk_lw)
+
+    resets = np.flatnonzero((ctx.name == "J") & (ex["kind"].to_numpy() == "command"))
+
+    def mk_reset(r: int) -> tuple:
+        return (ctx.t[r], f"`{ctx.cmd(r)}` resets the unit: position, checksums and modal "
+                "values return to the reset state and it is deaf for about 2 s",
+                ctx.frames(r), {"cause": "J"})
+
+    out.many("reset", resets, "info", mk_reset)
+    del n

@@ -1,0 +1,248 @@
+"""Queue feeding: replay the accepted vectors through the unit's own motion executor.
+
+The vectors the unit accepted are pushed into ``conform.unit.motion.MotionExecutor`` at the
+time their line arrived, with the modal parameters (V, A, B, $, T, VK/VN) the sender set.
+What comes out is what the unit's queue should have done: its depth over time, the moments
+it ran dry while the job went on (starvation: the motion had to stop at a junction it would
+have passed at the B speed), and how fast vectors were supplied versus consumed. The same
+replay with made-up arrival times answers "what would packets or a faster link change".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from conform.spec.model import Variant
+
+MODAL = {"V", "A", "B", "$", "T", "VK", "VN"}
+CONTROL = {"H", "G", "D", "J", "K", "R"}
+WHATIF_MAX_VECTORS = 200_000
+
+
+@dataclass
+class QueueReplay:
+    pushes: np.ndarray  # times vectors were pushed
+    push_rows: np.ndarray  # exchange row of each pushed vector
+    starts: np.ndarray  # per completed vector: start, end, starved, exit speed, push index
+    ends: np.ndarray
+    starved: np.ndarray
+    v_out: np.ndarray
+    done_rows: np.ndarray
+    removals: np.ndarray  # times vectors left the queue unfinished (D, J)
+    depth_t: np.ndarray
+    depth: np.ndarray
+    starvations: list[dict[str, Any]] = field(default_factory=list)
+    whatif: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    capacity: int = 0
+
+    @property
+    def vectors(self) -> int:
+        return len(self.pushes)
+
+
+def _params(variant: Variant) -> Any:
+    from conform.unit.motion import MotionParams
+
+    r = variant.reset
+    return MotionParams(v=float(r.get("V", 1000)), a=float(r.get("A", 20)) * 1000.0,
+                        b=float(r.get("B", 35000)), short=int(r.get("$", 512)),
+                        pause=float(r.get("T", 5)) / 1000.0, vk=bool(r.get("VK", False)))
+
+
+def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Variant,
+           arrival: np.ndarray | None = None) -> QueueReplay:
+    """Push ``ex`` rows flagged in ``accepted`` (vectors) at their arrival times.
+
+    ``host_parsed(row)`` returns the parsed Command of a row (for modal values).
+    ``arrival`` overrides the arrival time of each row (what-if replays).
+    """
+    from conform.unit.motion import MotionExecutor, MotionStateError
+
+    naxes = len(variant.axes)
+    log: list = []
+    exe = MotionExecutor(axes=naxes, capacity=variant.queue, max_rate=variant.max_rate,
+                         params=_params(variant), log=log)
+    names = ex["name"].to_numpy()
+    code = ex["code"].to_numpy()
+    t = ex["t_cmd_last"].to_numpy() if arrival is None else arrival
+    t = np.maximum.accumulate(np.nan_to_num(t, nan=0.0))
+    ok = (code == 0) & (ex["status"].to_numpy() == "answered")
+    ctrl = np.isin(names, list(MODAL | CONTROL)) & ok
+    rows = np.flatnonzero(accepted | ctrl)
+    vec = ex[["dx", "dy", "dz", "da"]].to_numpy()[:, :naxes]
+    is_vec = accepted[rows]
+    cont = names[rows] == "C"
+    pushes: list[float] = []
+    push_rows: list[int] = []
+    removals: list[float] = []
+    seq_row: list[int] = []
+    notes: list[str] = []
+    advance, push = exe.advance, exe.push
+    trow = t[rows].tolist()
+    vrows = [tuple(v) for v in vec[rows].tolist()]
+    for k, r in enumerate(rows.tolist()):
+        tk = trow[k]
+        advance(tk)
+        if is_vec[k]:
+            push(vrows[k], bool(cont[k]))
+            pushes.append(tk)
+            push_rows.append(r)
+            seq_row.append(r)
+            continue
+        name = names[r]
+        cmd = host_parsed(r)
+        args = getattr(cmd, "args", ()) or ()
+        try:
+            if name in MODAL:
+                p = exe.params
+                if name == "V" and args:
+                    exe.params = p.replace(v=float(args[0]))
+                elif name == "A" and args:
+                    exe.params = p.replace(a=float(args[0]) * 1000.0)
+                elif name == "B" and args:
+                    exe.params = p.replace(b=float(args[0]))
+                elif name == "$" and args:
+                    exe.params = p.replace(short=int(args[0]))
+                elif name == "T" and args:
+                    exe.params = p.replace(pause=float(args[0]) / 1000.0)
+                elif name in ("VK", "VN"):
+                    exe.params = p.replace(vk=name == "VK")
+            elif name == "H":
+                exe.halt(tk)
+            elif name == "G":
+                exe.resume(tk)
+            elif name == "D":
+                removals.extend([tk] * exe.queue_len)
+                exe.clear()
+            elif name == "K":
+                exe.park()
+            elif name == "R":
+                exe.restore()
+            elif name == "J":
+                removals.extend([tk] * exe.queue_len)
+                log_len = len(log)
+                exe = MotionExecutor(axes=naxes, capacity=variant.queue,
+                                     max_rate=variant.max_rate, params=_params(variant),
+                                     log=log)
+                advance, push = exe.advance, exe.push
+                exe.advance(tk)
+                del log_len
+        except (MotionStateError, ValueError) as err:
+            notes.append(f"replay: {name} at row {r} refused by the model: {err}")
+    end = exe.next_event_time()
+    guard = 0
+    while end is not None and guard < variant.queue + 10_000:
+        exe.advance(end)
+        end = exe.next_event_time()
+        guard += 1
+    if log:
+        arr = np.array([(c.seq, c.t_start, c.t_end, c.v_out, c.starved) for c in log], float)
+        seq = arr[:, 0].astype(np.int64)
+        starts, ends, v_out, starved = arr[:, 1], arr[:, 2], arr[:, 3], arr[:, 4] > 0
+    else:
+        seq = np.zeros(0, np.int64)
+        starts = ends = v_out = np.zeros(0)
+        starved = np.zeros(0, bool)
+    push_rows_a = np.asarray(push_rows, np.int64)
+    # seq counts pushes per executor; J makes a new executor: map by order of completion
+    done_rows = push_rows_a[np.minimum(_global_seq(seq), max(len(push_rows_a) - 1, 0))] \
+        if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
+    pushes_a = np.asarray(pushes, float)
+    removals_a = np.asarray(removals, float)
+    ev_t = np.concatenate([pushes_a, ends, removals_a])
+    ev_d = np.concatenate([np.ones(len(pushes_a)), -np.ones(len(ends)), -np.ones(len(removals_a))])
+    order = np.lexsort((ev_d, ev_t))
+    depth_t = ev_t[order]
+    depth = np.cumsum(ev_d[order]).astype(np.int64) if len(order) else np.zeros(0, np.int64)
+    rep = QueueReplay(pushes_a, push_rows_a, starts, ends, starved, v_out, done_rows,
+                      removals_a, depth_t, depth, notes=notes, capacity=variant.queue)
+    rep.starvations = _starvation_events(rep)
+    return rep
+
+
+def _global_seq(seq: np.ndarray) -> np.ndarray:
+    """Executor sequence numbers restart after J; make them a running count of pushes."""
+    if len(seq) == 0:
+        return seq
+    out = seq.copy()
+    base = 0
+    restart = np.flatnonzero(np.diff(seq) < 0) + 1
+    prev = 0
+    for r in restart.tolist():
+        base += int(seq[prev:r].max()) + 1
+        out[r:] = seq[r:] + base
+        prev = r
+    return out
+
+
+def _starvation_events(rep: QueueReplay) -> list[dict[str, Any]]:
+    out = []
+    idx = np.flatnonzero(rep.starved)
+    for i in idx.tolist():
+        gap_from = float(rep.ends[i - 1]) if i > 0 else float(rep.starts[i])
+        out.append({"t": float(rep.starts[i]), "from": gap_from,
+                    "gap": float(rep.starts[i]) - gap_from,
+                    "row": int(rep.done_rows[i]) if i < len(rep.done_rows) else -1})
+    return out
+
+
+def supply_consumption(rep: QueueReplay, edges: np.ndarray) -> pd.DataFrame:
+    """Vectors accepted and finished per time bin."""
+    sup, _ = np.histogram(rep.pushes, bins=edges)
+    con, _ = np.histogram(rep.ends, bins=edges)
+    width = np.diff(edges)
+    return pd.DataFrame({"t": edges[:-1], "supplied_per_s": sup / width,
+                         "consumed_per_s": con / width})
+
+
+def whatif(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Variant,
+           baud: float | None, rep: QueueReplay) -> list[dict[str, Any]]:
+    """What packets of n, or a link without converter latency, would change."""
+    vec_rows = np.flatnonzero(accepted)
+    if len(vec_rows) < 2 or not baud:
+        return []
+    byte_t = 10.0 / baud
+    single = ex.iloc[vec_rows]
+    plain = single[single["packet"].to_numpy() < 0]
+    src = plain if len(plain) else single
+    cmd_w = float(np.median(src["cmd_bytes"])) * byte_t
+    ans_w = 2 * byte_t
+    ut = src["unit_time"].to_numpy()
+    ht = src["host_time"].to_numpy()
+    lat = float(np.nanmedian(ut)) if np.isfinite(ut).any() else 0.0
+    host = float(np.nanmedian(ht)) if np.isfinite(ht).any() else 0.0
+    lat, host = max(lat, 0.0), max(host, 0.0)
+    durations = rep.ends - rep.starts
+    need = float(np.median(durations)) if len(durations) else float("nan")
+    observed = float(np.median(np.diff(ex["t_cmd_first"].to_numpy()[vec_rows])))
+    scenarios = [("as captured", observed)]
+    scenarios.append(("no converter latency (RS232)", cmd_w + ans_w + min(lat, 0.0005)
+                      + min(host, 0.0005)))
+    for n in (10, 20):
+        overhead = (6 + 8) * byte_t + 6 * byte_t + lat + host
+        scenarios.append((f"packets of {n}", cmd_w + overhead / n))
+    out = []
+    for label, cycle in scenarios:
+        row: dict[str, Any] = {"scenario": label, "seconds_per_vector": cycle,
+                               "supply_per_s": 1.0 / cycle if cycle > 0 else float("inf"),
+                               "consumption_per_s": 1.0 / need if need > 0 else float("nan")}
+        row["keeps_up"] = bool(cycle <= need) if need == need else None
+        if label != "as captured" and len(vec_rows) <= WHATIF_MAX_VECTORS:
+            t0 = float(ex["t_cmd_last"].to_numpy()[vec_rows[0]])
+            arrival = ex["t_cmd_last"].to_numpy().astype(float).copy()
+            arrival[vec_rows] = t0 + cycle * np.arange(len(vec_rows))
+            arrival = np.maximum.accumulate(np.nan_to_num(arrival, nan=t0))
+            sim = replay(ex, accepted, host_parsed, variant, arrival=arrival)
+            row["starvations"] = len(sim.starvations)
+            row["job_seconds"] = float(sim.ends.max() - t0) if len(sim.ends) else 0.0
+        elif label == "as captured":
+            row["starvations"] = len(rep.starvations)
+            row["job_seconds"] = (float(rep.ends.max() - rep.pushes.min())
+                                  if len(rep.ends) else 0.0)
+        out.append(row)
+    return out

@@ -1,0 +1,412 @@
+"""Read the raw byte channels of a capture fast and without trusting the file.
+
+The analyser needs only the raw chunks (the bytes are the truth) plus the small channels
+(link events, metadata). ``conform.capture.reader`` builds one Python object per message,
+which is too slow for a million exchanges, so this module walks the MCAP records itself:
+top-level records are bounded by the file size, chunks are decompressed and CRC-checked,
+and message records inside a chunk are sliced with ``struct`` without building objects.
+The JSON payloads of the raw channels are parsed in bulk (``pyarrow.json``) and their
+base64 data decoded with numpy. A damaged chunk is skipped, a truncated file is read up to
+the damage; both are reported in :class:`ReadStatus`, never raised. Only a file that is not
+MCAP at all raises ``UserError``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zstandard
+
+from conform.capture.scan import MAGIC, check_magic
+from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
+from conform.errors import UserError
+
+MAX_RECORD = 256 * 1024 * 1024
+MAX_CHUNK = 256 * 1024 * 1024
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
+OP_METADATA, OP_DATA_END = 0x0C, 0x0F
+RAW_TOPICS = {TOPIC_HOST: "host", TOPIC_UNIT: "unit"}
+Progress = Callable[[int, int], None]
+
+
+@dataclass
+class ReadStatus:
+    """What the walk over the file found."""
+
+    path: Path
+    size: int = 0
+    complete: bool = False
+    problem: str | None = None
+    damaged_chunks: int = 0
+    bad_payloads: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def truncated(self) -> bool:
+        return not self.complete
+
+
+@dataclass
+class Direction:
+    """Every byte of one direction in file order, with the chunk each came in."""
+
+    name: str
+    data: np.ndarray  # uint8, all chunks concatenated
+    start: np.ndarray  # int64, index of each chunk's first byte in ``data``
+    length: np.ndarray  # int64
+    offset: np.ndarray  # int64, the stream offset the capture claims (-1 if unknown)
+    t_read: np.ndarray  # float64 seconds
+    t_first: np.ndarray  # float64 seconds (nan where the capture gave none)
+    order: np.ndarray  # int64, message index in the file (both directions share one count)
+
+    @property
+    def chunks(self) -> int:
+        return len(self.start)
+
+    @classmethod
+    def empty(cls, name: str) -> Direction:
+        z = np.zeros(0, np.int64)
+        return cls(name, np.zeros(0, np.uint8), z, z, z, np.zeros(0), np.zeros(0), z)
+
+
+@dataclass
+class RawCapture:
+    status: ReadStatus
+    metadata: dict[str, dict[str, str]]
+    host: Direction
+    unit: Direction
+    link_events: list[dict[str, Any]]
+    topics: dict[str, int]  # messages per topic
+
+    def direction(self, name: str) -> Direction:
+        return self.host if name == "host" else self.unit
+
+
+class _Collector:
+    def __init__(self) -> None:
+        self.channels: dict[int, tuple[str, str]] = {}  # id -> (topic, encoding)
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.payloads: dict[str, list[bytes]] = {"host": [], "unit": []}
+        self.times: dict[str, list[int]] = {"host": [], "unit": []}
+        self.orders: dict[str, list[int]] = {"host": [], "unit": []}
+        self.raw_encoded: dict[str, bool] = {"host": False, "unit": False}
+        self.link: list[dict[str, Any]] = []
+        self.topics: dict[str, int] = {}
+        self.count = 0
+
+    def channel(self, body: bytes) -> None:
+        cid, _schema = struct.unpack_from("<HH", body, 0)
+        (n,) = struct.unpack_from("<I", body, 4)
+        topic = body[8 : 8 + n].decode("utf-8", "replace")
+        (m,) = struct.unpack_from("<I", body, 8 + n)
+        enc = body[12 + n : 12 + n + m].decode("utf-8", "replace")
+        self.channels.setdefault(cid, (topic, enc))
+
+    def metadata_record(self, body: bytes) -> None:
+        (n,) = struct.unpack_from("<I", body, 0)
+        name = body[4 : 4 + n].decode("utf-8", "replace")
+        (total,) = struct.unpack_from("<I", body, 4 + n)
+        pos, end = 8 + n, 8 + n + total
+        out: dict[str, str] = {}
+        while pos < end:
+            (k,) = struct.unpack_from("<I", body, pos)
+            key = body[pos + 4 : pos + 4 + k].decode("utf-8", "replace")
+            pos += 4 + k
+            (v,) = struct.unpack_from("<I", body, pos)
+            out[key] = body[pos + 4 : pos + 4 + v].decode("utf-8", "replace")
+            pos += 4 + v
+        self.metadata[name] = out
+
+    def records(self, data: bytes, pos: int, end: int) -> None:
+        """Every record in data[pos:end] (the inside of a chunk)."""
+        unpack = struct.unpack_from
+        channels = self.channels
+        payloads, times, orders = self.payloads, self.times, self.orders
+        topics = self.topics
+        while pos < end:
+            if pos + 9 > end:
+                raise ValueError("chunk ends inside a record header")
+            op = data[pos]
+            (length,) = unpack("<Q", data, pos + 1)
+            body = pos + 9
+            nxt = body + length
+            if nxt > end:
+                raise ValueError("chunk record runs past the chunk")
+            if op == OP_MESSAGE:
+                cid, _seq, log_time = unpack("<HIQ", data, body)
+                ch = channels.get(cid)
+                if ch is not None:
+                    topic = ch[0]
+                    topics[topic] = topics.get(topic, 0) + 1
+                    d = RAW_TOPICS.get(topic)
+                    if d is not None:
+                        payloads[d].append(data[body + 22 : nxt])
+                        times[d].append(log_time)
+                        orders[d].append(self.count)
+                        if ch[1] != "json":
+                            self.raw_encoded[d] = True
+                    elif topic == TOPIC_LINK:
+                        self._link(data[body + 22 : nxt], log_time)
+                self.count += 1
+            elif op == OP_CHANNEL:
+                self.channel(data[body:nxt])
+            pos = nxt
+
+    def _link(self, payload: bytes, log_time: int) -> None:
+        try:
+            obj = json.loads(payload)
+        except ValueError:
+            return
+        if isinstance(obj, dict):
+            obj.setdefault("t", log_time / 1e9)
+            self.link.append(obj)
+
+
+def _chunk_data(body: bytes) -> bytes:
+    # Chunk: start u64, end u64, uncompressed size u64, crc u32, compression str, records str
+    _start, _end, usize, crc = struct.unpack_from("<QQQI", body, 0)
+    (n,) = struct.unpack_from("<I", body, 28)
+    compression = body[32 : 32 + n].decode("ascii", "replace")
+    (rlen,) = struct.unpack_from("<Q", body, 32 + n)
+    pos = 40 + n
+    if pos + rlen > len(body):
+        raise ValueError("chunk records run past the record")
+    raw = body[pos : pos + rlen]
+    if usize > MAX_CHUNK:
+        raise ValueError(f"chunk claims {usize} bytes uncompressed")
+    if compression == "zstd":
+        data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
+    elif compression == "":
+        data = bytes(raw)
+    elif compression == "lz4":
+        try:
+            import lz4.frame  # type: ignore[import-not-found]
+        except ImportError:
+            raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
+        data = lz4.frame.decompress(raw)
+    else:
+        raise ValueError(f"unknown chunk compression {compression[:20]!r}")
+    if len(data) != usize:
+        raise ValueError("chunk size does not match its header")
+    if crc and zlib.crc32(data) != crc:
+        raise ValueError("chunk CRC mismatch")
+    return data
+
+
+def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None) -> None:
+    with open(path, "rb") as f:
+        size = status.size = os.fstat(f.fileno()).st_size
+        pos = len(MAGIC)
+        f.seek(pos)
+        in_summary = False
+        last_report = 0
+        while True:
+            if progress is not None and pos - last_report > 4 * 1024 * 1024:
+                progress(pos, size)
+                last_report = pos
+            if pos == size:
+                status.problem = status.problem or "file ends without a footer"
+                return
+            head = f.read(9)
+            if len(head) < 9:
+                status.problem = f"file ends inside a record header at byte {pos}"
+                return
+            op = head[0]
+            (length,) = struct.unpack("<Q", head[1:])
+            if length > MAX_RECORD or pos + 9 + length > size:
+                status.problem = (f"file ends inside a record at byte {pos}"
+                                  if length <= MAX_RECORD else
+                                  f"record at byte {pos} claims {length} bytes")
+                return
+            body = f.read(length)
+            pos += 9 + length
+            try:
+                if op == OP_FOOTER:
+                    status.complete = f.read(len(MAGIC)) == MAGIC
+                    if not status.complete:
+                        status.problem = "footer is not followed by the closing magic"
+                    return
+                if op == OP_DATA_END:
+                    in_summary = True
+                elif in_summary:
+                    continue
+                elif op == OP_CHUNK:
+                    try:
+                        data = _chunk_data(body)
+                        col.records(data, 0, len(data))
+                    except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
+                        status.damaged_chunks += 1
+                        status.notes.append(f"damaged chunk at byte {pos - 9 - length} "
+                                            f"skipped: {exc}")
+                elif op == OP_METADATA:
+                    col.metadata_record(body)
+                elif op in (OP_CHANNEL, OP_MESSAGE):
+                    col.records(head + body, 0, 9 + length)
+            except (ValueError, struct.error, UnicodeDecodeError) as exc:
+                status.problem = f"damaged record (opcode 0x{op:02x}) at byte " \
+                                 f"{pos - 9 - length}: {exc}"
+                return
+        if progress is not None:
+            progress(size, size)
+
+
+_B64 = np.full(256, 255, np.uint8)
+for _i, _c in enumerate(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/"):
+    _B64[_c] = _i
+_B64[ord("=")] = 0
+
+
+def b64decode_many(chars: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Decode many base64 strings stored back to back (``chars[offsets[i]:offsets[i+1]]``).
+
+    Returns (bytes, lengths). Raises ValueError for anything that is not canonical base64.
+    """
+    lens = np.diff(offsets)
+    if len(lens) == 0:
+        return np.zeros(0, np.uint8), np.zeros(0, np.int64)
+    if (lens % 4).any():
+        raise ValueError("base64 length is not a multiple of 4")
+    total = int(offsets[-1] - offsets[0])
+    c = chars[int(offsets[0]) : int(offsets[0]) + total]
+    vals = _B64[c]
+    if (vals == 255).any():
+        raise ValueError("not base64")
+    pad = np.zeros(len(lens), np.int64)
+    ends = offsets[1:] - offsets[0]
+    nz = lens > 0
+    pad[nz] = (c[ends[nz] - 1] == ord("=")).astype(np.int64) + (c[ends[nz] - 2] == ord("="))
+    quads = vals.reshape(-1, 4).astype(np.uint32)
+    word = (quads[:, 0] << 18) | (quads[:, 1] << 12) | (quads[:, 2] << 6) | quads[:, 3]
+    out = np.empty((len(word), 3), np.uint8)
+    out[:, 0] = word >> 16
+    out[:, 1] = (word >> 8) & 0xFF
+    out[:, 2] = word & 0xFF
+    flat = out.reshape(-1)
+    out_lens = lens // 4 * 3 - pad
+    if pad.any():
+        keep = np.ones(len(flat), bool)
+        out_ends = np.cumsum(lens // 4 * 3)
+        for p in (1, 2):
+            sel = pad >= p
+            keep[out_ends[sel] - p] = False
+        flat = flat[keep]
+    return flat, out_lens
+
+
+def _parse_payloads(name: str, col: _Collector, status: ReadStatus) -> Direction:
+    payloads = col.payloads[name]
+    times = np.asarray(col.times[name], np.int64) / 1e9
+    orders = np.asarray(col.orders[name], np.int64)
+    if not payloads:
+        return Direction.empty(name)
+    if col.raw_encoded[name]:
+        return _raw_direction(name, payloads, times, orders)
+    try:
+        return _bulk_json(name, payloads, times, orders)
+    except (ValueError, KeyError, TypeError, ImportError):
+        return _slow_json(name, payloads, times, orders, status)
+
+
+def _raw_direction(name: str, payloads: list[bytes], times: np.ndarray,
+                   orders: np.ndarray) -> Direction:
+    """A foreign capture whose raw channel carries the bytes themselves."""
+    lens = np.fromiter((len(p) for p in payloads), np.int64, len(payloads))
+    data = np.frombuffer(b"".join(payloads), np.uint8)
+    start = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+    return Direction(name, data, start, lens, np.full(len(lens), -1, np.int64), times,
+                     np.full(len(lens), np.nan), orders)
+
+
+def _bulk_json(name: str, payloads: list[bytes], times: np.ndarray,
+               orders: np.ndarray) -> Direction:
+    import pyarrow as pa
+    import pyarrow.json as pj
+
+    schema = pa.schema([("data", pa.string()), ("offset", pa.int64()),
+                        ("t_read", pa.float64()), ("t_first", pa.float64())])
+    blob = b"\n".join(payloads)
+    if blob.count(b"\n") != len(payloads) - 1:
+        raise ValueError("multi-line JSON")
+    opts = pj.ParseOptions(explicit_schema=schema, unexpected_field_behavior="ignore")
+    table = pj.read_json(io.BytesIO(blob), parse_options=opts,
+                         read_options=pj.ReadOptions(block_size=1 << 24))
+    if table.num_rows != len(payloads):
+        raise ValueError("row count")
+    col = table.column("data").combine_chunks()
+    if col.null_count:
+        raise ValueError("missing data")
+    offs = np.frombuffer(col.buffers()[1], np.int32, len(col) + 1, col.offset * 4)
+    chars = np.frombuffer(col.buffers()[2], np.uint8)
+    data, lens = b64decode_many(chars, offs.astype(np.int64))
+    start = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+
+    def num(colname: str, fill: float) -> np.ndarray:
+        return table.column(colname).to_numpy(zero_copy_only=False).astype(float)
+
+    t_read = num("t_read", np.nan)
+    t_read = np.where(np.isnan(t_read), times, t_read)
+    t_first = num("t_first", np.nan)
+    offset = table.column("offset").to_numpy(zero_copy_only=False).astype(float)
+    offset = np.where(np.isnan(offset), -1, offset).astype(np.int64)
+    return Direction(name, data, start, lens.astype(np.int64), offset, t_read, t_first, orders)
+
+
+def _slow_json(name: str, payloads: list[bytes], times: np.ndarray, orders: np.ndarray,
+               status: ReadStatus) -> Direction:
+    import base64
+    import binascii
+
+    chunks: list[bytes] = []
+    keep: list[int] = []
+    offset: list[int] = []
+    t_read: list[float] = []
+    t_first: list[float] = []
+    for i, raw in enumerate(payloads):
+        try:
+            obj = json.loads(raw)
+            b = base64.b64decode(obj.get("data", ""), validate=True)
+        except (ValueError, binascii.Error, TypeError, AttributeError, RecursionError):
+            status.bad_payloads += 1
+            continue
+        if not isinstance(obj, dict):
+            status.bad_payloads += 1
+            continue
+        chunks.append(b)
+        keep.append(i)
+        offset.append(_num(obj.get("offset"), -1))
+        t_read.append(_num(obj.get("t_read"), times[i]))
+        t_first.append(_num(obj.get("t_first"), np.nan))
+    lens = np.fromiter((len(c) for c in chunks), np.int64, len(chunks))
+    start = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+    return Direction(name, np.frombuffer(b"".join(chunks), np.uint8), start, lens,
+                     np.asarray(offset, np.int64), np.asarray(t_read, float),
+                     np.asarray(t_first, float), orders[np.asarray(keep, np.int64)])
+
+
+def _num(value: Any, default: float) -> Any:
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else default
+
+
+def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
+    """Read ``path`` (an MCAP capture) as far as it is intact."""
+    p = check_magic(path)
+    status = ReadStatus(p)
+    col = _Collector()
+    try:
+        _walk(p, status, col, progress)
+    except OSError as exc:
+        raise UserError(f"{p}: cannot read: {exc.strerror}") from None
+    host = _parse_payloads("host", col, status)
+    unit = _parse_payloads("unit", col, status)
+    if status.bad_payloads:
+        status.notes.append(f"{status.bad_payloads} raw chunk message(s) unreadable, skipped")
+    return RawCapture(status, col.metadata, host, unit, col.link, col.topics)

@@ -1,0 +1,111 @@
+"""Write an analysis out: ``index.html`` (self-contained), ``summary.md``, ``findings.json``
+and, on request, Parquet tables."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from conform.errors import UserError
+
+TEMPLATES = Path(__file__).with_name("templates")
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe: numpy scalars to Python, NaN/inf to None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def findings_document(a: Any) -> dict[str, Any]:
+    return _clean({
+        "capture": a.path,
+        "variant": a.variant.id,
+        "findings": [f.to_dict() for f in a.findings],
+        "metrics": a.metrics,
+        "notes": a.notes,
+    })
+
+
+def _env() -> Any:
+    import jinja2
+
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+                              autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
+                              trim_blocks=True, lstrip_blocks=True)
+
+
+def _fmt_ms(v: Any) -> str:
+    return "–" if v is None or v != v else f"{v * 1000:.3f}"
+
+
+def _context(a: Any, plots: dict[str, str]) -> dict[str, Any]:
+    m = _clean(a.metrics)
+    by_sev: dict[str, int] = {}
+    for f in a.findings:
+        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
+    return {
+        "a": a, "m": m, "plots": plots, "findings": a.findings, "by_sev": by_sev,
+        "counts": m.get("finding_counts", {}), "ms": _fmt_ms,
+        "hazards": m.get("hazards", 0), "notes": a.notes,
+        "status": a.raw.status,
+    }
+
+
+def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
+    from conform.analysis.plots import all_plots
+
+    d = Path(out_dir)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"{d}: cannot create the report folder: {exc.strerror}") from None
+    plots = all_plots(a)
+    env = _env()
+    ctx = _context(a, plots)
+    paths = {"html": d / "index.html", "markdown": d / "summary.md",
+             "json": d / "findings.json"}
+    paths["html"].write_text(env.get_template("report.html.j2").render(**ctx), "utf-8")
+    paths["markdown"].write_text(env.get_template("summary.md.j2").render(**ctx), "utf-8")
+    paths["json"].write_text(json.dumps(findings_document(a), indent=1), "utf-8")
+    return paths
+
+
+def write_parquet(a: Any, out_dir: str | Path) -> dict[str, Path]:
+    d = Path(out_dir)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
+    ex = a.exchanges.copy()
+    for col in ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"):
+        ex[col] = ex[col] - a.t0
+    ex["command"] = [a.host_text(i) for i in range(len(ex))]
+    tables = {"exchanges": ex, "frames_host": a.frames("host"),
+              "frames_unit": a.frames("unit"), "series": a.series}
+    if a.queue is not None:
+        import pandas as pd
+
+        q = a.queue
+        tables["queue_depth"] = pd.DataFrame({"t": q.depth_t - a.t0, "depth": q.depth})
+    out = {}
+    for name, df in tables.items():
+        p = d / f"{name}.parquet"
+        df = df.copy()
+        for col in df.columns:
+            if df[col].dtype == object:
+                df[col] = df[col].astype("string")
+        df.to_parquet(p, index=False)
+        out[name] = p
+    return out

@@ -1,0 +1,83 @@
+"""``conform analyze FILE.mcap``: findings, latency, throughput and queue feeding of a session."""
+
+from __future__ import annotations
+
+import os
+
+import click
+
+from conform.errors import UserError
+
+BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
+
+
+@click.command(name="analyze")
+@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
+              default=None, help="Write DIR/index.html, DIR/summary.md, DIR/findings.json.")
+@click.option("--parquet", "parquet_dir", type=click.Path(file_okay=False, path_type=str),
+              default=None, help="Write the tables as Parquet files into DIR.")
+@click.option("--variant", default=None, help="Decode as this variant (default: the capture's).")
+@click.option("--baud", type=float, default=None,
+              help="The line's baud rate (default: the capture's, checked against the data).")
+@click.option("--dialect", default=None, help="Open-question choices, e.g. A10=every-line.")
+@click.option("--no-whatif", is_flag=True, help="Skip the what-if queue replays.")
+@click.option("--progress/--no-progress", default=None,
+              help="Progress display (default: on for large files on a terminal).")
+def cli(file: str, report_dir: str | None, parquet_dir: str | None, variant: str | None,
+        baud: float | None, dialect: str | None, no_whatif: bool, progress: bool | None) -> None:
+    """Analyse a capture: findings with manual clauses, latency split, throughput, queue."""
+    from conform.analysis.analyze import analyze
+    from conform.analysis.report import write_parquet, write_report
+
+    try:
+        size = os.path.getsize(file)
+    except OSError:
+        size = 0
+    show = progress if progress is not None else (size > BIG_FILE and _tty())
+    if baud is not None and baud <= 0:
+        raise UserError(f"--baud {baud:g}: must be positive")
+    if show:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
+                      transient=True) as bar:
+            task = bar.add_task("reading", total=size or 1)
+
+            def on_bytes(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
+
+            def on_step(name: str) -> None:
+                bar.update(task, description=name)
+
+            a = analyze(file, variant=variant, baud=baud, dialect=dialect, progress=on_bytes,
+                        step=on_step, whatif_replays=not no_whatif)
+    else:
+        a = analyze(file, variant=variant, baud=baud, dialect=dialect,
+                    whatif_replays=not no_whatif)
+    m = a.metrics
+    click.echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
+               f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
+               f"baud {int(m['baud']['used'])}")
+    if not a.raw.status.complete:
+        click.echo(f"capture incomplete: {a.raw.status.problem}")
+    counts = m.get("finding_counts", {})
+    if counts:
+        click.echo("findings: " + ", ".join(f"{k} {n}" for k, n in counts.items()))
+    else:
+        click.echo("findings: none")
+    for f in a.findings:
+        if f.severity in ("hazard", "error"):
+            click.echo(f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}")
+    if report_dir:
+        paths = write_report(a, report_dir)
+        click.echo(f"report: {paths['html']}")
+    if parquet_dir:
+        write_parquet(a, parquet_dir)
+        click.echo(f"tables: {parquet_dir}")
+
+
+def _tty() -> bool:
+    import sys
+
+    return sys.stderr.isatty()

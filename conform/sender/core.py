@@ -1,0 +1,406 @@
+"""The reference sender, sans-I/O: a job in, command bytes out, answers in, with a clock.
+
+    s = Sender(items, variant, policy="careful", checksums=True, packet=10)
+    s.start(t)
+    data = s.poll(t)          # bytes to write now, or b""
+    s.receive(answer, t)      # bytes read from the unit
+    s.deadline()              # when to call poll() again if nothing arrives
+    s.done, s.failed
+
+Policies (what to do when an answer is uncertain or refused):
+
+* ``careful``: strictly simplex; after a garbled answer ask ``>`` (it repeats the last
+  command and its answer, GVE64 §13.5.13) and act on the repeated answer; after no answer
+  ask ``@`` and compare the index with the one expected: unchanged means the line never
+  arrived and it is sent again, advanced means it arrived and ``>`` tells its answer. Queue
+  full (1): wait ``queue_wait`` and send the vector again.
+* ``blind``: send the same line again after a garbled answer or none (a double move if the
+  first was taken); retry queue-full immediately.
+* ``move-on``: take a garbled answer or none as success (a lost vector if it was not taken).
+* ``careless``: ``blind`` after a garbled answer, ``move-on`` after no answer.
+
+Packets (``packet`` > 1): runs of C and B lines go out as ``*S`` … ``*E<n>`` with one answer
+(GVE64 §13.3.3); an answer ``k,m`` with an error means the first m were taken.
+At the end the sender polls ``F`` until the unit is idle and reads the position twice, so
+the capture shows where the machine ended.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+from conform.protocol import Answer, parse_answer
+from conform.protocol.checksum import append_checksum
+from conform.sender.job import PACKABLE, Item
+from conform.spec.model import Variant
+
+POLICIES = ("careful", "blind", "move-on", "careless")
+RUN_BIT = 0x40
+
+
+@dataclass
+class Unit_:
+    """One thing to deliver: a single command or a packet of C/B lines."""
+
+    items: list[Item]
+    packet: bool = False
+    tries: int = 0
+
+    @property
+    def motion(self) -> bool:
+        return any(i.motion for i in self.items)
+
+
+@dataclass
+class Stats:
+    sent: int = 0
+    answers: int = 0
+    garbled: int = 0
+    timeouts: int = 0
+    queue_full: int = 0
+    resent: int = 0
+    repeats: int = 0
+    index_checks: int = 0
+    errors: list[str] = field(default_factory=list)
+
+
+class Sender:
+    def __init__(self, items: list[Item], variant: Variant, *, policy: str = "careful",
+                 checksums: bool = False, packet: int = 1, timeout: float = 0.25,
+                 queue_wait: float = 0.02, max_tries: int = 200, address: int | None = None,
+                 finish: bool = True, poll_interval: float = 0.05,
+                 index_every: str = "answered-except-recovery") -> None:
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {POLICIES}")
+        self.variant = variant
+        self.policy = policy
+        self.checksums = checksums
+        self.packet = max(1, int(packet))
+        self.timeout = timeout
+        self.queue_wait = queue_wait
+        self.max_tries = max_tries
+        self.address = variant.interpolator_address if address is None else address
+        self.poll_interval = poll_interval
+        self.finish = finish
+        self.stats = Stats()
+        self.cs_on = False  # checksums as the unit has them now
+        self.units: deque[Unit_] = deque(self._group(items))
+        self.done = False
+        self.failed: str | None = None
+        self.index: int | None = None  # the unit's @ index as we believe it
+        self._buf = b""
+        self._out = b""
+        self._out_t = 0.0
+        self._wake = 0.0
+        self._deadline: float | None = None
+        self._await: str | None = None  # what the line in flight is: unit/repeat/index/...
+        self._current: Unit_ | None = None
+        self._lines: list[bytes] = []
+        self._phase = "start"
+        self._stable: list[tuple[str, ...]] = []
+        self._sent_line = b""
+        self.last_position: tuple[int, ...] | None = None
+
+    # ------------------------------------------------------------------ job shaping
+    def _group(self, items: list[Item]) -> list[Unit_]:
+        if self.packet <= 1:
+            return [Unit_([i]) for i in items]
+        out: list[Unit_] = []
+        run: list[Item] = []
+        vectors = 0
+
+        def flush() -> None:
+            nonlocal run, vectors
+            if run:
+                if vectors > 1:
+                    out.append(Unit_(run, packet=True))
+                else:
+                    out.extend(Unit_([i]) for i in run)
+            run, vectors = [], 0
+
+        for it in items:
+            if it.name in PACKABLE:
+                run.append(it)
+                vectors += it.name == "C"
+                if vectors >= self.packet:
+                    flush()
+            else:
+                flush()
+                out.append(Unit_([it]))
+        flush()
+        return out
+
+    # ------------------------------------------------------------------ encoding
+    def line(self, body: bytes, *, checksum: bool | None = None) -> bytes:
+        raw = b"!%d" % self.address + body
+        on = self.cs_on if checksum is None else checksum
+        return (append_checksum(raw) if on else raw) + b"\r"
+
+    def _unit_bytes(self, u: Unit_) -> bytes:
+        if not u.packet:
+            return self.line(u.items[0].body)
+        parts = [self.line(b"*S")] + [self.line(i.body) for i in u.items]
+        parts.append(self.line(b"*E%d" % len(u.items)))
+        return b"".join(parts)
+
+    # ------------------------------------------------------------------ driver API
+    def start(self, t: float) -> None:
+        self._wake = t
+        self._phase = "checksum" if self.checksums else (
+            "sync" if self.policy == "careful" else "job")
+
+    def deadline(self) -> float | None:
+        if self.done:
+            return None
+        if self._out:
+            return self._out_t
+        if self._await is not None:
+            return self._deadline
+        return self._wake
+
+    def poll(self, t: float) -> bytes:
+        """Bytes to write now (empty if waiting)."""
+        if self.done:
+            return b""
+        if self._out:
+            return self.take_pending()
+        if self._await is not None:
+            if self._deadline is not None and t >= self._deadline:
+                self._on_timeout(t)
+            if self._out:
+                return self.take_pending()
+            if self._await is not None:
+                return b""
+        if t < self._wake:
+            return b""
+        return self._next(t)
+
+    def receive(self, data: bytes, t: float) -> None:
+        self._buf += data
+        while b"\r" in self._buf:
+            line, _, self._buf = self._buf.partition(b"\r")
+            self._on_line(line, t)
+
+    def interrupt_lines(self) -> list[bytes]:
+        """What to send to leave the unit halted and empty after Ctrl-C: H then D."""
+        return [self.line(b"H"), self.line(b"D")]
+
+    # ------------------------------------------------------------------ sending
+    def _send(self, data: bytes, what: str, t: float, timeout: float | None = None) -> bytes:
+        self._await = what
+        self._deadline = t + (self.timeout if timeout is None else timeout)
+        self._lines = []
+        self._sent_line = data
+        self.stats.sent += 1
+        return data
+
+    def _next(self, t: float) -> bytes:
+        ph = self._phase
+        if ph == "checksum":
+            return self._send(self.line(b"%+", checksum=False), "checksum", t)
+        if ph == "sync":
+            return self._send(self.line(b"@"), "sync", t)
+        if ph == "job":
+            if self._current is None:
+                if not self.units:
+                    if not self.finish:
+                        self.done = True
+                        return b""
+                    self._phase = "drain"
+                    return self._next(t)
+                self._current = self.units.popleft()
+            u = self._current
+            u.tries += 1
+            if u.tries > self.max_tries:
+                self._fail(f"gave up on `{u.items[0].body.decode()}` after {self.max_tries} "
+                           "tries")
+                return b""
+            if u.tries > 1:
+                self.stats.resent += 1
+            # a HALT or W answers only when the motion has stopped
+            slow = u.items[0].name in ("H", "W")
+            return self._send(self._unit_bytes(u), "unit", t, 60.0 if slow else None)
+        if ph == "drain":
+            return self._send(self.line(b"F"), "drain", t)
+        if ph == "position":
+            cmd = b"P4" if self.variant.has("P4") else b"PF"
+            return self._send(self.line(cmd), "position", t)
+        return b""
+
+    def _fail(self, why: str) -> None:
+        self.failed = why
+        self.done = True
+        self._await = None
+
+    # ------------------------------------------------------------------ answers
+    def _on_line(self, line: bytes, t: float) -> None:
+        what = self._await
+        if what is None:
+            return  # unsolicited: ignore
+        if what == "repeat" and line[:1] == b"!":
+            self._lines.append(line)  # the echo of the repeated command
+            return
+        ans = parse_answer(line, self.cs_on or what == "checksum")
+        self._await = None
+        self.stats.answers += 1
+        bad = not isinstance(ans, Answer) or ans.checksum_ok is False
+        if bad:
+            self.stats.garbled += 1
+        handler = getattr(self, "_after_" + what)
+        handler(ans if not bad else None, t)
+
+    def _on_timeout(self, t: float) -> None:
+        what = self._await
+        self._await = None
+        self.stats.timeouts += 1
+        handler = getattr(self, "_after_" + str(what))
+        handler(None, t, timed_out=True)
+
+    def _ok_index(self, ans: Answer | None, counted: int = 1) -> None:
+        if self.index is not None and ans is not None and ans.code != 2 and not (
+                self.cs_on and ans.code == 4):
+            self.index = (self.index + counted) & 0xFF
+
+    def _after_checksum(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is None or ans.code != 0:
+            self._wake = t + self.queue_wait
+            return  # send %+ again
+        self.cs_on = True
+        self._phase = "sync" if self.policy == "careful" else "job"
+
+    def _after_sync(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is None or not ans.fields:
+            self._wake = t
+            return
+        try:
+            self.index = int(ans.fields[0])
+        except ValueError:
+            self.index = None
+        self._phase = "job"
+
+    def _after_unit(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        u = self._current
+        assert u is not None
+        if ans is not None:
+            self._resolve(u, ans, t)
+            return
+        pol = self.policy
+        if pol == "careful":
+            if timed_out:
+                self.stats.index_checks += 1
+                self._pending_send(self._send(self.line(b"@"), "index", t))
+            else:
+                self.stats.repeats += 1
+                self._pending_send(self._send(self.line(b">"), "repeat", t))
+            return
+        if pol == "blind" or (pol == "careless" and not timed_out):
+            self._wake = t  # same unit again
+            return
+        self._done_unit(t)  # move on
+
+    def _pending_send(self, data: bytes) -> None:
+        self._out = data
+        self._out_t = (self._deadline or 0.0) - self.timeout
+
+    def _resolve(self, u: Unit_, ans: Answer, t: float) -> None:
+        counted = 1
+        if u.packet:
+            counted = 2 + (int(ans.fields[0]) if ans.fields and ans.fields[0].isdigit() else 0)
+        self._ok_index(ans, counted)
+        if ans.code == 0:
+            self._done_unit(t)
+            return
+        if ans.code == 1 and u.motion:
+            self.stats.queue_full += 1
+            if u.packet and ans.fields and ans.fields[0].isdigit():
+                taken = int(ans.fields[0])
+                u.items = u.items[taken:]
+                if not u.items:
+                    self._done_unit(t)
+                    return
+            careful = self.policy == "careful"
+            self._wake = t + (self.queue_wait if careful else 0.0)
+            return
+        if ans.code == 4 and self.cs_on:
+            self._wake = t  # a line damaged on the way: certainly not taken, send it again
+            return
+        name = u.items[0].body.decode()
+        self.stats.errors.append(f"`{name}` answered {ans.raw.decode('ascii', 'replace')}")
+        if u.motion:
+            self._fail(f"`{name}` refused with error {ans.code}")
+            return
+        self._done_unit(t)
+
+    def _done_unit(self, t: float) -> None:
+        self._current = None
+        self._wake = t
+
+    def _after_repeat(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        u = self._current
+        assert u is not None
+        echo = self._lines[-1] if self._lines else None
+        if ans is None:
+            self.stats.repeats += 1
+            self._pending_send(self._send(self.line(b">"), "repeat", t))
+            return
+        last = self._unit_bytes(u).split(b"\r")[-2]
+        if echo is not None and echo == last:
+            self._resolve(u, ans, t)
+            return
+        if echo is None and not self._lines:
+            # `>` without an echo (A9 repeat-answer-only): trust the repeated answer
+            self._resolve(u, ans, t)
+            return
+        self._wake = t  # the unit's last command was not ours: send ours again
+
+    def _after_index(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is None or not ans.fields:
+            self.stats.index_checks += 1
+            self._pending_send(self._send(self.line(b"@"), "index", t))
+            return
+        try:
+            now = int(ans.fields[0])
+        except ValueError:
+            now = -1
+        if self.index is not None and now == self.index:
+            self._wake = t  # our line never arrived: send it again
+            return
+        self.stats.repeats += 1
+        self._pending_send(self._send(self.line(b">"), "repeat", t))
+        self.index = (now - 1) & 0xFF if now >= 0 else None  # _resolve adds ours back
+
+    def _after_drain(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        busy = True
+        if ans is not None and ans.fields:
+            try:
+                busy = bool(int(ans.fields[0], 16) & RUN_BIT)
+            except ValueError:
+                busy = True
+            self._ok_index(ans)
+        if busy:
+            self._wake = t + self.poll_interval
+            return
+        self._phase = "position"
+        self._wake = t
+
+    def _after_position(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is not None:
+            self._ok_index(ans)
+            self._stable.append(ans.fields)
+        if len(self._stable) >= 2 and self._stable[-1] == self._stable[-2]:
+            try:
+                self.last_position = tuple(int(x) for x in self._stable[-1])
+            except ValueError:
+                self.last_position = None
+            self.done = True
+            return
+        if len(self._stable) > 20:
+            self.done = True
+            return
+        self._wake = t + self.poll_interval
+
+    # ``_send`` from a handler: the bytes go out on the next poll
+    def take_pending(self) -> bytes:
+        out, self._out = self._out, b""
+        return out
