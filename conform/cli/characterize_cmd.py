@@ -1,0 +1,54 @@
+"""``conform characterize TARGET -o profile.toml``: what a unit does on each open question."""
+
+from __future__ import annotations
+
+import click
+
+from conform.conformance.characterize import characterize, to_profile
+from conform.conformance.profile import write_profile
+from conform.conformance.safety import Guard
+from conform.conformance.target import identify, open_target, parse_target
+from conform.errors import UserError
+from conform.spec import load_spec
+
+
+@click.command(name="characterize")
+@click.argument("target")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+              help="Profile to write (TOML: [dialect] A-id = alternative, plus evidence).")
+@click.option("--variant", default=None, help="The model (default: the emulator's or ask '?').")
+@click.option("--baud", type=int, default=115200, show_default=True)
+@click.option("--allow-motion", is_flag=True, help="Real units: allow probes that move axes.")
+@click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
+@click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM write probes (A18).")
+def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: bool,
+        max_steps: int | None, allow_eeprom: bool) -> None:
+    """Probe the open questions A1–A28 and write what the unit actually does."""
+    spec = load_spec()
+    if allow_motion and max_steps is None:
+        raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
+    kind, _, _ = parse_target(target)
+    guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps, allow_eeprom)
+    tgt, implied = open_target(target, spec, baud=baud, guard=guard)
+    try:
+        vid = variant or implied
+        if vid is None:
+            vid, how = identify(tgt, spec)
+            click.echo(f"variant: {how}", err=True)
+        spec.variant(vid)
+
+        def show(f):  # noqa: ANN001, ANN202
+            mark = {"determined": "=", "ambiguous": "~", "no-match": "!", "not-probed": "-"}
+            click.echo(f"{f.question:>4} {mark[f.status]} {f.choice:<28} {f.status}"
+                       + (f" ({', '.join(f.matches)})" if f.status == "ambiguous" else "")
+                       + (f" — {f.note}" if f.status == "not-probed" else ""))
+
+        dialect, findings = characterize(spec, tgt, vid, progress=show)
+        if not tgt.emulated and allow_motion:
+            click.echo(tgt.safe_stop(), err=True)
+    finally:
+        tgt.close()
+    write_profile(to_profile(spec, dialect, findings, target=target, variant=vid), output)
+    changed = dialect.changed()
+    click.echo(f"{output}: {len(changed)} answer(s) differ from the defaults"
+               + (": " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else ""))

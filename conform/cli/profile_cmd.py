@@ -1,0 +1,31 @@
+"""``conform profile diff A B``: compare two characterisation profiles."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from conform.conformance.profile import diff_profiles, load_profile
+
+
+@click.group(name="profile")
+def cli() -> None:
+    """Characterisation profiles (from ``conform characterize``)."""
+
+
+@cli.command()
+@click.argument("a", type=click.Path(dir_okay=False))
+@click.argument("b", type=click.Path(dir_okay=False))
+def diff(a: str, b: str) -> None:
+    """Open questions on which two profiles differ; exit 1 when they do."""
+    pa, pb = load_profile(a), load_profile(b)
+    rows = diff_profiles(pa, pb)
+    if not rows:
+        click.echo(f"same dialect ({len(pa.dialect)} questions)")
+        return
+    width = max(len(str(x)) for _, x, _ in rows)
+    click.echo(f"{'':4} {a:<{width}}  {b}")
+    for q, x, y in rows:
+        click.echo(f"{q:<4} {x or '(absent)':<{width}}  {y or '(absent)'}")
+    sys.exit(1)

@@ -1,0 +1,196 @@
+"""``conform run``: conformance checks against the emulator or a real unit, with reports."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+import click
+
+from conform.conformance.profile import load_profile_dialect
+from conform.conformance.results import Grade, TargetRun
+from conform.conformance.runner import RunAborted, RunOptions
+from conform.conformance.safety import Guard
+from conform.conformance.suite import (
+    PROFILE_NAMES,
+    parse_replay,
+    results_of,
+    run_mutants,
+    run_one,
+    suite,
+)
+from conform.conformance.target import DEFAULT_VARIANT, identify, open_target, parse_target
+from conform.errors import UserError
+from conform.report.render import default_dir, write_reports
+from conform.spec import load_spec
+
+
+class _Progress:
+    """A rich progress bar per target (quiet when stderr is not a terminal)."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.bar = None
+        if enabled:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+            )
+
+            self.bar = Progress(TextColumn("{task.description}"), BarColumn(),
+                                MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
+                                TimeElapsedColumn(), console=Console(stderr=True),
+                                transient=False)
+
+    def __enter__(self) -> _Progress:
+        if self.bar is not None:
+            self.bar.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+    def task(self, name: str, total: int):  # noqa: ANN201 - returns a progress callback
+        if self.bar is None:
+            return None
+        tid = self.bar.add_task(name, total=total, last="")
+        fails = [0]
+
+        def step(result):  # noqa: ANN001, ANN202
+            if result.grade is Grade.FAIL:
+                fails[0] += 1
+            self.bar.update(tid, advance=1, last=f"FAIL {fails[0]}" if fails[0] else "")
+
+        return step
+
+
+@click.command(name="run")
+@click.option("--target", "targets", multiple=True, metavar="T",
+              help="emu:VARIANT[:MUTANT], a device path, a pty or a pyserial URL "
+                   "(socket://, rfc2217://). Repeat for several. Default: emu:gve64-v19.")
+@click.option("--variant", default=None, help="The model expected (default: the emulator's, "
+              "else ask '?' and map the firmware string, else gve64-v19).")
+@click.option("--baud", type=int, default=115200, show_default=True)
+@click.option("--profile", type=click.Choice(PROFILE_NAMES), default="quick", show_default=True)
+@click.option("--report", "report_dir", type=click.Path(file_okay=False), default=None,
+              help="Report folder (default reports/<timestamp>/).")
+@click.option("--check", "patterns", multiple=True, metavar="GLOB",
+              help="Only checks whose id matches (e.g. '*/C/*'); repeatable.")
+@click.option("--list", "list_only", is_flag=True, help="List the check ids and exit.")
+@click.option("--matrix", is_flag=True, help="Every variant on its emulator, side by side.")
+@click.option("--mutants", is_flag=True,
+              help="Also run the deviant units and report the kill rate.")
+@click.option("--replay", default=None, metavar="ID[@SEED]",
+              help="Re-run one check (a state-machine check with the seed that found it).")
+@click.option("--seed", type=int, default=0, show_default=True, help="State-machine seed.")
+@click.option("--dialect", "dialect_file", type=click.Path(dir_okay=False), default=None,
+              help="Expect this characterised profile's dialect instead of the defaults.")
+@click.option("--allow-motion", is_flag=True, help="Real units: allow checks that move axes, "
+              "switch outputs or start the spindle (needs --max-steps).")
+@click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
+@click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
+@click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
+        report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
+        mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
+        allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
+        quiet: bool) -> None:
+    """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
+    spec = load_spec()
+    if variant is not None:
+        spec.variant(variant)
+    if allow_motion and max_steps is None:
+        raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
+    if max_steps is not None and max_steps <= 0:
+        raise UserError("--max-steps must be a positive number of pulses")
+    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    if replay:
+        check_id, replay_seed = parse_replay(replay)
+        patterns = (check_id,)
+        if replay_seed is not None:
+            seed = replay_seed
+        if variant is None and "/" in check_id:
+            variant = check_id.split("/", 1)[0]
+            spec.variant(variant)
+    plan = list(targets) or ([f"emu:{v}" for v in spec.variants] if matrix else ["emu"])
+    if matrix and targets:
+        plan += [f"emu:{v}" for v in spec.variants if f"emu:{v}" not in plan]
+    dialect = load_profile_dialect(spec, dialect_file) if dialect_file else None
+
+    if list_only:
+        for t in plan:
+            kind, what, _ = parse_target(t)
+            vid = variant or (what if kind == "emu" and what else DEFAULT_VARIANT)
+            for c in suite(spec, vid, patterns=patterns, machine=not no_machine):
+                click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
+        return
+
+    runs: list[TargetRun] = []
+    aborted = None
+    with _Progress(not quiet and sys.stderr.isatty()) as bar:
+        for t in plan:
+            kind, what, _ = parse_target(t)
+            guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps,
+                                                                 allow_eeprom)
+            target, implied = open_target(t, spec, baud=baud, guard=guard)
+            notes = []
+            try:
+                vid = variant or implied
+                if vid is None:
+                    vid, how = identify(target, spec)
+                    notes.append(f"variant: {how}")
+                checks = suite(spec, vid, patterns=patterns, guard=guard,
+                               machine=not no_machine)
+                if not checks:
+                    raise UserError(f"no check matches {' '.join(patterns) or '(all)'}")
+                if not target.emulated and not allow_motion:
+                    notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
+                options = RunOptions(profile=profile, seed=seed, notes=notes)
+                progress = bar.task(f"{target.name} ({vid})", len(checks))
+                try:
+                    runs.append(run_one(spec, target, vid, checks, options=options,
+                                        dialect=dialect, progress=progress))
+                except RunAborted as exc:
+                    runs.append(exc.run)
+                    aborted = exc.run.aborted
+                    break
+            finally:
+                target.close()
+    mutant_report = []
+    if mutants and aborted is None:
+        variants = [r.variant for r in runs] or [DEFAULT_VARIANT]
+        mutant_report, _ = run_mutants(spec, variants, profile=profile, seed=seed,
+                                       progress=None if quiet else
+                                       (lambda s: click.echo(s, err=True)))
+    results = results_of(runs, command, mutant_report)
+    out = Path(report_dir) if report_dir else default_dir()
+    write_reports(results, out)
+    _print_summary(results, out)
+    if aborted is not None:
+        raise UserError(f"run aborted: {aborted}", exit_code=2)
+    if results.failed():
+        sys.exit(1)
+
+
+def _print_summary(results, out: Path) -> None:  # noqa: ANN001
+    for r in results.runs:
+        counts = r.counts()
+        shown = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
+        click.echo(f"{r.target} ({r.variant}, {r.profile}): {shown} in {r.duration:.1f} s")
+        for c in r.checks:
+            if c.grade is Grade.FAIL:
+                click.echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+    if results.mutants:
+        killed = sum(1 for m in results.mutants if m["killed"])
+        click.echo(f"mutants: {killed}/{len(results.mutants)} killed")
+        for m in results.mutants:
+            if not m["killed"]:
+                click.echo(f"  SURVIVED {m['name']} ({m['fault']})")
+    click.echo(f"report: {out / 'index.html'}")

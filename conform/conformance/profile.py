@@ -1,0 +1,102 @@
+"""Characterisation profiles: what a unit actually does on each open question, as TOML.
+
+Format (shared with ``conform emulate --profile``)::
+
+    [meta]
+    target = "/dev/ttyUSB0"
+    variant = "gve64-v19"
+    [dialect]
+    A10 = "every-line"
+    [evidence.A10]
+    status = "determined"          # determined | ambiguous | no-match | not-probed
+    matches = ["every-line"]
+    probe = ["!0@", "!0V1000", ...]
+    answers = ["0,0", "0", ...]
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from conform.errors import UserError
+
+
+@dataclass
+class Profile:
+    dialect: dict[str, str]
+    meta: dict[str, Any] = field(default_factory=dict)
+    evidence: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return json.dumps(str(value), ensure_ascii=True)
+
+
+def dumps(profile: Profile) -> str:
+    out = ["# conform characterisation profile: what the unit does on each open question",
+           "# (load it with `conform emulate --profile` or `conform run --dialect`)", "",
+           "[meta]"]
+    out += [f"{k} = {_toml_value(v)}" for k, v in profile.meta.items()]
+    out += ["", "[dialect]"]
+    out += [f"{k} = {_toml_value(v)}" for k, v in sorted(profile.dialect.items(), key=_qkey)]
+    for q, ev in sorted(profile.evidence.items(), key=_qkey):
+        out += ["", f"[evidence.{q}]"]
+        out += [f"{k} = {_toml_value(v)}" for k, v in ev.items()]
+    return "\n".join(out) + "\n"
+
+
+def _qkey(item: tuple[str, Any]) -> tuple[int, str]:
+    k = item[0]
+    return (int(k[1:]) if k[1:].isdigit() else 999, k)
+
+
+def write_profile(profile: Profile, path: str | Path) -> None:
+    try:
+        Path(path).write_text(dumps(profile), encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def load_profile(path: str | Path) -> Profile:
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise UserError(f"{p}: no such profile") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{p}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{p}: {exc}") from None
+    dialect = data.get("dialect")
+    if not isinstance(dialect, dict):
+        raise UserError(f"{p}: no [dialect] table")
+    for k, v in dialect.items():
+        if not isinstance(v, str):
+            raise UserError(f"{p}: [dialect] {k} must be a string, not {type(v).__name__}")
+    return Profile(dict(dialect), dict(data.get("meta", {})), dict(data.get("evidence", {})))
+
+
+def load_profile_dialect(spec: Any, path: str | Path) -> Any:
+    """The dialect a profile describes (validated against questions.toml)."""
+    prof = load_profile(path)
+    try:
+        return spec.dialect(prof.dialect)
+    except UserError as exc:
+        raise UserError(f"{path}: {exc}") from None
+
+
+def diff_profiles(a: Profile, b: Profile) -> list[tuple[str, str | None, str | None]]:
+    """(question, choice in a, choice in b) for every question on which they differ."""
+    keys = sorted(set(a.dialect) | set(b.dialect), key=lambda k: _qkey((k, None)))
+    return [(k, a.dialect.get(k), b.dialect.get(k)) for k in keys
+            if a.dialect.get(k) != b.dialect.get(k)]

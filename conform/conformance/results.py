@@ -1,0 +1,179 @@
+"""What a conformance run produces: grades, findings, per-check results, the run as a whole.
+
+Plain dataclasses that round-trip through JSON (``results.json``), so a report can be re-rendered
+from a file without the unit or the tables.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+from conform.errors import UserError
+
+
+class Grade(StrEnum):
+    """Per-check verdicts (docs/conformance.md)."""
+
+    PASS = "PASS"
+    FAIL = "FAIL"
+    DEVIATION = "DEVIATION"
+    NOT_APPLICABLE = "NOT-APPLICABLE"
+    SKIPPED = "SKIPPED"
+    ERROR = "ERROR"
+
+
+GRADE_ORDER = [Grade.FAIL, Grade.ERROR, Grade.DEVIATION, Grade.PASS, Grade.SKIPPED,
+               Grade.NOT_APPLICABLE]
+
+MUST = "MUST"
+INFO = "INFO"
+
+
+@dataclass
+class LogEntry:
+    """One chunk on the wire: seconds since the check began, direction (tx|rx|note), bytes."""
+
+    t: float
+    dir: str
+    data: bytes
+
+    def to_json(self) -> dict[str, Any]:
+        return {"t": round(self.t, 6), "dir": self.dir, "data": self.data.decode("latin-1")}
+
+    @staticmethod
+    def from_json(d: dict[str, Any]) -> LogEntry:
+        return LogEntry(float(d["t"]), str(d["dir"]), str(d["data"]).encode("latin-1"))
+
+
+@dataclass
+class CheckResult:
+    """The verdict of one check on one target."""
+
+    id: str
+    grade: Grade
+    clause: str
+    level: str = MUST
+    title: str = ""
+    expected: str = ""
+    actual: str = ""
+    detail: str = ""
+    question: str | None = None       # the open question a DEVIATION (or INFO check) is about
+    alternative: str | None = None    # the alternative the target matched (DEVIATION)
+    sequence: list[str] = field(default_factory=list)  # the (shrunk) lines that show it
+    seed: int | None = None
+    replay: str = ""                  # argument for `conform run --replay`
+    log: list[LogEntry] = field(default_factory=list)
+    duration: float = 0.0
+    variant: str = ""
+    target: str = ""
+
+    @property
+    def key(self) -> str:
+        """The id without variant and clause: the row of the variants × checks matrix."""
+        parts = self.id.split("/")
+        return "/".join(parts[2:]) if len(parts) > 2 else self.id
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["grade"] = self.grade.value
+        d["log"] = [e.to_json() for e in self.log]
+        return d
+
+    @staticmethod
+    def from_json(d: dict[str, Any]) -> CheckResult:
+        d = dict(d)
+        d["grade"] = Grade(d["grade"])
+        d["log"] = [LogEntry.from_json(e) for e in d.get("log", [])]
+        known = set(CheckResult.__dataclass_fields__)
+        return CheckResult(**{k: v for k, v in d.items() if k in known})
+
+
+@dataclass
+class TargetRun:
+    """All results of one target (one column of the matrix)."""
+
+    target: str
+    variant: str
+    emulated: bool
+    profile: str
+    started: str
+    duration: float = 0.0
+    checks: list[CheckResult] = field(default_factory=list)
+    aborted: str | None = None        # why the run stopped early (and what was sent to stop it)
+    notes: list[str] = field(default_factory=list)
+
+    def counts(self) -> dict[str, int]:
+        out = {g.value: 0 for g in GRADE_ORDER}
+        for c in self.checks:
+            out[c.grade.value] += 1
+        return out
+
+
+@dataclass
+class RunResults:
+    """A whole ``conform run``: one or more targets."""
+
+    runs: list[TargetRun]
+    command: str = ""
+    created: str = ""
+    mutants: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def checks(self) -> list[CheckResult]:
+        return [c for r in self.runs for c in r.checks]
+
+    def failed(self) -> bool:
+        return any(c.grade is Grade.FAIL for c in self.checks)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": "conform-results/1",
+            "command": self.command,
+            "created": self.created,
+            "checks": [c.to_json() for c in self.checks],
+            "runs": [
+                {k: v for k, v in asdict(r).items() if k != "checks"} | {"counts": r.counts()}
+                for r in self.runs
+            ],
+            "mutants": self.mutants,
+        }
+
+    def dump(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_json(), indent=1), encoding="utf-8")
+
+    @staticmethod
+    def from_json(d: dict[str, Any]) -> RunResults:
+        checks = [CheckResult.from_json(c) for c in d.get("checks", [])]
+        runs = []
+        for r in d.get("runs", []):
+            run = TargetRun(
+                target=r["target"], variant=r["variant"], emulated=bool(r.get("emulated")),
+                profile=r.get("profile", ""), started=r.get("started", ""),
+                duration=float(r.get("duration", 0.0)), aborted=r.get("aborted"),
+                notes=list(r.get("notes", [])),
+            )
+            run.checks = [c for c in checks if c.target == run.target and c.variant == run.variant]
+            runs.append(run)
+        return RunResults(runs, d.get("command", ""), d.get("created", ""), d.get("mutants", []))
+
+    @staticmethod
+    def load(path: str | Path) -> RunResults:
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise UserError(f"{p}: no such file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"{p}: cannot read: {exc}") from None
+        except json.JSONDecodeError as exc:
+            raise UserError(f"{p}: line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+        if not isinstance(data, dict) or not isinstance(data.get("checks"), list):
+            raise UserError(f"{p}: not a conform results file (no 'checks' list)")
+        try:
+            return RunResults.from_json(data)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{p}: malformed results: {exc}") from None

@@ -1,0 +1,115 @@
+"""What a line does to a real machine, and the guard that keeps a run inside what it may use.
+
+``hazards(line)`` names the risks of one command line: ``motion`` (L, C, W, Y+/Y&, G, a packet
+holding vectors), ``actuator`` (outputs switched on, spindle speed), ``eeprom`` (EEPROM writes),
+``reset`` (J). Against a real unit a check whose script carries a hazard the run did not allow is
+SKIPPED; the guard refuses such a line outright as a last line of defence, and bounds every axis
+move by ``max_steps``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from conform.errors import UserError
+
+_LINE = re.compile(rb"^!(\d)([^\r\n]*)")
+_VECTOR = re.compile(r"^[LC](-?\d+(?:,-?\d+)*)")
+_WREF = re.compile(r"^W([A-Za-z]),(-?\d+),(\d+),(\d+),(\d+)")
+
+# the answer to H, D and O0,FF when a run is interrupted (GVE64 §13.5.9, §13.5.11)
+STOP_SEQUENCE = ("H", "D", "O0,FF")
+
+
+class SafetyRefusal(UserError):
+    """The guard refused to send a line (a harness decision, not the unit's fault)."""
+
+
+def _bodies(body: str) -> list[str]:
+    """The command text with and without a trailing ``,XX`` (which may be a checksum or a
+    last parameter): the guard considers both readings."""
+    m = re.search(r",([0-9A-Fa-f]{2})$", body)
+    return [body, body[: m.start()]] if m else [body]
+
+
+def hazards(line: bytes) -> set[str]:
+    """The risks a command line carries for a real machine (empty for a harmless line)."""
+    m = _LINE.match(line)
+    if m is None:
+        return set()
+    address = int(m.group(1))
+    try:
+        text = m.group(2).decode("ascii")
+    except UnicodeDecodeError:
+        return set()
+    out: set[str] = set()
+    for body in _bodies(text):
+        if address == 7:
+            if body.startswith("V") and body[1:].lstrip("0") != "":
+                out.add("actuator")
+        elif address == 0:
+            if body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
+                out.add("motion")
+            elif body.startswith("O") and body.upper() != "O0,FF":
+                out.add("actuator")
+        if address in (0, 7):
+            if body.startswith(("EW", "EFW", "EUW")):
+                out.add("eeprom")
+            elif body.startswith("J"):
+                out.add("reset")
+    if "actuator" in out and address == 0 and any(b.upper() == "O0,FF" for b in _bodies(text)):
+        out.discard("actuator")  # O0,FF with its checksum: all outputs off
+    if "actuator" in out and address == 7 and any(b == "V0" or b.lstrip("V0") == ""
+                                                  for b in _bodies(text)):
+        out.discard("actuator")
+    return out
+
+
+def axis_moves(line: bytes) -> list[int]:
+    """The pulse counts a line may ask any axis to travel (vectors, W travels)."""
+    m = _LINE.match(line)
+    if m is None or m.group(1) != b"0":
+        return []
+    out: list[int] = []
+    for body in _bodies(m.group(2).decode("ascii", "replace")):
+        v = _VECTOR.match(body)
+        if v:
+            out += [int(x) for x in v.group(1).split(",")]
+        w = _WREF.match(body)
+        if w:
+            out += [int(w.group(2)), int(w.group(4))]
+    return out
+
+
+@dataclass(frozen=True)
+class Guard:
+    """What a run may do to the machine behind the target."""
+
+    allow_motion: bool = True
+    max_steps: int | None = None
+    allow_eeprom: bool = True
+
+    @staticmethod
+    def emulated() -> Guard:
+        return Guard(True, None, True)
+
+    def blocked(self, risks: set[str]) -> set[str]:
+        """The risks this guard does not allow."""
+        allowed = {"reset"}
+        if self.allow_motion:
+            allowed |= {"motion", "actuator"}
+        if self.allow_eeprom:
+            allowed.add("eeprom")
+        return risks - allowed
+
+    def check(self, line: bytes) -> None:
+        bad = self.blocked(hazards(line))
+        if bad:
+            raise SafetyRefusal(f"refused to send {line!r}: {', '.join(sorted(bad))} not allowed "
+                                "(use --allow-motion with --max-steps)")
+        if self.max_steps is not None:
+            for n in axis_moves(line):
+                if abs(n) > self.max_steps:
+                    raise SafetyRefusal(f"refused to send {line!r}: a move of {abs(n)} steps "
+                                        f"exceeds --max-steps {self.max_steps}")

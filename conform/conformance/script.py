@@ -1,0 +1,99 @@
+"""A check's script: the steps sent to a target, and running them.
+
+A script is data (frozen, hashable), so the reference unit's transcript of it can be cached and
+the same script replayed on any target: a step sends one line (or waits, or drives an input, or
+returns the unit to its power-up state).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from conform.conformance.safety import Guard, hazards
+from conform.conformance.target import Reply, Target
+
+# answer kinds whose fields are compared loosely on a real unit
+POSITION = "position"  # changes while moving: compared within a tolerance
+ENVIRONMENT = "environment"  # depends on the unit at hand (firmware text, EEPROM, inputs)
+
+
+@dataclass(frozen=True)
+class Step:
+    line: bytes = b""
+    answer: bool = True  # wait for an answer (False: lines inside a packet, a cut line)
+    lines: int = 1  # answer lines expected (`>` may give two)
+    timeout: float = 0.5
+    wait: float = 0.0  # seconds to let pass before sending
+    input: tuple[int, int, bool] | None = None  # (port, bit, active), emulator only
+    reset: bool = False  # return to the power-up state first
+    subject: bool = False  # the step the check is about
+    kind: str = ""  # POSITION | ENVIRONMENT | ""
+
+    def describe(self) -> str:
+        if self.reset:
+            return "(reset)"
+        if self.input is not None:
+            port, bit, active = self.input
+            return f"(input I{port}.{bit} {'active' if active else 'inactive'})"
+        text = self.line.decode("latin-1").replace("\r", "")
+        if self.wait and not self.line:
+            return f"(wait {self.wait:g} s)"
+        return (f"(wait {self.wait:g} s) " if self.wait else "") + text
+
+
+Script = tuple[Step, ...]
+
+
+def script_needs(script: Script) -> set[str]:
+    """What a script asks of the machine: motion, actuator, eeprom, reset, inputs."""
+    out: set[str] = set()
+    for step in script:
+        if step.line:
+            out |= hazards(step.line)
+        if step.input is not None:
+            out.add("inputs")
+    return out
+
+
+def skip_reason(script: Script, guard: Guard, emulated: bool) -> str | None:
+    """Why a script may not run on this target, or None."""
+    needs = script_needs(script)
+    if "inputs" in needs and not emulated:
+        return "needs inputs driven, which only the emulator allows"
+    blocked = guard.blocked(needs - {"inputs"})
+    if blocked:
+        return f"needs {', '.join(sorted(blocked))} (not allowed in this run: --allow-motion)"
+    if guard.max_steps is not None:
+        from conform.conformance.safety import SafetyRefusal
+
+        for step in script:
+            if step.line:
+                try:
+                    guard.check(step.line)
+                except SafetyRefusal as exc:
+                    return str(exc)
+    return None
+
+
+def run_script(target: Target, script: Script) -> list[Reply | None]:
+    """Run every step; a reply per step (None for steps that send nothing or expect nothing)."""
+    out: list[Reply | None] = []
+    target.begin_log()
+    for step in script:
+        if step.reset:
+            target.reset()
+            if target.emulated:
+                target.begin_log()
+        if step.wait:
+            target.wait(step.wait)
+        if step.input is not None:
+            target.set_input(*step.input)
+        if not step.line:
+            out.append(None)
+            continue
+        if step.answer:
+            out.append(target.exchange(step.line, step.timeout, step.lines))
+        else:
+            t, stray = target.send(step.line)
+            out.append(Reply(step.line, t - target.t_log0, stray=stray))
+    return out
