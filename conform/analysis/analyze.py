@@ -218,6 +218,8 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
         unit.t_first, unit.t_last = ut
         ex, unsolicited = exm.build_exchanges(host, unit, packets, used)
 
+    _check_answer_shapes(ex, unit, raw.unit.data, var)
+
     t_all = np.concatenate([host.t_first, unit.t_first])
     t_all = t_all[np.isfinite(t_all)]
     t0 = float(t_all.min()) if len(t_all) else 0.0
@@ -269,6 +271,36 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
                           "variant": var.id, "dialect_changes": dia.changed()}
     return Analysis(str(path), raw, var, dia, used, host, unit, ex, unsolicited, out.sorted(),
                     metrics, series, rep, t0, notes)
+
+
+_FREE_ANSWERS = {">", "?", "Q", "Y", "EFR", "EUR", "@", "J"}
+
+
+def _check_answer_shapes(ex: pd.DataFrame, unit: fr.DecodedLines, data: np.ndarray,
+                         var: Any) -> None:
+    """An OK answer with the wrong number of fields for its command is garbled (§13.7)."""
+    if len(unit) == 0:
+        return
+    commas = np.concatenate([[0], np.cumsum(data == fr.COMMA, dtype=np.int64)])
+    nf = commas[unit.lines.end] - commas[unit.lines.start]
+    nf = nf - ((unit.checksum != fr.CS_NONE) & (unit.checksum != fr.CS_MISSING))
+    want = {cid: len(c.answer) for cid, c in var.commands.items() if cid not in _FREE_ANSWERS}
+    want["*E"] = 1
+    names = ex["name"].to_numpy()
+    a = ex["answer_frame"].to_numpy()
+    expect = np.array([want.get(n, -1) if isinstance(n, str) else -1 for n in names])
+    ok = (a >= 0) & (ex["answer_kind"].to_numpy() == fr.ANSWER) & (expect >= 0)
+    ok &= ex["code"].to_numpy() == 0
+    bad = np.flatnonzero(ok & (nf[np.maximum(a, 0)] != expect))
+    if len(bad) == 0:
+        return
+    for r in bad.tolist():
+        u = int(a[r])
+        unit.kind[u] = fr.GARBLED
+        unit.detail[u] = f"{expect[r]} field(s) expected after a {names[r]} command"
+    ex.loc[bad, "answer_kind"] = fr.GARBLED
+    ex.loc[bad, "code"] = -1
+    ex["uncertain"] = exm.uncertain_mask(ex)
 
 
 def _parser(var: Any, dia: Any) -> Any:

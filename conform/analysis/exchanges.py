@@ -19,6 +19,7 @@ from conform.analysis.frames import (
     BITS_PER_BYTE,
     COMMAND,
     ECHO,
+    GARBLED,
     PARTIAL,
     REJECTION,
     DecodedLines,
@@ -83,6 +84,13 @@ def pair(host: DecodedLines, unit: DecodedLines, packets: Packets
     c = np.searchsorted(hr[exp_idx], ur, side="left") - 1
     answer = np.full(n, -1, np.int64)
     extra = np.zeros(n, np.int64)
+    echo = np.flatnonzero(unit.kind == ECHO)
+    if len(echo):
+        # a line starting with `!` is an echo only right after `>` (A9); else it is noise
+        prev = np.where(c[echo] >= 0, exp_idx[np.maximum(c[echo], 0)], -1)
+        stray = echo[(prev < 0) | (host.name[np.maximum(prev, 0)] != ">")]
+        unit.kind[stray] = GARBLED
+        unit.detail[stray] = "starts with '!' but no `>` asked for an echo"
     real = unit.kind != ECHO
     unsolicited = np.flatnonzero(c < 0)
     sel = np.flatnonzero((c >= 0) & real)

@@ -369,6 +369,8 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         cause = ""
         if host.checksum[r] in (CS_BAD, CS_MISSING):
             cause = " (the command's checksum was wrong)"
+        elif c == 4 and host.checksum[r] == 1:
+            cause = " (its checksum is right as sent: the line was damaged on the way)"
         elif host.kind[r] == "rejection" and host.detail[r]:
             cause = f" ({host.detail[r]})"
         return (ctx.t[r], f"`{ctx.cmd(r)}`{prev} answered {ctx.ans(r)}: error {c}, {why}"

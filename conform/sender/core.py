@@ -46,6 +46,7 @@ class Unit_:
     items: list[Item]
     packet: bool = False
     tries: int = 0
+    refused: int = 0
 
     @property
     def motion(self) -> bool:
@@ -69,7 +70,7 @@ class Sender:
     def __init__(self, items: list[Item], variant: Variant, *, policy: str = "careful",
                  checksums: bool = False, packet: int = 1, timeout: float = 0.25,
                  queue_wait: float = 0.02, max_tries: int = 200, address: int | None = None,
-                 finish: bool = True, poll_interval: float = 0.05,
+                 finish: bool = True, poll_interval: float = 0.1,
                  index_every: str = "answered-except-recovery") -> None:
         if policy not in POLICIES:
             raise ValueError(f"policy must be one of {POLICIES}")
@@ -322,8 +323,14 @@ class Sender:
             careful = self.policy == "careful"
             self._wake = t + (self.queue_wait if careful else 0.0)
             return
-        if ans.code == 4 and self.cs_on:
-            self._wake = t  # a line damaged on the way: certainly not taken, send it again
+        if ans.code in (2, 3, 4, 5) and u.refused < 5:
+            # the job line is valid by the tables, so a refusal means it was damaged on the
+            # way (or cut off): certainly not taken, so sending it again is safe
+            u.refused += 1
+            self._wake = t
+            return
+        if ans.code == 7:
+            self._wake = t + self.queue_wait
             return
         name = u.items[0].body.decode()
         self.stats.errors.append(f"`{name}` answered {ans.raw.decode('ascii', 'replace')}")

@@ -39,8 +39,9 @@ class GcodeOptions:
     period: float = 0.001  # interpolation period T, s
     path_error: float = 0.01  # L, mm
     stop_angle: float = 120.0  # degrees: sharper junctions stop
-    chord_tolerance: float = 0.005  # mm
-    b_min: int = 10
+    chord_tolerance: float = 0.002  # mm
+    b_min: int = 100  # pulses/s: the "stop" speed at a junction too sharp to pass
+    short: int = 16  # the $ threshold: only vectors shorter than this run at the B speed
 
 
 @dataclass
@@ -180,6 +181,7 @@ def gcode_to_items(text: str, variant: Variant, dialect: Dialect, opts: GcodeOpt
     lines: list[tuple[str, str]] = []
     accel_k = max(1, min(1000, round(opts.accel * spm / 1000)))
     lines.append((f"A{accel_k}", source))
+    lines.append((f"${max(1, int(opts.short))}", source))
     last_v = last_b = None
     naxes = len(variant.axes)
     for i, s in enumerate(segs):

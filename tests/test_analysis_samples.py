@@ -1,0 +1,71 @@
+"""The sample captures in captures/ give exactly what captures/README.md says they show."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+from conform.analysis import analyze
+
+CAPTURES = Path(__file__).resolve().parent.parent / "captures"
+
+
+@cache
+def sample(name: str):  # type: ignore[no-untyped-def]
+    path = CAPTURES / f"{name}.mcap"
+    if not path.exists():
+        pytest.fail(f"{path} is missing: run python captures/make_captures.py")
+    return analyze(path)
+
+
+def test_samples_are_small() -> None:
+    for p in CAPTURES.glob("*.mcap"):
+        assert p.stat().st_size < 5 * 1024 * 1024, p
+
+
+def test_good_rs232_recovers_without_hazards() -> None:
+    a = sample("good-rs232")
+    assert a.kinds() == {"garbled-answer": 1, "repeat-used": 1, "no-answer": 1,
+                         "index-checked": 1}
+    assert a.hazards() == []
+    assert {f.severity for f in a.findings} <= {"info", "warning"}
+    assert a.metrics["positions"]["checked"] >= 1
+    assert a.metrics["queue"]["starvations"] == 0
+
+
+def test_usb_latency_starves_the_queue() -> None:
+    a = sample("usb-latency")
+    assert a.kinds() == {"starvation": 243}
+    q = a.metrics["queue"]
+    assert q["starvations"] == 243 and q["starved_s"] > 1.0
+    # the round trip is dominated by the converter: 16 ms of host turnaround
+    assert a.metrics["latency"]["host_time"]["median"] == pytest.approx(0.016, abs=0.001)
+    w = {x["scenario"]: x for x in q["whatif"]}
+    assert w["as captured"]["keeps_up"] is False
+    assert w["packets of 20"]["keeps_up"] is True
+    assert w["packets of 20"]["starvations"] <= 1
+
+
+def test_usb_packets_keep_the_queue_fed() -> None:
+    a = sample("usb-packets")
+    assert a.kinds() == {}
+    assert a.metrics["vectors_accepted"] == 476 and a.metrics["exchanges"] == 44
+    assert a.metrics["queue"]["starvations"] == 0
+
+
+def test_careless_noisy_hazards() -> None:
+    a = sample("careless-noisy")
+    assert a.kinds() == {"blind-resend": 3, "checksum-error": 3, "double-move": 1,
+                         "error-code": 10, "garbled-answer": 2, "lost-vector": 1,
+                         "no-answer": 1, "queue-full-polling": 2423}
+    dm = [f for f in a.findings if f.kind == "double-move"]
+    assert [f.row for f in dm] == [200] and a.host_text(200) == "!0C0,50,0,DD"
+    lost = [f for f in a.findings if f.kind == "lost-vector"]
+    assert [f.row for f in lost] == [300] and lost[0].extra["confirmed"] is True
+    assert a.host_text(300) == "!0C-2000,0,0,67"
+    q = [f for f in a.findings if f.kind == "queue-full-polling"][0]
+    assert q.extra["runs"] == 61 and q.extra["pattern"] == "immediate"
+    assert all(f.severity == "hazard" for f in a.findings
+               if f.kind in ("blind-resend", "double-move", "lost-vector"))
