@@ -11,6 +11,7 @@ hits both alike. Target: the proxy adds at most 1 ms at p99.
 from __future__ import annotations
 
 import argparse
+import shutil
 import signal
 import statistics
 import tempfile
@@ -86,6 +87,7 @@ def main() -> None:
           f"ratio {added[99] / TARGET_ADDED_P99:.2f}); mean direct "
           f"{statistics.mean(d) * 1e3:.3f} ms, proxy {statistics.mean(p) * 1e3:.3f} ms")
     print(f"capture: {info.state}, {info.messages.get('/exchanges', 0)} exchanges recorded")
+    shutil.rmtree(workdir, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ and both directions in the MCAP file are compared with what was sent.
 from __future__ import annotations
 
 import argparse
+import shutil
 import signal
 import tempfile
 import threading
@@ -86,8 +87,10 @@ def main() -> None:
         time.sleep(0.2)  # let the last answers come back
     done.set()
     reader.join()
+    t_term = time.monotonic()
     proxy.send_signal(signal.SIGTERM)
-    proxy.wait(120)
+    proxy.wait(300)
+    finish = time.monotonic() - t_term
     sender.close()
     unit_total, unit_crc = stop_unit(unit)
 
@@ -118,7 +121,12 @@ def main() -> None:
           f"{sum(info.messages.values()):,} messages, gaps {info.gaps}")
     ok = (lost_to_unit == 0 and lost_in_file == 0 and unit_crc == crc
           and host_stream_crc == crc and unit_len == 2 * n_lines == len(answers))
+    end = info.metadata.get("conform.session_end", {})
+    print(f"recorder         writer backlog at most {end.get('max_backlog', '?')} items; "
+          f"proxy finished {finish:.2f} s after SIGTERM")
     print(f"zero bytes lost: {'YES' if ok else 'NO'}")
+    if args.keep is None:
+        shutil.rmtree(workdir, ignore_errors=True)
 
 
 if __name__ == "__main__":
