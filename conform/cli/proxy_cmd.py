@@ -31,6 +31,9 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
 
     The first line on stdout is the pty's device path.
     """
+    # the recorder's writer thread must not hold the GIL for long while a pump thread waits
+    # to forward bytes: a short switch interval bounds that wait (latency added at p99)
+    sys.setswitchinterval(0.0002)
     proxy = ProxyCapture(unit_url, output, baud=baud, variant=variant, decode=not no_decode,
                          reconnect=reconnect, link=link)
     sys.stdout.write(proxy.host_path + "\n")
