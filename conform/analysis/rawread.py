@@ -36,6 +36,12 @@ OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 
 OP_METADATA, OP_DATA_END = 0x0C, 0x0F
 RAW_TOPICS = {TOPIC_HOST: "host", TOPIC_UNIT: "unit"}
 Progress = Callable[[int, int], None]
+_U64 = struct.Struct("<Q").unpack_from
+
+
+def _gather(arr: np.ndarray, at: np.ndarray, width: int, dtype: str) -> np.ndarray:
+    """Little-endian integers of ``width`` bytes at each index of ``at``."""
+    return arr[at[:, None] + np.arange(width)].copy().view(dtype).ravel()
 
 
 @dataclass
@@ -95,9 +101,9 @@ class _Collector:
     def __init__(self) -> None:
         self.channels: dict[int, tuple[str, str]] = {}  # id -> (topic, encoding)
         self.metadata: dict[str, dict[str, str]] = {}
-        self.payloads: dict[str, list[bytes]] = {"host": [], "unit": []}
-        self.times: dict[str, list[int]] = {"host": [], "unit": []}
-        self.orders: dict[str, list[int]] = {"host": [], "unit": []}
+        self.spans: dict[str, list[tuple]] = {"host": [], "unit": []}
+        self.buffers: list[np.ndarray] = []
+        self.size = 0
         self.raw_encoded: dict[str, bool] = {"host": False, "unit": False}
         self.link: list[dict[str, Any]] = []
         self.topics: dict[str, int] = {}
@@ -127,39 +133,59 @@ class _Collector:
         self.metadata[name] = out
 
     def records(self, data: bytes, pos: int, end: int) -> None:
-        """Every record in data[pos:end] (the inside of a chunk)."""
-        unpack = struct.unpack_from
-        channels = self.channels
-        payloads, times, orders = self.payloads, self.times, self.orders
-        topics = self.topics
+        """Every record in data[pos:end] (the inside of a chunk), message fields vectorised."""
+        positions: list[int] = []
+        app = positions.append
+        q = _U64
         while pos < end:
             if pos + 9 > end:
                 raise ValueError("chunk ends inside a record header")
-            op = data[pos]
-            (length,) = unpack("<Q", data, pos + 1)
-            body = pos + 9
-            nxt = body + length
-            if nxt > end:
-                raise ValueError("chunk record runs past the chunk")
-            if op == OP_MESSAGE:
-                cid, _seq, log_time = unpack("<HIQ", data, body)
-                ch = channels.get(cid)
-                if ch is not None:
-                    topic = ch[0]
-                    topics[topic] = topics.get(topic, 0) + 1
-                    d = RAW_TOPICS.get(topic)
-                    if d is not None:
-                        payloads[d].append(data[body + 22 : nxt])
-                        times[d].append(log_time)
-                        orders[d].append(self.count)
-                        if ch[1] != "json":
-                            self.raw_encoded[d] = True
-                    elif topic == TOPIC_LINK:
-                        self._link(data[body + 22 : nxt], log_time)
-                self.count += 1
-            elif op == OP_CHANNEL:
-                self.channel(data[body:nxt])
-            pos = nxt
+            app(pos)
+            pos += 9 + q(data, pos + 1)[0]
+        if pos > end:
+            raise ValueError("chunk record runs past the chunk")
+        if not positions:
+            return
+        arr = np.frombuffer(data, np.uint8)
+        at = np.asarray(positions, np.int64)
+        ops = arr[at]
+        lens = _gather(arr, at + 1, 8, "<u8").astype(np.int64)
+        for i in np.flatnonzero(ops == OP_CHANNEL).tolist():
+            self.channel(data[at[i] + 9 : at[i] + 9 + lens[i]])
+        msg = np.flatnonzero(ops == OP_MESSAGE)
+        if len(msg) == 0:
+            return
+        pm = at[msg]
+        if (lens[msg] < 22).any():
+            raise ValueError("message record too short")
+        cid = _gather(arr, pm + 9, 2, "<u2")
+        log_time = _gather(arr, pm + 15, 8, "<u8").astype(np.int64)
+        order = self.count + np.arange(len(msg), dtype=np.int64)
+        self.count += len(msg)
+        base = self.size
+        kept = False
+        for c in np.unique(cid).tolist():
+            sel = cid == c
+            ch = self.channels.get(c)
+            if ch is None:
+                continue
+            topic = ch[0]
+            n = int(sel.sum())
+            self.topics[topic] = self.topics.get(topic, 0) + n
+            d = RAW_TOPICS.get(topic)
+            if d is not None:
+                self.spans[d].append((base + pm[sel] + 31, lens[msg][sel] - 22,
+                                      log_time[sel], order[sel]))
+                kept = True
+                if ch[1] != "json":
+                    self.raw_encoded[d] = True
+            elif topic == TOPIC_LINK:
+                for p, ln, lt in zip(pm[sel].tolist(), lens[msg][sel].tolist(),
+                                     log_time[sel].tolist(), strict=True):
+                    self._link(data[p + 31 : p + 9 + ln], lt)
+        if kept:
+            self.buffers.append(arr)
+            self.size += len(arr)
 
     def _link(self, payload: bytes, log_time: int) -> None:
         try:
@@ -302,18 +328,96 @@ def b64decode_many(chars: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, 
     return flat, out_lens
 
 
-def _parse_payloads(name: str, col: _Collector, status: ReadStatus) -> Direction:
-    payloads = col.payloads[name]
-    times = np.asarray(col.times[name], np.int64) / 1e9
-    orders = np.asarray(col.orders[name], np.int64)
-    if not payloads:
+def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndarray,
+                    commas: np.ndarray, status: ReadStatus) -> Direction:
+    spans = col.spans[name]
+    if not spans:
         return Direction.empty(name)
+    starts = np.concatenate([s[0] for s in spans])
+    lens = np.concatenate([s[1] for s in spans])
+    times = np.concatenate([s[2] for s in spans]) / 1e9
+    orders = np.concatenate([s[3] for s in spans])
+
+    def payloads() -> list[bytes]:
+        return [big[a : a + n].tobytes() for a, n in zip(starts.tolist(), lens.tolist(),
+                                                          strict=True)]
+
     if col.raw_encoded[name]:
-        return _raw_direction(name, payloads, times, orders)
+        return _raw_direction(name, payloads(), times, orders)
     try:
-        return _bulk_json(name, payloads, times, orders)
+        return _fast_json(name, big, starts, lens, times, orders, quotes, commas)
+    except ValueError:
+        pass
+    pl = payloads()
+    try:
+        return _bulk_json(name, pl, times, orders)
     except (ValueError, KeyError, TypeError, ImportError):
-        return _slow_json(name, payloads, times, orders, status)
+        return _slow_json(name, pl, times, orders, status)
+
+
+def _tail_values(big: np.ndarray, commas: np.ndarray, ends: np.ndarray,
+                 keys: tuple[bytes, ...], width: int = 28) -> list[np.ndarray]:
+    """Numbers of the last fields of every payload (``,"key":number`` … ``}``), as 'S' arrays.
+
+    conform's payloads end with ``"offset":N,"t_read":X,"t_first":X,"seq":N}``; the fields
+    are found from the last commas, so the free text before them cannot confuse the search.
+    """
+    k = np.searchsorted(commas, ends)  # index of the first comma at or after each end
+    out = []
+    for j, key in enumerate(keys):
+        ci = k - (len(keys) - j)
+        if (ci < 0).any():
+            raise ValueError("too few fields")
+        c = commas[ci]
+        pat = np.frombuffer(b"," + key, np.uint8)
+        idx = np.minimum(c[:, None] + np.arange(len(pat)), len(big) - 1)
+        if not (big[idx] == pat).all():
+            raise ValueError(f"{key!r} not where expected")
+        vs = c + len(pat)
+        nxt = commas[ci + 1] if j + 1 < len(keys) else ends - 1
+        n = nxt - vs
+        if (n <= 0).any() or (n > width).any():
+            raise ValueError(f"{key!r}: bad value")
+        idx = np.minimum(vs[:, None] + np.arange(width), len(big) - 1)
+        win = big[idx].copy()
+        win[np.arange(width)[None, :] >= n[:, None]] = 0
+        out.append(win.view(f"S{width}").ravel())
+    return out
+
+
+def _fast_json(name: str, big: np.ndarray, starts: np.ndarray, lens: np.ndarray,
+               times: np.ndarray, orders: np.ndarray, quotes: np.ndarray,
+               commas: np.ndarray) -> Direction:
+    """conform's own payloads (json.dumps, keys in schema order) without a JSON parser."""
+    prefix = np.frombuffer(b'{"direction":"%s","data":"' % name.encode(), np.uint8)
+    if (lens <= len(prefix)).any():
+        raise ValueError("short payload")
+    head = big[starts[:, None] + np.arange(len(prefix))]
+    if not (head == prefix).all():
+        raise ValueError("not conform's layout")
+    ends = starts + lens
+    ds = starts + len(prefix)
+    k = np.searchsorted(quotes, ds)
+    if (k >= len(quotes)).any():
+        raise ValueError("unterminated data")
+    de = quotes[k]
+    if (de >= ends).any():
+        raise ValueError("unterminated data")
+    n = de - ds
+    total = int(n.sum())
+    rel = np.repeat(ds - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+    chars = big[np.arange(total) + rel]
+    data, out_lens = b64decode_many(chars, np.concatenate([[0], np.cumsum(n)]))
+    if (big[ends - 1] != ord("}")).any():
+        raise ValueError("payload does not end with }")
+    off_s, tr_s, tf_s, _seq = _tail_values(
+        big, commas, ends, (b'"offset":', b'"t_read":', b'"t_first":', b'"seq":'))
+    offset = off_s.astype(np.int64)
+    t_read = tr_s.astype(float)
+    t_first = tf_s.astype(float)
+    start = np.concatenate([[0], np.cumsum(out_lens)[:-1]]).astype(np.int64)
+    return Direction(name, data, start, out_lens.astype(np.int64), offset, t_read, t_first,
+                     orders)
 
 
 def _raw_direction(name: str, payloads: list[bytes], times: np.ndarray,
@@ -405,8 +509,13 @@ def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> 
         _walk(p, status, col, progress)
     except OSError as exc:
         raise UserError(f"{p}: cannot read: {exc.strerror}") from None
-    host = _parse_payloads("host", col, status)
-    unit = _parse_payloads("unit", col, status)
+    big = np.concatenate(col.buffers) if col.buffers else np.zeros(0, np.uint8)
+    col.buffers = []
+    quotes = np.flatnonzero(big == ord('"'))
+    commas = np.flatnonzero(big == ord(","))
+    host = _parse_payloads("host", col, big, quotes, commas, status)
+    unit = _parse_payloads("unit", col, big, quotes, commas, status)
+    del big
     if status.bad_payloads:
         status.notes.append(f"{status.bad_payloads} raw chunk message(s) unreadable, skipped")
     return RawCapture(status, col.metadata, host, unit, col.link, col.topics)
