@@ -198,3 +198,23 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "gve64-v19/13.5.2/C/queue-full\t" in out
     assert code("run", "-q", "--replay", "gve64-v19/13.5.3/V/valid",
                 "--report", str(tmp_path / "c")) == 0
+
+
+def test_pytest_plugin_runs_checks_as_items(tmp_path):
+    import subprocess
+    import sys
+    import xml.etree.ElementTree as ET
+
+    junit = tmp_path / "j.xml"
+    base = [sys.executable, "-m", "pytest", "-p", "conform.conformance.pytest_plugin",
+            "-q", "--rootdir", str(tmp_path), str(tmp_path), "-p", "no:cacheprovider"]
+    plain = subprocess.run(base, capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert "no tests ran" in plain.stdout  # without --conform-target: no items
+    run = subprocess.run(base + ["--conform-target=emu:gve64-v10", "--conform-variant=gve64-v19",
+                                 "--conform-check=*/V*/valid", f"--junitxml={junit}"],
+                         capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert run.returncode == 1, run.stdout[-2000:]
+    assert "GVE64 §14.1" in run.stdout
+    cases = {c.get("name"): c for c in ET.parse(junit).getroot().iter("testcase")}
+    assert cases["gve64-v19/13.5.3/V/valid"].find("failure") is None
+    assert cases["gve64-v19/13.5.3/VL/valid"].find("failure") is not None

@@ -128,7 +128,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         for t in plan:
             kind, what, _ = parse_target(t)
             vid = variant or (what if kind == "emu" and what else DEFAULT_VARIANT)
-            for c in suite(spec, vid, patterns=patterns, machine=not no_machine):
+            for c in suite(spec, vid, patterns=patterns, machine=not no_machine,
+                           profile=profile):
                 click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
         return
 
@@ -147,7 +148,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     vid, how = identify(target, spec)
                     notes.append(f"variant: {how}")
                 checks = suite(spec, vid, patterns=patterns, guard=guard,
-                               machine=not no_machine)
+                               machine=not no_machine, profile=profile)
                 if not checks:
                     raise UserError(f"no check matches {' '.join(patterns) or '(all)'}")
                 if not target.emulated and not allow_motion:

@@ -80,6 +80,7 @@ class _Builder:
         self.v = variant
         self.manual = variant.manual
         self.travel = travel
+        self.deep = False
         self.out: list[Check] = []
         self.range_questions: dict[str, tuple[str, ...]] = {}
         hi = variant.ranges.get("velocity", (0, 0))[1]
@@ -239,10 +240,13 @@ def _edge_text(kind: str, value: int) -> str | None:
     return str(value)
 
 
-def generate(spec: Any, variant_id: str, *, travel: int = 100000) -> list[Check]:
-    """Every directed and example check of one variant (nothing runs)."""
+def generate(spec: Any, variant_id: str, *, travel: int = 100000,
+             deep: bool = False) -> list[Check]:
+    """Every directed and example check of one variant (nothing runs). ``deep`` (the full
+    profile) also tries the range edges of every axis of per-axis parameters."""
     v = spec.variant(variant_id)
     b = _Builder(spec, v, travel)
+    b.deep = deep
     universe = [cid for cid in spec.commands]
     for cid in universe:
         if cid in v.commands:
@@ -375,23 +379,33 @@ def _range_checks(b: _Builder, cid: str) -> None:
         if p.kind not in ("int", "uint", "hex") or p.lo is None or p.hi is None:
             continue
         questions = b.range_questions.get(p.range_name or "", ())
-        edges = [("lo", p.lo, OK), ("lo-1", p.lo - 1, RANGE), ("hi", p.hi, OK),
-                 ("hi+1", p.hi + 1, RANGE)]
-        for name, value, intent in edges:
-            if value < 0 and p.kind in ("uint", "hex"):
-                intent = SYNTAX  # no digits for a negative number: not a well-formed parameter
-            texts = [("%02X" % a if isinstance(a, int) and q.kind == "hex" else str(a))
-                     for a, q in zip(args, _expand(cmd, args), strict=True)]
-            texts[at] = _edge_text(p.kind, value) or "-1"
-            line = _join(b, cmd, texts)
-            steps: list[Step] = [RESET]
-            if cid == "*E":  # the count closes a packet
-                steps.append(b.cmd_step("*S", [], answer=False, subject=False))
-                intent = intent if name != "hi" else SYNTAX  # count mismatch (A12)
-            steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5)))
-            b.add(cid, f"range/{p.name}/{name}",
-                  f"{cid} {p.name}={value} ({'inside' if intent == OK else 'outside'} "
-                  f"{p.lo}..{p.hi})", steps, intent=intent, questions=questions)
+        if p.per_axis and b.deep:
+            for k in range(1, index - at):
+                _edges(b, cid, p, args, at + k, f"range/{p.name}/{b.v.axes[k]}", questions)
+        _edges(b, cid, p, args, at, f"range/{p.name}", questions)
+
+
+def _edges(b: _Builder, cid: str, p: Any, args: list[Any], at: int, prefix: str,
+           questions: tuple[str, ...]) -> None:
+    """lo, lo-1, hi, hi+1 of the parameter value at ``args[at]``."""
+    cmd = b.v.commands[cid]
+    edges = [("lo", p.lo, OK), ("lo-1", p.lo - 1, RANGE), ("hi", p.hi, OK),
+             ("hi+1", p.hi + 1, RANGE)]
+    for name, value, intent in edges:
+        if value < 0 and p.kind in ("uint", "hex"):
+            intent = SYNTAX  # no digits for a negative number: not a well-formed parameter
+        texts = [("%02X" % a if isinstance(a, int) and q.kind == "hex" else str(a))
+                 for a, q in zip(args, _expand(cmd, args), strict=True)]
+        texts[at] = _edge_text(p.kind, value) or "-1"
+        line = _join(b, cmd, texts)
+        steps: list[Step] = [RESET]
+        if cid == "*E":  # the count closes a packet
+            steps.append(b.cmd_step("*S", [], answer=False, subject=False))
+            intent = intent if name != "hi" else SYNTAX  # count mismatch (A12)
+        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5)))
+        b.add(cid, f"{prefix}/{name}",
+              f"{cid} {p.name}={value} ({'inside' if intent == OK else 'outside'} "
+              f"{p.lo}..{p.hi})", steps, intent=intent, questions=questions)
 
 
 def _expand(cmd: Any, args: list[Any]) -> list[Any]:

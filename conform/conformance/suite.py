@@ -20,12 +20,13 @@ PROFILE_NAMES = ("quick", "full")
 
 
 def suite(spec: Any, variant_id: str, *, patterns: Sequence[str] = (),
-          guard: Guard | None = None, machine: bool = True) -> list[Check]:
-    """Every check of a variant (filtered by globs)."""
+          guard: Guard | None = None, machine: bool = True, profile: str = "quick"
+          ) -> list[Check]:
+    """Every check of a variant for a profile (filtered by globs)."""
     travel = 100000
     if guard is not None and guard.max_steps is not None:
         travel = min(travel, guard.max_steps)
-    checks = generate(spec, variant_id, travel=travel)
+    checks = generate(spec, variant_id, travel=travel, deep=profile == "full")
     if machine:
         checks.append(machine_check(spec, variant_id))
     return select(checks, patterns)
@@ -54,7 +55,7 @@ def run_mutants(spec: Any, variant_ids: Sequence[str], *, profile: str = "quick"
         t0 = time.perf_counter()
         target = EmuTarget(emulator_factory(spec, vid, None, m.name), f"emu:{vid}:{m.name}")
         runner = Runner(spec, target, vid, options=RunOptions(profile=profile, seed=seed))
-        run = runner.run(suite(spec, vid, machine=machine))
+        run = runner.run(suite(spec, vid, machine=machine, profile=profile))
         failed = [c for c in run.checks if c.grade is Grade.FAIL]
         caught_by = [c.id for c in failed]
         expected_hit = [c.id for c in failed if c.key in m.catches]

@@ -1,0 +1,125 @@
+"""pytest plugin: ``pytest --conform-target=URL --conform-variant=V`` runs the conformance checks
+as test items (usual pass/fail/skip, ``--junitxml`` output). Without ``--conform-target`` it adds
+nothing. Load it with ``-p conform.conformance.pytest_plugin`` (or the ``pytest11`` entry point).
+
+A unit's FAIL fails the item; a harness ERROR is raised during setup, so pytest (and JUnit)
+report it as an error; SKIPPED and NOT-APPLICABLE checks are skipped; a DEVIATION passes and is
+recorded in the item's properties.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+_STATE = pytest.StashKey[dict]()
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("conform", "GVE conformance checks")
+    group.addoption("--conform-target", default=None, metavar="T",
+                    help="emu:VARIANT, a device path, pty or pyserial URL: run the checks on it")
+    group.addoption("--conform-variant", default=None, metavar="V",
+                    help="the model expected (default: the emulator's, else ask '?')")
+    group.addoption("--conform-profile", default="quick", choices=("quick", "full"))
+    group.addoption("--conform-check", action="append", default=[], metavar="GLOB",
+                    help="only checks whose id matches (repeatable)")
+    group.addoption("--conform-baud", type=int, default=115200)
+    group.addoption("--conform-seed", type=int, default=0)
+    group.addoption("--conform-allow-motion", action="store_true")
+    group.addoption("--conform-max-steps", type=int, default=None)
+
+
+class ConformFailure(Exception):
+    """The unit broke what the manual states (a FAIL)."""
+
+
+class ConformItem(pytest.Item):
+    def __init__(self, *, check: Any, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.check = check
+        self.result: Any = None
+        self.user_properties.append(("clause", check.clause))
+        self.user_properties.append(("level", check.level))
+
+    def setup(self) -> None:
+        from conform.conformance.results import Grade
+
+        runner = _runner(self.config)
+        self.result = runner.run_check(self.check)
+        self.user_properties.append(("grade", self.result.grade.value))
+        if self.result.grade is Grade.ERROR:
+            raise RuntimeError(f"harness error: {self.result.detail}")
+        if self.result.grade in (Grade.SKIPPED, Grade.NOT_APPLICABLE):
+            pytest.skip(f"{self.result.grade.value}: {self.result.detail}")
+
+    def runtest(self) -> None:
+        from conform.conformance.results import Grade
+
+        r = self.result
+        if r.grade is Grade.DEVIATION:
+            self.user_properties.append(("deviation", r.detail))
+        if r.grade is Grade.FAIL:
+            raise ConformFailure(r)
+
+    def repr_failure(self, excinfo: Any, style: Any = None) -> str:
+        if isinstance(excinfo.value, ConformFailure):
+            r = excinfo.value.args[0]
+            lines = [f"{r.id} [{r.clause}]", f"  expected: {r.expected}", f"  actual:   {r.actual}",
+                     f"  {r.detail}", f"  replay: conform run --target {r.target} "
+                     f"--variant {r.variant} --replay '{r.replay}'", "  sequence:"]
+            lines += [f"    {s}" for s in r.sequence]
+            return "\n".join(lines)
+        return super().repr_failure(excinfo)
+
+    def reportinfo(self) -> tuple[str, int, str]:
+        return ("conform", 0, f"{self.check.id} ({self.check.clause})")
+
+
+def _runner(config: pytest.Config) -> Any:
+    state = config.stash[_STATE]
+    if "runner" not in state:
+        from conform.conformance.runner import Runner, RunOptions
+
+        state["runner"] = Runner(state["spec"], state["target"], state["variant"],
+                                 options=RunOptions(profile=config.getoption("conform_profile"),
+                                                    seed=config.getoption("conform_seed")))
+    return state["runner"]
+
+
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config,
+                                  items: list[pytest.Item]) -> None:
+    target_text = config.getoption("conform_target")
+    if not target_text:
+        return
+    from conform.conformance.safety import Guard
+    from conform.conformance.suite import suite
+    from conform.conformance.target import identify, open_target, parse_target
+    from conform.spec import load_spec
+
+    spec = load_spec()
+    kind, _, _ = parse_target(target_text)
+    motion = config.getoption("conform_allow_motion")
+    max_steps = config.getoption("conform_max_steps")
+    if motion and max_steps is None:
+        raise pytest.UsageError("--conform-allow-motion needs --conform-max-steps")
+    guard = Guard.emulated() if kind == "emu" else Guard(motion, max_steps, False)
+    target, implied = open_target(target_text, spec, baud=config.getoption("conform_baud"),
+                                  guard=guard)
+    variant = config.getoption("conform_variant") or implied
+    if variant is None:
+        variant, _ = identify(target, spec)
+    config.stash[_STATE] = {"spec": spec, "target": target, "variant": variant}
+    for check in suite(spec, variant, patterns=config.getoption("conform_check"), guard=guard,
+                       profile=config.getoption("conform_profile")):
+        items.append(ConformItem.from_parent(session, name=check.id, check=check))
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    state = config.stash.get(_STATE, None)
+    if state and "target" in state:
+        target = state["target"]
+        if not target.emulated and target.guard.allow_motion:
+            target.safe_stop()
+        target.close()
