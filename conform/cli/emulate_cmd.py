@@ -1,0 +1,214 @@
+"""``conform emulate``: the reference unit as a serial device (a pty) or a TCP endpoint.
+
+    conform emulate gve64-v19                   # prints /dev/pts/N, serves until Ctrl-C
+    conform emulate gve124 --tcp 5000 --baud 115200 --dialect A10=every-line
+    conform emulate gve64-v10 --faults corrupt=1e-3,latency=1-16 --seed 7
+    conform emulate control /tmp/conform-emu-XXXX.sock press stop
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+from conform.errors import UserError
+from conform.spec import load_spec
+
+
+class _EmulateGroup(click.Group):
+    """``conform emulate VARIANT ...`` runs ``serve``; ``conform emulate control ...`` talks
+    to a running emulator."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
+            args = ["serve", *args]
+        return super().parse_args(ctx, args)
+
+
+@click.group(cls=_EmulateGroup)
+def cli() -> None:
+    """Serve the reference unit model on a pty or TCP (VARIANT), or control a running one."""
+
+
+def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, str]:
+    choices: dict[str, str] = {}
+    if profile:
+        path = Path(profile)
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise UserError(f"{path}: no such profile") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"{path}: cannot read: {exc}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise UserError(f"{path}: {exc}") from None
+        table = data.get("dialect")
+        if not isinstance(table, dict):
+            raise UserError(f"{path}: no [dialect] table")
+        for key, value in table.items():
+            if not isinstance(value, str):
+                raise UserError(f"{path}: [dialect] {key} must be a string")
+            choices[key] = value
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key or not value:
+            raise UserError(f"--dialect {pair!r}: expected A<n>=<alternative>")
+        choices[key.strip().upper()] = value.strip()
+    return choices
+
+
+def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
+    out = {}
+    for pair in pairs:
+        axis, sep, value = pair.partition("=")
+        try:
+            out[axis.strip().upper()] = int(value)
+        except ValueError:
+            raise UserError(f"--switch {pair!r}: expected AXIS=PULSES (e.g. X=3000)") from None
+        if not sep:
+            raise UserError(f"--switch {pair!r}: expected AXIS=PULSES (e.g. X=3000)")
+    return out
+
+
+@cli.command("serve")
+@click.argument("variant")
+@click.option("--baud", type=int, default=None,
+              help="Pace both directions at this wire speed (10 bits per byte).")
+@click.option("--tcp", "tcp_port", type=int, default=None,
+              help="Serve socket://127.0.0.1:PORT instead of a pty (0: any free port).")
+@click.option("--dialect", "dialect_pairs", multiple=True, metavar="A<n>=ALT",
+              help="Choose an open-question alternative (repeatable).")
+@click.option("--profile", type=click.Path(dir_okay=False), default=None,
+              help="A TOML file whose [dialect] table chooses alternatives.")
+@click.option("--faults", default=None, metavar="SPEC",
+              help="Noise, drops, latency, garbled answers, disconnects "
+                   "(e.g. corrupt=1e-3,drop=1e-4,latency=1-16,garble=0.01,disconnect=0.02).")
+@click.option("--seed", type=int, default=None, help="Seed for the fault injection.")
+@click.option("--control", "control_path", default=None, metavar="PATH",
+              help="Unix socket for control commands (default: a fresh path, shown on stderr).")
+@click.option("--link", "link_path", default=None, metavar="PATH",
+              help="Also create a symlink PATH to the pty (stable across injected disconnects).")
+@click.option("--record", "record_path", default=None, metavar="FILE.mcap",
+              help="Record the session as an MCAP capture.")
+@click.option("--switch", "switch_pairs", multiple=True, metavar="AXIS=PULSES",
+              help="Distance from a W's start to that axis's reference switch (default 3000).")
+@click.option("--answer-delay", type=float, default=0.0, show_default=True,
+              help="Processing time of the unit before each answer, seconds.")
+def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pairs: tuple[str, ...],
+              profile: str | None, faults: str | None, seed: int | None,
+              control_path: str | None, link_path: str | None, record_path: str | None,
+              switch_pairs: tuple[str, ...], answer_delay: float) -> None:
+    """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path."""
+    from conform.link.faults import FaultConfig, FaultInjector
+    from conform.unit.model import Unit
+    from conform.unit.serve import ControlServer, Emulator
+
+    spec = load_spec()
+    v = spec.variant(variant)
+    dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
+    if baud is not None and baud <= 0:
+        raise UserError(f"--baud {baud}: must be positive")
+    if answer_delay < 0:
+        raise UserError("--answer-delay: must not be negative")
+    t_start = time.monotonic()  # the unit runs on the monotonic wall clock
+    try:
+        unit = Unit(v, dialect, t0=t_start, switches=_switches(switch_pairs),
+                    answer_delay=answer_delay)
+    except ValueError as exc:
+        raise UserError(f"--switch: {exc}") from None
+    injector = None
+    if faults:
+        config = FaultConfig.parse(faults)
+        injector = FaultInjector(config, seed, t0=t_start) if config.active else None
+
+    endpoint, reopen = _open_endpoint(tcp_port, link_path)
+
+    control_path = control_path or os.path.join(
+        tempfile.gettempdir(), f"conform-emu-{os.getpid()}-{id(unit) & 0xFFFF:04x}.sock")
+    try:
+        control = ControlServer(control_path)
+    except OSError as exc:
+        endpoint.close()
+        raise UserError(f"--control {control_path}: cannot listen: {exc.strerror or exc}") from None
+    recorder = None
+    if record_path:
+        from conform.capture import Recorder
+
+        try:
+            recorder = Recorder(record_path, {
+                "capture_method": "emulator", "variant": v.id, "baud": baud or "",
+                "unit_port": endpoint.name, "dialect": ",".join(
+                    f"{k}={x}" for k, x in dialect.changed().items()),
+                "faults": faults or "", "seed": "" if seed is None else seed})
+        except UserError:
+            endpoint.close()
+            control.close()
+            raise
+
+    def report(msg: str) -> None:
+        click.echo(f"conform emulate: {msg}", err=True)
+
+    emulator = Emulator(unit, endpoint, baud=baud, injector=injector, recorder=recorder,
+                        control=control, reopen=reopen, report=report)
+    click.echo(endpoint.name)
+    sys.stdout.flush()
+    report(f"{v.id} on {endpoint.name}; control: {control_path}"
+           + (f"; dialect {dialect.changed()}" if dialect.changed() else ""))
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        emulator.stop()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        emulator.run()
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        control.close()
+        if recorder is not None:
+            recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out})
+        report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out)")
+
+
+def _open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any]:
+    if tcp_port is not None:
+        from conform.link.tcp import TcpServerEndpoint
+
+        if not 0 <= tcp_port <= 65535:
+            raise UserError(f"--tcp {tcp_port}: not a port number")
+        endpoint = TcpServerEndpoint("127.0.0.1", tcp_port)
+        port = endpoint.port
+        return endpoint, lambda: TcpServerEndpoint("127.0.0.1", port)
+    from conform.link.pty import PtyEndpoint
+
+    try:
+        endpoint = PtyEndpoint(link=link_path)
+    except OSError as exc:
+        raise UserError(f"cannot create a pty{' at ' + link_path if link_path else ''}: "
+                        f"{exc.strerror or exc}") from None
+    return endpoint, lambda: PtyEndpoint(link=link_path)
+
+
+@cli.command("control", context_settings={"ignore_unknown_options": True})
+@click.argument("socket_path", metavar="SOCKET")
+@click.argument("words", nargs=-1, required=True)
+def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
+    """Send a control command to a running emulator, e.g. `press stop`, `input 1 7 off`,
+    `release sensor`, `state`, `help`."""
+    from conform.unit.control import send_control
+
+    try:
+        reply = send_control(socket_path, " ".join(words))
+    except (OSError, TimeoutError) as exc:
+        raise UserError(f"{socket_path}: cannot reach the emulator: {exc}") from None
+    click.echo(reply)
+    if not reply.startswith("ok"):
+        sys.exit(1)
