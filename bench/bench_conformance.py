@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 
-from conform.conformance.mutants import MUTANTS
+from conform.conformance.mutants import MUTANTS, mutant_targets
 from conform.conformance.runner import Runner, RunOptions
 from conform.conformance.suite import run_mutants, suite
 from conform.conformance.target import open_target
@@ -49,6 +49,17 @@ def main() -> None:
     print(f"mutants: {killed}/{len(MUTANTS)} killed, {on_target}/{len(MUTANTS)} by the check "
           f"meant to catch them, kill rate {killed / len(MUTANTS):.0%} "
           f"(directed checks, {time.perf_counter() - t0:.1f} s)")
+    # the state machine on its own (quick profile): how many faults random sequences find
+    t0 = time.perf_counter()
+    found = []
+    for m, vid in mutant_targets(list(spec.variants)):
+        target, _ = open_target(f"emu:{vid}:{m.name}", spec)
+        [check] = suite(spec, vid, patterns=["*/sequences"])
+        result = Runner(spec, target, vid, options=RunOptions(profile="quick")).run_check(check)
+        if result.grade.value == "FAIL":
+            found.append(m.name)
+    print(f"state machine alone (quick): {len(found)}/{len(MUTANTS)} mutants "
+          f"({', '.join(found)}) in {time.perf_counter() - t0:.1f} s")
 
 
 if __name__ == "__main__":

@@ -218,3 +218,32 @@ def test_pytest_plugin_runs_checks_as_items(tmp_path):
     cases = {c.get("name"): c for c in ET.parse(junit).getroot().iter("testcase")}
     assert cases["gve64-v19/13.5.3/V/valid"].find("failure") is None
     assert cases["gve64-v19/13.5.3/VL/valid"].find("failure") is not None
+
+
+@pytest.mark.slow
+def test_run_against_the_emulator_on_a_pty(tmp_path):
+    """End to end through a real pty: identification by '?', J resets, motion SKIPPED."""
+    import json
+    import subprocess
+    import sys
+
+    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "gve64-v10"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        port = emu.stdout.readline().strip()
+        assert port.startswith("/dev/")
+        out = tmp_path / "r"
+        run = subprocess.run(
+            [sys.executable, "-m", "conform", "run", "-q", "--target", port, "--report", str(out),
+             "--no-machine", "--check", "*/V/valid", "--check", "*/13.7/status-range",
+             "--check", "*/C/valid"], capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stdout + run.stderr
+        data = json.loads((out / "results.json").read_text())
+        grades = {c["id"]: c["grade"] for c in data["checks"]}
+        assert grades == {"gve64-v10/13.5.3/V/valid": "PASS",
+                          "gve64-v10/13.7/status-range": "PASS",
+                          "gve64-v10/13.5.2/C/valid": "SKIPPED"}
+        assert "variant: firmware 'IP64MPG v10' is gve64-v10" in data["runs"][0]["notes"]
+    finally:
+        emu.terminate()
+        emu.wait(10)

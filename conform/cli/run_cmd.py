@@ -111,9 +111,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     if max_steps is not None and max_steps <= 0:
         raise UserError("--max-steps must be a positive number of pulses")
     command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    exact = None
     if replay:
         check_id, replay_seed = parse_replay(replay)
-        patterns = (check_id,)
+        exact = check_id
         if replay_seed is not None:
             seed = replay_seed
         if variant is None and "/" in check_id:
@@ -149,8 +150,11 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     notes.append(f"variant: {how}")
                 checks = suite(spec, vid, patterns=patterns, guard=guard,
                                machine=not no_machine, profile=profile)
+                if exact is not None:  # ids hold glob characters (?, *S): match exactly
+                    checks = [c for c in checks if c.id == exact]
                 if not checks:
-                    raise UserError(f"no check matches {' '.join(patterns) or '(all)'}")
+                    wanted = exact or " ".join(patterns) or "(all)"
+                    raise UserError(f"no check of {vid} matches {wanted} (see --list)")
                 if not target.emulated and not allow_motion:
                     notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
                 options = RunOptions(profile=profile, seed=seed, notes=notes)

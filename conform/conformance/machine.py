@@ -32,7 +32,7 @@ from conform.errors import LinkError
 from conform.protocol import encode_command
 from conform.protocol.checksum import append_checksum
 
-PROFILES = {"quick": (40, 30), "full": (600, 80)}  # examples, steps per example
+PROFILES = {"quick": (100, 40), "full": (600, 80)}  # examples, steps per example
 SHRINK_SECONDS = {"quick": 8.0, "full": 60.0}  # wall-clock budget for shrinking a failure
 _TIMEOUTS = {"H": 5.0, "W": 60.0}
 _SPEEDS = (10, 100, 1000, 5000, 20000)
