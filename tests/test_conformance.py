@@ -247,3 +247,18 @@ def test_run_against_the_emulator_on_a_pty(tmp_path):
     finally:
         emu.terminate()
         emu.wait(10)
+
+
+def test_lost_link_ends_the_run(spec):
+    class DeadEndpoint(UnitEndpoint):
+        def write(self, data):
+            from conform.link import PortGone
+
+            raise PortGone("fake://unit: peer hung up")
+
+    target = LinkTarget(DeadEndpoint(spec, "gve64-v19"), "fake://unit", Guard(False, None, False),
+                        115200, ready_after=0.0)
+    checks = select(generate(spec, "gve64-v19"), ["*/V/*"])
+    run = Runner(spec, target, "gve64-v19").run(checks)
+    assert run.aborted and "link lost" in run.aborted
+    assert [c.grade for c in run.checks] == [Grade.ERROR] * 3

@@ -69,6 +69,11 @@ def test_profile_diff_and_cli(spec, tmp_path, capsys):
         main(["characterize", "emu:gve64-v19", "-o", str(out)])
     assert info.value.code == 0
     assert load_profile(out).dialect == dict(spec.dialect().choices)
+    partial = tmp_path / "partial.toml"
+    partial.write_text('[dialect]\nA15 = "no-effect-0"\n')
+    with pytest.raises(SystemExit) as info:
+        main(["profile", "diff", str(paths[1]), str(partial)])
+    assert info.value.code == 0  # a question left out is its default
     bad = tmp_path / "bad.toml"
     bad.write_text('[dialect]\nA10 = "sometimes"\n')
     with pytest.raises(SystemExit) as info:

@@ -7,6 +7,7 @@ import sys
 import click
 
 from conform.conformance.profile import diff_profiles, load_profile
+from conform.spec import load_spec
 
 
 @click.group(name="profile")
@@ -20,9 +21,9 @@ def cli() -> None:
 def diff(a: str, b: str) -> None:
     """Open questions on which two profiles differ; exit 1 when they do."""
     pa, pb = load_profile(a), load_profile(b)
-    rows = diff_profiles(pa, pb)
+    rows = diff_profiles(pa, pb, dict(load_spec().dialect().choices))
     if not rows:
-        click.echo(f"same dialect ({len(pa.dialect)} questions)")
+        click.echo("same dialect")
         return
     width = max(len(str(x)) for _, x, _ in rows)
     click.echo(f"{'':4} {a:<{width}}  {b}")

@@ -160,8 +160,12 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                 options = RunOptions(profile=profile, seed=seed, notes=notes)
                 progress = bar.task(f"{target.name} ({vid})", len(checks))
                 try:
-                    runs.append(run_one(spec, target, vid, checks, options=options,
-                                        dialect=dialect, progress=progress))
+                    run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
+                                  progress=progress)
+                    runs.append(run)
+                    if run.aborted:
+                        aborted = run.aborted
+                        break
                 except RunAborted as exc:
                     runs.append(exc.run)
                     aborted = exc.run.aborted

@@ -95,8 +95,11 @@ def load_profile_dialect(spec: Any, path: str | Path) -> Any:
         raise UserError(f"{path}: {exc}") from None
 
 
-def diff_profiles(a: Profile, b: Profile) -> list[tuple[str, str | None, str | None]]:
-    """(question, choice in a, choice in b) for every question on which they differ."""
-    keys = sorted(set(a.dialect) | set(b.dialect), key=lambda k: _qkey((k, None)))
-    return [(k, a.dialect.get(k), b.dialect.get(k)) for k in keys
-            if a.dialect.get(k) != b.dialect.get(k)]
+def diff_profiles(a: Profile, b: Profile, defaults: dict[str, str] | None = None
+                  ) -> list[tuple[str, str | None, str | None]]:
+    """(question, choice in a, choice in b) for every question on which they differ; a question
+    a profile leaves out counts as its default (from ``defaults``) when one is given."""
+    base = defaults or {}
+    da, db = base | a.dialect, base | b.dialect
+    keys = sorted(set(da) | set(db), key=lambda k: _qkey((k, None)))
+    return [(k, da.get(k), db.get(k)) for k in keys if da.get(k) != db.get(k)]

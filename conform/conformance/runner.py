@@ -23,6 +23,7 @@ from conform.conformance.target import HarnessError, Target
 from conform.errors import LinkError
 
 Progress = Callable[[CheckResult], None]
+LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
 
 
 @dataclass
@@ -51,12 +52,18 @@ class Runner:
         run = TargetRun(self.target.name, self.variant.id, self.target.emulated,
                         self.options.profile, started, notes=list(self.options.notes))
         t0 = time.perf_counter()
+        link_errors = 0
         try:
             for check in checks:
                 result = self.run_check(check)
                 run.checks.append(result)
                 if progress is not None:
                     progress(result)
+                link_errors = link_errors + 1 if self._link_failed(result) else 0
+                if link_errors >= LINK_ERRORS_TO_ABORT:
+                    run.aborted = (f"link lost after {len(run.checks)} checks "
+                                   f"({result.detail.split(';')[0]})")
+                    break
         except KeyboardInterrupt:
             what = self.target.safe_stop()
             run.aborted = f"interrupted (Ctrl-C) after {len(run.checks)} checks; {what}"
@@ -66,6 +73,10 @@ class Runner:
         if not self.target.emulated and self.target.guard.allow_motion:
             run.notes.append(f"end of run: {self.target.safe_stop()}")
         return run
+
+    def _link_failed(self, result: CheckResult) -> bool:
+        return (result.grade is Grade.ERROR and not self.target.emulated
+                and result.detail.startswith(("HarnessError", "LinkError", "PortGone", "OSError")))
 
     def _result(self, check: Check, grade: Grade, **kw: Any) -> CheckResult:
         return CheckResult(id=check.id, grade=grade, clause=check.clause, level=check.level,
