@@ -39,7 +39,7 @@ def test_usb_latency_starves_the_queue() -> None:
     a = sample("usb-latency")
     assert a.kinds() == {"starvation": 243}
     q = a.metrics["queue"]
-    assert q["starvations"] == 243 and q["starved_s"] > 1.0
+    assert q["starvations"] == 243 and q["standstill_s"] > 1.0
     # the round trip is dominated by the converter: 16 ms of host turnaround
     assert a.metrics["latency"]["host_time"]["median"] == pytest.approx(0.016, abs=0.001)
     w = {x["scenario"]: x for x in q["whatif"]}

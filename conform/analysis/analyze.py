@@ -59,6 +59,13 @@ class Analysis:
         d = self.host if direction == "host" else self.unit
         return frames_frame(d, self.t0)
 
+    def chunks(self, direction: str) -> pd.DataFrame:
+        """The raw chunks of one direction as read: offsets, lengths, times (from t0)."""
+        d = self.raw.direction(direction)
+        return pd.DataFrame({"direction": direction, "start": d.start, "length": d.length,
+                             "offset": d.offset, "t_read": d.t_read - self.t0,
+                             "t_first": d.t_first - self.t0, "file_order": d.order})
+
     def host_text(self, i: int) -> str:
         return escape_bytes(self.host.raw(i))
 
@@ -385,11 +392,15 @@ def _starvation_findings(rep: QueueReplay, out: Findings) -> None:
 
     def mk(i: int) -> tuple:
         e = ev[i]
-        return (e["t"], f"the queue ran dry for {e['gap'] * 1000:.1f} ms while the job went "
-                "on: the motion stopped at a junction it would have passed at the B speed",
-                [f"host:{e['row']}"] if e["row"] >= 0 else [], {"gap_s": e["gap"]})
+        when = (f"arrived {e['gap'] * 1000:.1f} ms after the previous one ended"
+                if e["gap"] > 0 else "arrived only while the previous one was braking")
+        return (e["t"], f"the queue ran dry: the next vector {when}, too late for the "
+                f"junction, so the motion braked to rest (standstill {e['stop'] * 1000:.1f} "
+                "ms with the T pause) where it could have passed at the B speed",
+                [f"host:{e['row']}"] if e["row"] >= 0 else [],
+                {"gap_s": e["gap"], "standstill_s": e["stop"]})
 
-    out.many("starvation", np.arange(len(ev)), "warning", mk)
+    out.many("starvation", np.arange(len(ev)), "warning", mk, limit=10)
 
 
 def compute_metrics(ex: pd.DataFrame, host: fr.DecodedLines, unit: fr.DecodedLines,
@@ -459,6 +470,7 @@ def compute_metrics(ex: pd.DataFrame, host: fr.DecodedLines, unit: fr.DecodedLin
             "mean_depth": float(_time_mean(rep.depth_t, rep.depth)),
             "starvations": len(rep.starvations),
             "starved_s": float(sum(e["gap"] for e in rep.starvations)),
+            "standstill_s": float(sum(e["stop"] for e in rep.starvations)),
             "median_vector_s": float(np.median(dur)) if len(dur) else None,
             "motion_end_s": float(rep.ends.max() - t0) if len(rep.ends) else None,
             "whatif": rep.whatif,

@@ -84,11 +84,13 @@ class Findings:
         self.items.append(Finding(kind, round(t_rel, 6), severity, message,
                                   CLAUSES.get(kind, ""), frames or [], row, count, extra))
 
-    def many(self, kind: str, rows: np.ndarray, severity: str, make: Any) -> None:
-        """Add one finding per row (listing the first MAX_LISTED), ``make(row) -> (t, msg, frames)``."""
+    def many(self, kind: str, rows: np.ndarray, severity: str, make: Any,
+             limit: int = MAX_LISTED) -> None:
+        """One finding per row, listing the first ``limit``; ``make(row) -> (t, msg, frames,
+        extra)``."""
         rows = np.asarray(rows)
         for k, r in enumerate(rows.tolist()):
-            if k >= MAX_LISTED:
+            if k >= limit:
                 self.counts[kind] = self.counts.get(kind, 0) + len(rows) - k
                 self.items.append(Finding(kind, self.items[-1].t if self.items else 0.0,
                                           severity, f"… and {len(rows) - k} more like these",

@@ -181,12 +181,20 @@ def _global_seq(seq: np.ndarray) -> np.ndarray:
 
 
 def _starvation_events(rep: QueueReplay) -> list[dict[str, Any]]:
+    """Each starved vector: when the queue ran dry (the previous vector ended at rest) and
+    how long until this vector arrived; it starts after that, plus the T pause."""
     out = []
     idx = np.flatnonzero(rep.starved)
-    for i in idx.tolist():
-        gap_from = float(rep.ends[i - 1]) if i > 0 else float(rep.starts[i])
-        out.append({"t": float(rep.starts[i]), "from": gap_from,
-                    "gap": float(rep.starts[i]) - gap_from,
+    if len(idx) == 0:
+        return out
+    k = np.clip(np.searchsorted(rep.push_rows, rep.done_rows[idx]), 0, len(rep.pushes) - 1)
+    arrived = rep.pushes[k]
+    for j, i in enumerate(idx.tolist()):
+        dry_from = float(rep.ends[i - 1]) if i > 0 else float(rep.starts[i])
+        out.append({"t": dry_from, "from": dry_from, "arrived": float(arrived[j]),
+                    "start": float(rep.starts[i]),
+                    "gap": max(0.0, float(arrived[j]) - dry_from),
+                    "stop": float(rep.starts[i]) - dry_from,
                     "row": int(rep.done_rows[i]) if i < len(rep.done_rows) else -1})
     return out
 

@@ -37,6 +37,7 @@ OP_METADATA, OP_DATA_END = 0x0C, 0x0F
 RAW_TOPICS = {TOPIC_HOST: "host", TOPIC_UNIT: "unit"}
 Progress = Callable[[int, int], None]
 _U64 = struct.Struct("<Q").unpack_from
+BATCH_BYTES = 8 * 1024 * 1024  # decompressed bytes decoded at a time
 
 
 def _gather(arr: np.ndarray, at: np.ndarray, width: int, dtype: str) -> np.ndarray:
@@ -104,6 +105,8 @@ class _Collector:
         self.spans: dict[str, list[tuple]] = {"host": [], "unit": []}
         self.buffers: list[np.ndarray] = []
         self.size = 0
+        self.parts: dict[str, list[Direction]] = {"host": [], "unit": []}
+        self.status: ReadStatus | None = None
         self.raw_encoded: dict[str, bool] = {"host": False, "unit": False}
         self.link: list[dict[str, Any]] = []
         self.topics: dict[str, int] = {}
@@ -186,6 +189,24 @@ class _Collector:
         if kept:
             self.buffers.append(arr)
             self.size += len(arr)
+            if self.size >= BATCH_BYTES:
+                self.flush()
+
+    def flush(self) -> None:
+        """Decode the raw payloads of the chunks read so far and let their bytes go."""
+        if not self.buffers:
+            return
+        big = np.concatenate(self.buffers) if len(self.buffers) > 1 else self.buffers[0]
+        quotes = np.flatnonzero(big == ord('"'))
+        commas = np.flatnonzero(big == ord(","))
+        assert self.status is not None
+        for d in ("host", "unit"):
+            part = _parse_payloads(d, self, big, quotes, commas, self.status)
+            if part.chunks:
+                self.parts[d].append(part)
+            self.spans[d] = []
+        self.buffers = []
+        self.size = 0
 
     def _link(self, payload: bytes, log_time: int) -> None:
         try:
@@ -356,20 +377,27 @@ def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndar
 
 
 def _tail_values(big: np.ndarray, commas: np.ndarray, ends: np.ndarray,
-                 keys: tuple[bytes, ...], width: int = 28) -> list[np.ndarray]:
-    """Numbers of the last fields of every payload (``,"key":number`` … ``}``), as 'S' arrays.
+                 keys: tuple[bytes, ...], want: tuple[int, ...], width: int = 24
+                 ) -> list[np.ndarray]:
+    """Numbers of the last fields of every payload (``,"key":number`` … ``}``) as float64.
 
     conform's payloads end with ``"offset":N,"t_read":X,"t_first":X,"seq":N}``; the fields
     are found from the last commas, so the free text before them cannot confuse the search.
+    Only the fields whose index is in ``want`` are converted.
     """
     k = np.searchsorted(commas, ends)  # index of the first comma at or after each end
     out = []
+    cols = np.arange(width)
     for j, key in enumerate(keys):
         ci = k - (len(keys) - j)
         if (ci < 0).any():
             raise ValueError("too few fields")
         c = commas[ci]
         pat = np.frombuffer(b"," + key, np.uint8)
+        if j not in want:  # a delimiter only: its first letters are proof enough
+            if not ((big[c + 1] == pat[1]) & (big[c + 2] == pat[2])).all():
+                raise ValueError(f"{key!r} not where expected")
+            continue
         idx = np.minimum(c[:, None] + np.arange(len(pat)), len(big) - 1)
         if not (big[idx] == pat).all():
             raise ValueError(f"{key!r} not where expected")
@@ -378,10 +406,32 @@ def _tail_values(big: np.ndarray, commas: np.ndarray, ends: np.ndarray,
         n = nxt - vs
         if (n <= 0).any() or (n > width).any():
             raise ValueError(f"{key!r}: bad value")
-        idx = np.minimum(vs[:, None] + np.arange(width), len(big) - 1)
-        win = big[idx].copy()
-        win[np.arange(width)[None, :] >= n[:, None]] = 0
-        out.append(win.view(f"S{width}").ravel())
+        win = big[np.minimum(vs[:, None] + cols, len(big) - 1)]
+        out.append(_numbers(win, n))
+    return out
+
+
+def _numbers(win: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Parse plain decimal numbers (digits, one optional point) held in byte windows."""
+    width = win.shape[1]
+    valid = np.arange(width)[None, :] < n[:, None]
+    dot = (win == ord(".")) & valid
+    digit = (win >= ord("0")) & (win <= ord("9")) & valid
+    if not ((digit | dot) == valid).all() or (dot.sum(axis=1) > 1).any():
+        w = win.copy()
+        w[~valid] = 0
+        return w.view(f"S{width}").ravel().astype(float)  # signs, exponents: the slow way
+    has_dot = dot.any(axis=1)
+    dpos = np.where(has_dot, dot.argmax(axis=1), n)
+    d = win.astype(np.float64) - ord("0")
+    d[~digit] = 0.0
+    out = np.empty(len(n))
+    col = np.arange(width)
+    for p in np.unique(dpos).tolist():  # usually one or two point positions: one matmul each
+        sel = dpos == p
+        powers = np.where(col < p, 10.0 ** (p - 1 - col), 10.0 ** -(col - p).clip(1, 300))
+        powers[col == p] = 0.0
+        out[sel] = d[sel] @ powers
     return out
 
 
@@ -410,11 +460,10 @@ def _fast_json(name: str, big: np.ndarray, starts: np.ndarray, lens: np.ndarray,
     data, out_lens = b64decode_many(chars, np.concatenate([[0], np.cumsum(n)]))
     if (big[ends - 1] != ord("}")).any():
         raise ValueError("payload does not end with }")
-    off_s, tr_s, tf_s, _seq = _tail_values(
-        big, commas, ends, (b'"offset":', b'"t_read":', b'"t_first":', b'"seq":'))
-    offset = off_s.astype(np.int64)
-    t_read = tr_s.astype(float)
-    t_first = tf_s.astype(float)
+    off, t_first = _tail_values(
+        big, commas, ends, (b'"offset":', b'"t_read":', b'"t_first":', b'"seq":'), (0, 2))
+    offset = off.astype(np.int64)
+    t_read = times  # the message's log time is the read time (to the nanosecond)
     start = np.concatenate([[0], np.cumsum(out_lens)[:-1]]).astype(np.int64)
     return Direction(name, data, start, out_lens.astype(np.int64), offset, t_read, t_first,
                      orders)
@@ -500,22 +549,32 @@ def _num(value: Any, default: float) -> Any:
     return value if isinstance(value, (int, float)) and not isinstance(value, bool) else default
 
 
+def _merge(name: str, parts: list[Direction]) -> Direction:
+    if not parts:
+        return Direction.empty(name)
+    if len(parts) == 1:
+        return parts[0]
+    shift = np.cumsum([0] + [len(p.data) for p in parts[:-1]])
+    return Direction(
+        name, np.concatenate([p.data for p in parts]),
+        np.concatenate([p.start + k for p, k in zip(parts, shift, strict=True)]),
+        *(np.concatenate([getattr(p, f) for p in parts])
+          for f in ("length", "offset", "t_read", "t_first", "order")))
+
+
 def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
     """Read ``path`` (an MCAP capture) as far as it is intact."""
     p = check_magic(path)
     status = ReadStatus(p)
     col = _Collector()
+    col.status = status
     try:
         _walk(p, status, col, progress)
     except OSError as exc:
         raise UserError(f"{p}: cannot read: {exc.strerror}") from None
-    big = np.concatenate(col.buffers) if col.buffers else np.zeros(0, np.uint8)
-    col.buffers = []
-    quotes = np.flatnonzero(big == ord('"'))
-    commas = np.flatnonzero(big == ord(","))
-    host = _parse_payloads("host", col, big, quotes, commas, status)
-    unit = _parse_payloads("unit", col, big, quotes, commas, status)
-    del big
+    col.flush()
+    host = _merge("host", col.parts["host"])
+    unit = _merge("unit", col.parts["unit"])
     if status.bad_payloads:
         status.notes.append(f"{status.bad_payloads} raw chunk message(s) unreadable, skipped")
     return RawCapture(status, col.metadata, host, unit, col.link, col.topics)
