@@ -295,7 +295,7 @@ def _check_answer_shapes(ex: pd.DataFrame, unit: fr.DecodedLines, data: np.ndarr
     want["*E"] = 1
     names = ex["name"].to_numpy()
     a = ex["answer_frame"].to_numpy()
-    expect = np.array([want.get(n, -1) if isinstance(n, str) else -1 for n in names])
+    expect = pd.Series(names, dtype=object).map(want).fillna(-1).to_numpy(np.int64)
     ok = (a >= 0) & (ex["answer_kind"].to_numpy() == fr.ANSWER) & (expect >= 0)
     ok &= ex["code"].to_numpy() == 0
     bad = np.flatnonzero(ok & (nf[np.maximum(a, 0)] != expect))

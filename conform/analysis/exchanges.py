@@ -164,13 +164,13 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
     ans_cs = pick(unit.checksum, 0).astype(np.int8)
     df = pd.DataFrame({
         "frame": np.arange(n),
-        "name": host.name,
-        "kind": host.kind,
-        "status": STATUS_NAMES[status],
+        "name": pd.Series(host.name, dtype=object),
+        "kind": pd.Series(host.kind, dtype=object),
+        "status": pd.Series(STATUS_NAMES[status], dtype=object),
         "reject_code": host.code,
         "cmd_checksum": host.checksum,
         "answer_frame": answer,
-        "answer_kind": ans_kind,
+        "answer_kind": pd.Series(ans_kind, dtype=object),
         "code": code.astype(np.int64),
         "inta": inta.astype(bool),
         "answer_checksum": ans_cs,
@@ -187,7 +187,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
         "unit_time": unit_time.astype(float),
         "host_time": host_time.astype(float),
         "packet": packets.packet,
-        "packet_role": packets.role,
+        "packet_role": pd.Series(packets.role, dtype=object),
         "dx": host.vec[:, 0], "dy": host.vec[:, 1], "dz": host.vec[:, 2], "da": host.vec[:, 3],
     })
     df["uncertain"] = uncertain_mask(df)

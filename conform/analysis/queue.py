@@ -84,7 +84,7 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     notes: list[str] = []
     advance, push = exe.advance, exe.push
     trow = t[rows].tolist()
-    vrows = [tuple(v) for v in vec[rows].tolist()]
+    vrows = vec[rows].tolist()
     for k, r in enumerate(rows.tolist()):
         tk = trow[k]
         advance(tk)
