@@ -259,13 +259,17 @@ class Unit:
         """
         if (self._fast and not self._timers and not self._partial and not self._outbox
                 and self._packet is None and t >= self._now and t >= self._deaf_until):
-            m = (self._fast_cs if self._checksum_on else self._fast_plain).match(line)
-            if m is not None:
-                d = self._fast_args(m, line)
-                if d is not None:
+            cs_on = self._checksum_on
+            m = (self._fast_cs if cs_on else self._fast_plain).match(line)
+            if m is not None and (not cs_on or (sum(line[:-3]) & 0xFF) == int(m.group(3), 16)):
+                kind, nums = m.group(1, 2)
+                d = tuple(map(int, nums.split(b",")))
+                if min(d) >= self._pulse_lo and max(d) <= self._pulse_hi:
+                    if len(d) < self._naxes:
+                        d += self._pad[len(d)]
                     self._exec.advance(t)
                     self._now = t
-                    name = "C" if m.group(1) == b"C" else "L"
+                    name = "C" if kind == b"C" else "L"
                     reply = self.handlers[name](d, t)
                     if reply.__class__ is int:
                         ans = self.encode(reply)  # type: ignore[arg-type]
