@@ -206,7 +206,7 @@ def test_pytest_plugin_runs_checks_as_items(tmp_path):
     import xml.etree.ElementTree as ET
 
     junit = tmp_path / "j.xml"
-    base = [sys.executable, "-m", "pytest", "-p", "conform.conformance.pytest_plugin",
+    base = [sys.executable, "-m", "pytest", "-p", "conform",
             "-q", "--rootdir", str(tmp_path), str(tmp_path), "-p", "no:cacheprovider"]
     plain = subprocess.run(base, capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert "no tests ran" in plain.stdout  # without --conform-target: no items

@@ -141,6 +141,8 @@ def test_dialect_choices_change_parsing():
     assert PARSERS["gve64-v19"].parse(b"!0A5000", False).code == 5
     lenient = CommandParser(v, SPEC.dialect({"A22": "lenient"}))
     assert lenient.parse(b"!0L+100, 0,,5", False).args == (100, 0, 0, 5)
+    assert lenient.parse(b"!0%+", False).args == ("+",)
+    assert lenient.parse(b"!0Y-", False).args == ("-",)
     assert CommandParser(v, SPEC.dialect({"A23": "error-3"})).parse(b"!3V1", False).code == 3
 
 

@@ -151,7 +151,7 @@ class _Form:
             if raw is None:  # an optional trailing axis left out: that axis does not move
                 values.append(0)
                 continue
-            if lenient:
+            if lenient and kind != "sign":
                 raw = raw.replace(" ", "")
                 if raw in ("", "+", "-"):
                     if kind == "axis":
