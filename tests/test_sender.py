@@ -159,3 +159,50 @@ def test_interrupt_sends_halt_then_delete() -> None:
     port = FakePort()
     answers = halt_and_delete(s, port)
     assert port.written == [b"!0H\r", b"!0D\r"] and answers == [b"8\r", b"0\r"]
+
+
+class UnitPort:
+    """A pyserial-like port whose other end is the reference unit on the wall clock."""
+
+    def __init__(self) -> None:
+        import time
+
+        from conform.unit import Unit
+
+        self.clock = time.monotonic
+        self.unit = Unit(VAR, DIA, t0=self.clock())
+        self.timeout = 0.0
+        self.pending = b""
+
+    @property
+    def in_waiting(self) -> int:
+        self._pull()
+        return len(self.pending)
+
+    def _pull(self) -> None:
+        for _t, data in self.unit.poll(self.clock()):
+            self.pending += data
+
+    def write(self, data: bytes) -> None:
+        self.unit.receive(data, self.clock())
+
+    def read(self, n: int = 1) -> bytes:
+        import time
+
+        end = self.clock() + (self.timeout or 0.0)
+        while True:
+            self._pull()
+            if self.pending or self.clock() >= end:
+                out, self.pending = self.pending[:n], self.pending[n:]
+                return out
+            time.sleep(0.0005)
+
+
+def test_run_serial_on_the_wall_clock() -> None:
+    from conform.sender.links import run_serial
+
+    parser = CommandParser(VAR, DIA)
+    items = [parse_item(x, VAR, parser) for x in ["V50000", "C100,0,0", "C0,100,0", "C-50,0,0"]]
+    s = Sender(items, VAR, checksums=True, packet=2, poll_interval=0.01)
+    run_serial(s, UnitPort())
+    assert s.failed is None and s.last_position == (50, 100, 0, 0)
