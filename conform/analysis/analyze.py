@@ -242,7 +242,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     pos = check_positions(ctx, unit, rec, out)
 
     say("queue replay")
-    accepted = accepted_vectors(ex)
+    accepted = accepted_vectors(ex, rec["recovered"])
     rep: QueueReplay | None = None
     try:
         rep = replay(ex, accepted, host.result, var)
@@ -334,12 +334,15 @@ def _step(ev_pos: np.ndarray, ev_state: np.ndarray, at: np.ndarray, init: bool,
     return np.where(k >= 0, ev_state[np.maximum(k, 0)] == 1, init)
 
 
-def accepted_vectors(ex: pd.DataFrame) -> np.ndarray:
-    """Vectors the unit took: answered 0, or inside a packet whose answer counts them."""
+def accepted_vectors(ex: pd.DataFrame, recovered: np.ndarray | None = None) -> np.ndarray:
+    """Vectors the unit took: answered 0, or inside a packet whose answer counts them, or
+    (``recovered``) uncertain ones that the sender checked with ``@``/``>`` and moved on."""
     name = ex["name"].to_numpy()
     is_vec = np.isin(name, ("C", "L")) & (ex["kind"].to_numpy() == "command")
     packet = ex["packet"].to_numpy()
     ok = (ex["status"].to_numpy() == "answered") & (ex["code"].to_numpy() == 0)
+    if recovered is not None:
+        ok = ok | recovered
     acc = is_vec & (packet < 0) & ok
     role = ex["packet_role"].to_numpy()
     ends = np.flatnonzero(role == "end")
@@ -350,8 +353,9 @@ def accepted_vectors(ex: pd.DataFrame) -> np.ndarray:
         code = ex["code"].to_numpy()
         st = ex["status"].to_numpy()
         for r in ends.tolist():
-            if st[r] == "answered":
-                limit[packet[r]] = 1 << 30 if code[r] == 0 else 0
+            if st[r] == "answered" or (recovered is not None and recovered[r]):
+                limit[packet[r]] = 1 << 30 if code[r] == 0 or (
+                    recovered is not None and recovered[r]) else 0
         if len(members):
             pk = packet[members]
             first = np.searchsorted(pk, pk, side="left")

@@ -184,7 +184,8 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     cum_rec = np.cumsum(is_rec)
     res: dict[str, np.ndarray] = {"doubles": np.zeros(0, np.int64),
                                   "lost": np.zeros(0, np.int64),
-                                  "contrib": np.zeros(len(ex), bool)}
+                                  "contrib": np.zeros(len(ex), bool),
+                                  "recovered": np.zeros(len(ex), bool)}
     if len(rows) == 0:
         _repeat_used(ctx, out, uncertain, is_rec)
         return res
@@ -261,6 +262,10 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     contrib = np.zeros(len(ex), bool)
     contrib[rows] = (answered_clean & (code == 0)) | (unc & ~same_next)
     res["contrib"] = contrib
+    # uncertain, then checked with @ / > and not sent again: the unit had taken it
+    recovered = np.zeros(len(ex), bool)
+    recovered[rows] = unc & rec_between & ~same_next & has_next
+    res["recovered"] = recovered
     res["doubles"] = rows[blind]
     res["lost"] = rows[moved_on]
     return res
