@@ -57,7 +57,11 @@ class Analysis:
     def frames(self, direction: str) -> pd.DataFrame:
         """The decoded lines of one direction as a DataFrame (text escaped)."""
         d = self.host if direction == "host" else self.unit
-        return frames_frame(d, self.t0)
+        df = frames_frame(d, self.t0)
+        if direction == "host":
+            df["packet"] = self.exchanges["packet"].to_numpy()
+            df["packet_role"] = self.exchanges["packet_role"].to_numpy()
+        return df
 
     def chunks(self, direction: str) -> pd.DataFrame:
         """The raw chunks of one direction as read: offsets, lengths, times (from t0)."""
