@@ -13,12 +13,11 @@ import signal
 import sys
 import tempfile
 import time
-import tomllib
-from pathlib import Path
 from typing import Any
 
 import click
 
+from conform.conformance.profile import load_profile
 from conform.errors import UserError
 from conform.spec import load_spec
 
@@ -39,24 +38,7 @@ def cli() -> None:
 
 
 def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, str]:
-    choices: dict[str, str] = {}
-    if profile:
-        path = Path(profile)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise UserError(f"{path}: no such profile") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise UserError(f"{path}: cannot read: {exc}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise UserError(f"{path}: {exc}") from None
-        table = data.get("dialect")
-        if not isinstance(table, dict):
-            raise UserError(f"{path}: no [dialect] table")
-        for key, value in table.items():
-            if not isinstance(value, str):
-                raise UserError(f"{path}: [dialect] {key} must be a string")
-            choices[key] = value
+    choices: dict[str, str] = dict(load_profile(profile).dialect) if profile else {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key or not value:
