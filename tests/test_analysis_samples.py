@@ -71,3 +71,14 @@ def test_careless_noisy_hazards() -> None:
     assert q.extra["runs"] == 61 and q.extra["pattern"] == "immediate"
     assert all(f.severity == "hazard" for f in a.findings
                if f.kind in ("blind-resend", "double-move", "lost-vector"))
+
+
+def test_proxy_emulator_noisy_recovers_without_hazards() -> None:
+    """Recorded live: `conform send` (careful) → `conform proxy` pty → `conform emulate` with faults."""
+    a = sample("proxy-emulator-noisy")
+    assert a.kinds() == {"checksum-error": 3, "error-code": 10, "garbled-answer": 5,
+                         "no-answer": 3, "repeat-used": 11}
+    assert a.hazards() == []
+    assert "simplex-violation" not in a.kinds() and "baud-mismatch" not in a.kinds()
+    assert a.metrics["vectors_accepted"] == 316
+    assert a.metrics["positions"]["checked"] >= 1

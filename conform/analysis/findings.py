@@ -183,6 +183,7 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     is_rec = expects & np.isin(name, ("@", ">"))
     cum_rec = np.cumsum(is_rec)
     res: dict[str, np.ndarray] = {"doubles": np.zeros(0, np.int64),
+                                  "checked_resends": np.zeros(0, np.int64),
                                   "lost": np.zeros(0, np.int64),
                                   "contrib": np.zeros(len(ex), bool),
                                   "recovered": np.zeros(len(ex), bool)}
@@ -267,6 +268,9 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     recovered[rows] = unc & rec_between & ~same_next & has_next
     res["recovered"] = recovered
     res["doubles"] = rows[blind]
+    # sent again after asking `@`/`>`: safe only if the answers said it had not arrived, so
+    # these too may explain a position that shows a vector executed twice
+    res["checked_resends"] = rows[checked & same_next]
     res["lost"] = rows[moved_on]
     return res
 

@@ -57,7 +57,8 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
     # segments between resets; unreliable after H / D / K (motion cut short on purpose)
     zero = np.flatnonzero(clean & np.isin(name, ("N", "J", "N<axis>")))
     cut = np.flatnonzero(clean & np.isin(name, ("H", "D", "K")))
-    doubles = rec["doubles"]
+    doubles = np.concatenate([rec["doubles"], rec.get("checked_resends", np.zeros(0, np.int64))])
+    checked_resends = set(rec.get("checked_resends", np.zeros(0, np.int64)).tolist())
     lost = rec["lost"]
     used: set[int] = set()
     prev_vals: tuple[int, ...] | None = None
@@ -110,9 +111,11 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
         for d in dd:
             used.add(d)
             summary["confirmed_double"] += 1
+            how = (" The sender asked `@`/`>` before sending it again, but the unit had taken "
+                   "the first copy." if d in checked_resends else "")
             out.add("double-move", ctx.t[r], "hazard",
                     f"`{ctx.cmd(d)}` was executed twice: `{ctx.cmd(r)}` reports {vals}, "
-                    f"which is the job's position plus that vector once more",
+                    f"which is the job's position plus that vector once more.{how}",
                     frames=[f"host:{d}"] + ctx.frames(r), row=d, position_row=r)
         for lv in ll:
             used.add(lv)

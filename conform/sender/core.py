@@ -9,11 +9,23 @@
 
 Policies (what to do when an answer is uncertain or refused):
 
-* ``careful``: strictly simplex; after a garbled answer ask ``>`` (it repeats the last
-  command and its answer, GVE64 §13.5.13) and act on the repeated answer; after no answer
-  ask ``@`` and compare the index with the one expected: unchanged means the line never
-  arrived and it is sent again, advanced means it arrived and ``>`` tells its answer. Queue
-  full (1): wait ``queue_wait`` and send the vector again.
+* ``careful``: strictly simplex, and it acts only on conclusive evidence. After a garbled
+  answer or none it waits for stale bytes to settle, then asks ``>`` (it repeats the last
+  command and its answer, GVE64 §13.5.13):
+
+  - the echo is our line (and differs from the line before it): it arrived, and the
+    repeated answer is its answer;
+  - the echo is the line sent before ours: ours never arrived, send it again;
+  - no echo where the unit echoes (``repeat_echo``): our ``>`` was damaged, ask again;
+  - anything else (no echo in a unit that does not echo, our line identical to the one
+    before, a damaged line the unit kept, A29): ask ``@`` and compare the index with the one
+    read before our line went out (``>`` and ``@`` do not advance it, A10): unchanged means
+    ours never arrived (send it again); advanced by ours means it arrived, and the ``>``
+    answer is its answer where the unit does not echo; otherwise the sender stops (H, D)
+    rather than guess.
+
+  ``@`` is never asked between our line and ``>``: ``>`` would then repeat the ``@``.
+  Queue full (1): wait ``queue_wait`` and send the vector again.
 * ``blind``: send the same line again after a garbled answer or none (a double move if the
   first was taken); retry queue-full immediately.
 * ``move-on``: take a garbled answer or none as success (a lost vector if it was not taken).
@@ -31,7 +43,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from conform.protocol import Answer, parse_answer
-from conform.protocol.checksum import append_checksum
+from conform.protocol.checksum import append_checksum, verify
 from conform.sender.job import PACKABLE, Item
 from conform.spec.model import Variant
 
@@ -71,7 +83,7 @@ class Sender:
                  checksums: bool = False, packet: int = 1, timeout: float = 0.25,
                  queue_wait: float = 0.02, max_tries: int = 200, address: int | None = None,
                  finish: bool = True, poll_interval: float = 0.1,
-                 index_every: str = "answered-except-recovery") -> None:
+                 index_every: str = "answered-except-recovery", repeat_echo: bool = True) -> None:
         if policy not in POLICIES:
             raise ValueError(f"policy must be one of {POLICIES}")
         self.variant = variant
@@ -83,6 +95,7 @@ class Sender:
         self.max_tries = max_tries
         self.address = variant.interpolator_address if address is None else address
         self.poll_interval = poll_interval
+        self.repeat_echo = repeat_echo  # `>` sends the repeated line before its answer (A9)
         self.finish = finish
         self.stats = Stats()
         self.cs_on = False  # checksums as the unit has them now
@@ -101,6 +114,9 @@ class Sender:
         self._phase = "start"
         self._stable: list[tuple[str, ...]] = []
         self._sent_line = b""
+        self._before = b""  # the line sent just before the current job unit
+        self._repeat_ans: Answer | None = None
+        self._recoveries = 0
         self.last_position: tuple[int, ...] | None = None
 
     # ------------------------------------------------------------------ job shaping
@@ -221,7 +237,18 @@ class Sender:
                 self.stats.resent += 1
             # a HALT or W answers only when the motion has stopped
             slow = u.items[0].name in ("H", "W")
+            self._repeat_ans = None
+            if u.tries == 1:
+                self._before = self._sent_line.split(b"\r")[-2] if b"\r" in self._sent_line else b""
             return self._send(self._unit_bytes(u), "unit", t, 60.0 if slow else None)
+        if ph == "recover":
+            self._phase = "job"
+            self.stats.repeats += 1
+            return self._send(self.line(b">"), "repeat", t)
+        if ph == "recover-index":
+            self._phase = "job"
+            self.stats.index_checks += 1
+            return self._send(self.line(b"@"), "index", t)
         if ph == "drain":
             return self._send(self.line(b"F"), "drain", t)
         if ph == "position":
@@ -264,6 +291,8 @@ class Sender:
             self.index = (self.index + counted) & 0xFF
 
     def _after_checksum(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is not None and ans.code == 4 and ans.checksum_ok:
+            ans = Answer(0, ans.inta, (), ans.checksum, True, ans.raw)  # already on: the 4 came summed
         if ans is None or ans.code != 0:
             self._wake = t + self.queue_wait
             return  # send %+ again
@@ -288,12 +317,7 @@ class Sender:
             return
         pol = self.policy
         if pol == "careful":
-            if timed_out:
-                self.stats.index_checks += 1
-                self._pending_send(self._send(self.line(b"@"), "index", t))
-            else:
-                self.stats.repeats += 1
-                self._pending_send(self._send(self.line(b">"), "repeat", t))
+            self._recover(t, "recover")
             return
         if pol == "blind" or (pol == "careless" and not timed_out):
             self._wake = t  # same unit again
@@ -341,41 +365,72 @@ class Sender:
 
     def _done_unit(self, t: float) -> None:
         self._current = None
+        self._recoveries = 0
         self._wake = t
+
+    def _last_line(self, u: Unit_) -> bytes:
+        return self._unit_bytes(u).split(b"\r")[-2]
+
+    def _recover(self, t: float, phase: str) -> None:
+        """Ask ``>`` (or ``@``) after a settle time in which stale bytes are ignored."""
+        self._recoveries += 1
+        if self._recoveries > 50:
+            self._fail("no clean answer to `>`/`@` after 50 tries")
+            return
+        self._phase = phase
+        self._wake = t + min(self.timeout, 0.05)
 
     def _after_repeat(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
         u = self._current
         assert u is not None
         echo = self._lines[-1] if self._lines else None
-        if ans is None:
-            self.stats.repeats += 1
-            self._pending_send(self._send(self.line(b">"), "repeat", t))
+        if ans is None or (echo is None and self.repeat_echo) or (
+                echo is not None and self.cs_on and not verify(echo)):
+            self._recover(t, "recover")  # the answer, the echo or our `>` was damaged: ask again
             return
-        last = self._unit_bytes(u).split(b"\r")[-2]
-        if echo is not None and echo == last:
-            self._resolve(u, ans, t)
-            return
-        if echo is None and not self._lines:
-            # `>` without an echo (A9 repeat-answer-only): trust the repeated answer
-            self._resolve(u, ans, t)
-            return
-        self._wake = t  # the unit's last command was not ours: send ours again
+        ours = self._last_line(u)
+        if echo is not None and ours != self._before:
+            if echo == ours:
+                self._resolve(u, ans, t)
+                return
+            if echo == self._before:
+                self._wake = t  # the unit's last line is the one before ours: ours never arrived
+                return
+        self._repeat_ans = None if self.repeat_echo else ans
+        self._recover(t, "recover-index")
 
     def _after_index(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        u = self._current
+        assert u is not None
         if ans is None or not ans.fields:
-            self.stats.index_checks += 1
-            self._pending_send(self._send(self.line(b"@"), "index", t))
+            self._recover(t, "recover-index")
             return
+        field = ans.fields[0]
         try:
-            now = int(ans.fields[0])
+            now = int(field, 16) if len(field) == 2 and not field.isdigit() else int(field)
         except ValueError:
-            now = -1
-        if self.index is not None and now == self.index:
+            self._recover(t, "recover-index")
+            return
+        if self.index is None:
+            self._fail("cannot tell whether the line arrived: the index was never read")
+            return
+        counted = 1
+        if u.packet:
+            counted = 2 + (int(self._repeat_ans.fields[0]) if self._repeat_ans is not None
+                           and self._repeat_ans.fields and self._repeat_ans.fields[0].isdigit() else 0)
+        if now == self.index:
             self._wake = t  # our line never arrived: send it again
             return
-        self.stats.repeats += 1
-        self._pending_send(self._send(self.line(b">"), "repeat", t))
-        self.index = (now - 1) & 0xFF if now >= 0 else None  # _resolve adds ours back
+        if now == (self.index + counted) & 0xFF and self._repeat_ans is not None:
+            self._resolve(u, self._repeat_ans, t)
+            return
+        name = u.items[0].body.decode()
+        if now == (self.index + counted) & 0xFF:
+            self._fail(f"`{name}` arrived (index {now}) but its answer cannot be read back: "
+                       "stopping rather than risk a double or lost move")
+        else:
+            self._fail(f"index {now} is neither {self.index} (`{name}` not arrived) nor "
+                       f"{(self.index + counted) & 0xFF} (arrived): cannot tell, stopping")
 
     def _after_drain(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
         busy = True

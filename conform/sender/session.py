@@ -48,7 +48,8 @@ def send_emulated(items: list[Item], variant: Any, dialect: Any, *, policy: str 
     clock = _VirtualClock(EPOCH)
     unit = Unit(variant, dialect, t0=EPOCH, answer_delay=answer_delay)
     sender = Sender(items, variant, policy=policy, checksums=checksums, packet=packet,
-                    timeout=max(timeout, 2 * link.latency + 0.05), queue_wait=queue_wait)
+                    timeout=max(timeout, 2 * link.latency + 0.05), queue_wait=queue_wait,
+                    index_every=dialect["A10"], repeat_echo=dialect["A9"] != "repeat-answer-only")
     meta = {
         "capture_method": "conform send, in-process emulator (virtual clock)",
         "variant": variant.id, "baud": link.baud, "sender_policy": policy,

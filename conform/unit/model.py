@@ -150,6 +150,8 @@ class Unit:
         self._a7_rate = d["A7"] == "rate-limited"
         self._a9 = d["A9"]
         self._a10 = _A10[d["A10"]]
+        # A29: does a line rejected for its checksum become the line `>` repeats?
+        self._a29_store_bad = self.dialect["A29"] == "every-line"
         self._a12 = d["A12"]
         self._watchdog_s = WATCHDOG_S[d["A13"]]
         self._a14_blocks = d["A14"] == "reset-blocks"
@@ -610,8 +612,9 @@ class Unit:
                 self._index = (self._index + 1) & 0xFF
             return
         self._outbox.append((t + self.answer_delay, ans))
-        self._last_line = line
-        self._last_answer = ans
+        if kind != "checksum" or self._a29_store_bad:
+            self._last_line = line
+            self._last_answer = ans
         self._count(name, code, kind)
 
     def _count(self, name: str | None, code: int, kind: str | None) -> None:
