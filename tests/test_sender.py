@@ -206,3 +206,27 @@ def test_run_serial_on_the_wall_clock() -> None:
     s = Sender(items, VAR, checksums=True, packet=2, poll_interval=0.01)
     run_serial(s, UnitPort())
     assert s.failed is None and s.last_position == (50, 100, 0, 0)
+
+
+@pytest.mark.parametrize("seed", [0, 6, 11, 23])
+def test_careful_sender_never_moves_twice_on_a_very_noisy_line(seed: int) -> None:
+    """Heavy noise (0.6 % of bytes damaged): answers, echoes of `>` and `>` itself get hit.
+    The careful sender must end exactly where the job ends, or stop, never guess."""
+    items = vectors(150, seed=seed)
+    link = LinkModel(noise=0.006, seed=seed, latency=0.002)
+    res = send_emulated(items, VAR, DIA, checksums=True, link=link)
+    assert res.sender.stats.garbled + res.sender.stats.timeouts > 0
+    if res.sender.failed is None:
+        assert res.position == intended(items)
+    else:
+        assert "stopping" in res.sender.failed
+
+
+def test_careful_sender_after_a_lost_checksum_on_answer() -> None:
+    """`%+` taken but its answer lost: the next `%+` (sent unsummed) is refused with a summed
+    4, which shows checksums are already on."""
+    items = vectors(20, seed=1)
+    link = LinkModel(seed=1, corrupt_answers={0})
+    res = send_emulated(items, VAR, DIA, checksums=True, link=link)
+    assert res.sender.failed is None and res.sender.done
+    assert res.position == intended(items)

@@ -671,3 +671,19 @@ def test_fast_path_matches_parser(spec):
             if checksum_on:
                 bad = cs("!0C1,2,3")[:-2] + "00"
                 assert fast.exchange(bad.encode() + b"\r", t) == (t, b"4,60\r")
+
+
+@pytest.mark.parametrize(("choice", "repeats"), [("valid-only", "vector"), ("every-line", "damaged")])
+def test_repeat_after_a_damaged_line_a29(spec, choice, repeats):
+    """A29: a line rejected for its checksum does (every-line) or does not (valid-only)
+    become the line that `>` repeats."""
+    u = make(spec, A29=choice)
+    assert ans(u, "!0%+") == "0,5C"
+    vector = cs("!0C1,0,0")
+    assert ans(u, vector) == "0,5C"
+    assert ans(u, "!0>,00") == "4,60"  # a `>` damaged on the way
+    echo = ans(u, cs("!0>"))
+    if repeats == "vector":
+        assert echo == f"{vector}\r0,5C"
+    else:
+        assert echo == "!0>,00\r4,60"
