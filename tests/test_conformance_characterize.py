@@ -22,7 +22,7 @@ DIALECTS = [
      "A26": "vk-unlimited-100"},
     {"A2": "s-too", "A3": "zero-too", "A4": "queued", "A21": "any-case", "A23": "error-3",
      "A25": "1ms", "A27": "all-allowed", "A28": "all-ff", "A16": "discarded",
-     "A18": "hex-bytes"},
+     "A18": "hex-bytes", "A29": "every-line"},
 ]
 
 

@@ -23,7 +23,7 @@ from conform.spec import load_spec
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM write probes (A18).")
 def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: bool,
         max_steps: int | None, allow_eeprom: bool) -> None:
-    """Probe the open questions A1–A28 and write what the unit actually does."""
+    """Probe the open questions A1–A29 and write what the unit actually does."""
     spec = load_spec()
     if allow_motion and max_steps is None:
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")

@@ -1,4 +1,4 @@
-"""Characterisation: probe every open question (A1–A28) and find which alternative the unit
+"""Characterisation: probe every open question (A1–A29) and find which alternative the unit
 follows.
 
 Each question has a probe script. The target runs it once; the reference unit runs it under each
@@ -117,6 +117,9 @@ def _probe(q: str, v: Any) -> Script | None:
         if cell is None:
             return None
         p = [_s("!0ER%02X" % cell.address)]
+    elif q == "A29":
+        # checksums on; a valid V; a V with a wrong sum; what does `>` repeat?
+        p = [_s("!0%+"), _s("!0V1000", cs=True), _raw(b"!0V1001,00\r"), _s("!0>", cs=True, lines=2)]
     else:
         return None
     return (RESET, *p)
