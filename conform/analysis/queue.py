@@ -61,7 +61,7 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     ``host_parsed(row)`` returns the parsed Command of a row (for modal values).
     ``arrival`` overrides the arrival time of each row (what-if replays).
     """
-    from conform.unit.motion import MotionExecutor, MotionStateError
+    from conform.unit.motion import Completion, MotionExecutor, MotionStateError
 
     naxes = len(variant.axes)
     log: list = []
@@ -77,22 +77,18 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     vec = ex[["dx", "dy", "dz", "da"]].to_numpy()[:, :naxes]
     is_vec = accepted[rows]
     cont = names[rows] == "C"
-    pushes: list[float] = []
-    push_rows: list[int] = []
     removals: list[float] = []
-    seq_row: list[int] = []
     notes: list[str] = []
     advance, push = exe.advance, exe.push
     trow = t[rows].tolist()
     vrows = vec[rows].tolist()
+    is_vec_l = is_vec.tolist()
+    cont_l = cont.tolist()
     for k, r in enumerate(rows.tolist()):
         tk = trow[k]
         advance(tk)
-        if is_vec[k]:
-            push(vrows[k], bool(cont[k]))
-            pushes.append(tk)
-            push_rows.append(r)
-            seq_row.append(r)
+        if is_vec_l[k]:
+            push(vrows[k], cont_l[k])
             continue
         name = names[r]
         cmd = host_parsed(r)
@@ -141,18 +137,21 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         end = exe.next_event_time()
         guard += 1
     if log:
-        arr = np.array([(c.seq, c.t_start, c.t_end, c.v_out, c.starved) for c in log], float)
-        seq = arr[:, 0].astype(np.int64)
-        starts, ends, v_out, starved = arr[:, 1], arr[:, 2], arr[:, 3], arr[:, 4] > 0
+        arr = np.array(log, float)  # Completion is a NamedTuple: one row per finished vector
+        f = Completion._fields
+        seq = arr[:, f.index("seq")].astype(np.int64)
+        starts, ends = arr[:, f.index("t_start")], arr[:, f.index("t_end")]
+        v_out, starved = arr[:, f.index("v_out")], arr[:, f.index("starved")] > 0
     else:
         seq = np.zeros(0, np.int64)
         starts = ends = v_out = np.zeros(0)
         starved = np.zeros(0, bool)
-    push_rows_a = np.asarray(push_rows, np.int64)
+    # every vector row was pushed, in order, at its arrival time
+    push_rows_a = rows[is_vec].astype(np.int64)
     # seq counts pushes per executor; J makes a new executor: map by order of completion
     done_rows = push_rows_a[np.minimum(_global_seq(seq), max(len(push_rows_a) - 1, 0))] \
         if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
-    pushes_a = np.asarray(pushes, float)
+    pushes_a = t[push_rows_a].astype(float)
     removals_a = np.asarray(removals, float)
     ev_t = np.concatenate([pushes_a, ends, removals_a])
     ev_d = np.concatenate([np.ones(len(pushes_a)), -np.ones(len(ends)), -np.ones(len(removals_a))])
