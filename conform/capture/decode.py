@@ -258,6 +258,10 @@ class FrameDecoder:
 
     # -- unit side -------------------------------------------------------------------------
     def _answer(self, line: Line) -> list[Record]:
+        if (self.pending and self.pending[0].frame["name"] == ">" and line.data[:1] == b"!"):
+            # `>` first sends the line it repeats (A9), then that line's answer
+            frame = self._base(line, "echo")
+            return [Record(TOPIC_FRAMES, to_ns(line.t_last), frame)]
         pending = self.pending.pop(0) if self.pending else None
         with_sum = self.checksum_on
         if pending is not None and pending.checksum_after is not None:

@@ -55,7 +55,7 @@ FRAME: dict[str, Any] = {
     "type": "object",
     "properties": {
         "direction": {"type": "string", "enum": list(DIRECTIONS)},
-        "kind": {"type": "string", "enum": ["command", "rejection", "answer", "garbled"]},
+        "kind": {"type": "string", "enum": ["command", "rejection", "answer", "echo", "garbled"]},
         "text": {"type": "string", "description": "the line, escaped, without its terminator"},
         "offset": {"type": "integer", "description": "byte offset of the line's first byte"},
         "length": {"type": "integer", "description": "bytes including the terminator"},
