@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.errors import UserError
+from conform.errors import UserError, read_user_text
 
 
 @dataclass
@@ -70,11 +70,7 @@ def write_profile(profile: Profile, path: str | Path) -> None:
 def load_profile(path: str | Path) -> Profile:
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise UserError(f"{p}: no such profile") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{p}: cannot read: {exc}") from None
+        data = tomllib.loads(read_user_text(p))
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{p}: {exc}") from None
     dialect = data.get("dialect")

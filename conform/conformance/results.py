@@ -12,7 +12,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from conform.errors import UserError
+from conform.errors import UserError, read_user_text
 
 
 class Grade(StrEnum):
@@ -164,11 +164,7 @@ class RunResults:
     def load(path: str | Path) -> RunResults:
         p = Path(path)
         try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise UserError(f"{p}: no such file") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise UserError(f"{p}: cannot read: {exc}") from None
+            data = json.loads(read_user_text(p))
         except json.JSONDecodeError as exc:
             raise UserError(f"{p}: line {exc.lineno} column {exc.colno}: {exc.msg}") from None
         if not isinstance(data, dict) or not isinstance(data.get("checks"), list):
