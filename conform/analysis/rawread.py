@@ -17,7 +17,6 @@ import io
 import json
 import os
 import struct
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,12 +25,10 @@ from typing import Any
 import numpy as np
 import zstandard
 
-from conform.capture.scan import MAGIC, check_magic
+from conform.capture.scan import Walk, check_magic, decompress_chunk, walk_records
 from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
 from conform.errors import UserError
 
-MAX_RECORD = 256 * 1024 * 1024
-MAX_CHUNK = 256 * 1024 * 1024
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
 OP_METADATA, OP_DATA_END = 0x0C, 0x0F
 RAW_TOPICS = {TOPIC_HOST: "host", TOPIC_UNIT: "unit"}
@@ -228,82 +225,41 @@ def _chunk_data(body: bytes) -> bytes:
     if pos + rlen > len(body):
         raise ValueError("chunk records run past the record")
     raw = body[pos : pos + rlen]
-    if usize > MAX_CHUNK:
-        raise ValueError(f"chunk claims {usize} bytes uncompressed")
-    if compression == "zstd":
-        data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
-    elif compression == "":
-        data = bytes(raw)
-    elif compression == "lz4":
-        try:
-            import lz4.frame  # type: ignore[import-not-found]
-        except ImportError:
-            raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
-        data = lz4.frame.decompress(raw)
-    else:
-        raise ValueError(f"unknown chunk compression {compression[:20]!r}")
-    if len(data) != usize:
-        raise ValueError("chunk size does not match its header")
-    if crc and zlib.crc32(data) != crc:
-        raise ValueError("chunk CRC mismatch")
-    return data
+    return decompress_chunk(compression, raw, usize, crc)
 
 
 def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None) -> None:
+    walk = Walk()
     with open(path, "rb") as f:
         size = status.size = os.fstat(f.fileno()).st_size
-        pos = len(MAGIC)
-        f.seek(pos)
-        in_summary = False
         last_report = 0
-        while True:
-            if progress is not None and pos - last_report > 4 * 1024 * 1024:
-                progress(pos, size)
-                last_report = pos
-            if pos == size:
-                status.problem = status.problem or "file ends without a footer"
-                return
-            head = f.read(9)
-            if len(head) < 9:
-                status.problem = f"file ends inside a record header at byte {pos}"
-                return
-            op = head[0]
-            (length,) = struct.unpack("<Q", head[1:])
-            if length > MAX_RECORD or pos + 9 + length > size:
-                status.problem = (f"file ends inside a record at byte {pos}"
-                                  if length <= MAX_RECORD else
-                                  f"record at byte {pos} claims {length} bytes")
-                return
-            body = f.read(length)
-            pos += 9 + length
-            try:
-                if op == OP_FOOTER:
-                    status.complete = f.read(len(MAGIC)) == MAGIC
-                    if not status.complete:
-                        status.problem = "footer is not followed by the closing magic"
-                    return
-                if op == OP_DATA_END:
-                    in_summary = True
-                elif in_summary:
+        try:
+            for pos, op, head, body, in_summary in walk_records(f, size, walk):
+                if progress is not None and pos - last_report > 4 * 1024 * 1024:
+                    progress(pos, size)
+                    last_report = pos
+                if in_summary or op == OP_FOOTER:
                     continue
-                elif op == OP_CHUNK:
-                    try:
-                        data = _chunk_data(body)
-                        col.records(data, 0, len(data))
-                    except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
-                        status.damaged_chunks += 1
-                        status.notes.append(f"damaged chunk at byte {pos - 9 - length} "
-                                            f"skipped: {exc}")
-                elif op == OP_METADATA:
-                    col.metadata_record(body)
-                elif op in (OP_CHANNEL, OP_MESSAGE):
-                    col.records(head + body, 0, 9 + length)
-            except (ValueError, struct.error, UnicodeDecodeError) as exc:
-                status.problem = f"damaged record (opcode 0x{op:02x}) at byte " \
-                                 f"{pos - 9 - length}: {exc}"
-                return
-        if progress is not None:
-            progress(size, size)
+                try:
+                    if op == OP_CHUNK:
+                        try:
+                            data = _chunk_data(body)
+                            col.records(data, 0, len(data))
+                        except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
+                            status.damaged_chunks += 1
+                            status.notes.append(f"damaged chunk at byte {pos} skipped: {exc}")
+                    elif op == OP_METADATA:
+                        col.metadata_record(body)
+                    elif op in (OP_CHANNEL, OP_MESSAGE):
+                        col.records(head + body, 0, 9 + len(body))
+                except (ValueError, struct.error, UnicodeDecodeError) as exc:
+                    status.problem = f"damaged record (opcode 0x{op:02x}) at byte {pos}: {exc}"
+                    return
+        finally:
+            status.complete = walk.complete
+            status.problem = status.problem or walk.problem
+    if progress is not None:
+        progress(size, size)
 
 
 _B64 = np.full(256, 255, np.uint8)

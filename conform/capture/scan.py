@@ -17,6 +17,7 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import zstandard
 from mcap.data_stream import ReadDataStream
@@ -111,26 +112,37 @@ def check_magic(path: str | os.PathLike[str]) -> Path:
     return p
 
 
-def _chunk_records(chunk: Chunk) -> list[object]:
-    if chunk.uncompressed_size > MAX_CHUNK_UNCOMPRESSED:
-        raise ValueError(f"chunk claims {chunk.uncompressed_size} bytes uncompressed")
-    if chunk.compression == "zstd":
-        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data))
-        data = reader.read(chunk.uncompressed_size + 1)
-    elif chunk.compression == "":
-        data = chunk.data
-    elif chunk.compression == "lz4":
+def decompress_chunk(compression: str, raw: bytes, usize: int, crc: int) -> bytes:
+    """A chunk's records, decompressed and checked against its declared size and CRC.
+
+    Nothing larger than the chunk claims (nor than ``MAX_CHUNK_UNCOMPRESSED``) is allocated.
+    """
+    if usize > MAX_CHUNK_UNCOMPRESSED:
+        raise ValueError(f"chunk claims {usize} bytes uncompressed")
+    if compression == "zstd":
+        if zstandard.frame_content_size(raw) > usize:
+            raise ValueError("zstd frame is larger than its chunk claims")
+        data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=max(usize, 1))
+    elif compression == "":
+        data = bytes(raw)
+    elif compression == "lz4":
         try:
             import lz4.frame  # type: ignore[import-not-found]
         except ImportError:
             raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
-        data = lz4.frame.decompress(chunk.data)
+        data = lz4.frame.decompress(raw)
     else:
-        raise ValueError(f"unknown chunk compression {chunk.compression[:20]!r}")
-    if len(data) != chunk.uncompressed_size:
+        raise ValueError(f"unknown chunk compression {compression[:20]!r}")
+    if len(data) != usize:
         raise ValueError("chunk size does not match its header")
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+    if crc and zlib.crc32(data) != crc:
         raise ValueError("chunk CRC mismatch")
+    return data
+
+
+def _chunk_records(chunk: Chunk) -> list[object]:
+    data = decompress_chunk(chunk.compression, chunk.data, chunk.uncompressed_size,
+                            chunk.uncompressed_crc)
     out: list[object] = []
     pos = 0
     while pos < len(data):
@@ -147,6 +159,58 @@ def _chunk_records(chunk: Chunk) -> list[object]:
     return out
 
 
+@dataclass
+class Walk:
+    """How a walk over the top-level records ended (filled in as it goes)."""
+
+    problem: str | None = None  # why it stopped before the footer, if it did
+    complete: bool = False  # footer and closing magic reached
+    end: int = len(MAGIC)  # end of the last whole record the caller went past
+    trailing: int = 0  # bytes after the closing magic
+
+
+def walk_records(f: BinaryIO, size: int, walk: Walk) -> Iterator[tuple[int, int, bytes, bytes, bool]]:
+    """The top-level records of an open MCAP file: (position, opcode, header, body, in summary).
+
+    Every length is bounded by what the file holds. The footer comes last, then the closing
+    magic is checked. A caller that stops at a record it finds damaged leaves ``walk.end`` at
+    the end of the record before it.
+    """
+    pos = len(MAGIC)
+    f.seek(pos)
+    in_summary = False  # after DATA_END: the summary repeats schemas and channels
+    while True:
+        if pos == size:
+            walk.problem = "file ends without a footer"
+            return
+        head = f.read(9)
+        if len(head) < 9:
+            walk.problem = f"file ends inside a record header at byte {pos}"
+            return
+        opcode = head[0]
+        (length,) = struct.unpack("<Q", head[1:])
+        if length > MAX_RECORD:
+            walk.problem = f"record at byte {pos} claims {length} bytes"
+            return
+        if pos + 9 + length > size:
+            walk.problem = f"file ends inside a record at byte {pos} " \
+                f"({size - pos - 9} of {length} bytes present)"
+            return
+        body = f.read(length)
+        in_summary = in_summary or opcode == Opcode.DATA_END
+        yield pos, opcode, head, body, in_summary
+        pos += 9 + length
+        if opcode == Opcode.FOOTER:
+            if f.read(len(MAGIC)) != MAGIC:
+                walk.problem = "footer is not followed by the closing magic"
+                return
+            walk.complete = True
+            walk.end = pos + len(MAGIC)
+            walk.trailing = size - walk.end
+            return
+        walk.end = pos
+
+
 def iter_records(status: ScanStatus) -> Iterator[Item]:
     """Header, schemas, channels, messages and metadata in file order (chunks opened).
 
@@ -154,67 +218,39 @@ def iter_records(status: ScanStatus) -> Iterator[Item]:
     ``status`` says which, and how far the file was intact.
     """
     path = check_magic(status.path)
+    walk = Walk()
     with open(path, "rb") as f:
         size = status.size = os.fstat(f.fileno()).st_size
-        pos = len(MAGIC)
-        f.seek(pos)
-        status.valid_bytes = pos
-        in_summary = False  # the summary repeats schemas and channels: skip them there
-        while True:
-            if pos == size:
-                status.problem = status.problem or "file ends without a footer"
-                return
-            head = f.read(9)
-            if len(head) < 9:
-                status.problem = f"file ends inside a record header at byte {pos}"
-                return
-            opcode = head[0]
-            (length,) = struct.unpack("<Q", head[1:])
-            if length > MAX_RECORD:
-                status.problem = f"record at byte {pos} claims {length} bytes"
-                return
-            if pos + 9 + length > size:
-                status.problem = f"file ends inside a record at byte {pos} " \
-                    f"({size - pos - 9} of {length} bytes present)"
-                return
-            body = f.read(length)
-            try:
-                rec = _parse(opcode, body)
-            except _PARSE_ERRORS as exc:
-                status.damaged_records += 1
-                status.problem = f"damaged record (opcode 0x{opcode:02x}) at byte {pos}: " \
-                    f"{_short(exc)}"
-                return
-            pos += 9 + length
-            if isinstance(rec, Footer):
-                tail = f.read(len(MAGIC))
-                if tail != MAGIC:
-                    status.problem = "footer is not followed by the closing magic"
-                    return
-                status.valid_bytes = pos + len(MAGIC)
-                status.complete = True
-                if pos + len(MAGIC) != size:
-                    status.notes.append(f"{size - pos - len(MAGIC)} bytes after the end")
-                return
-            status.valid_bytes = pos
-            if rec is _DATA_END:
-                in_summary = True
-            elif in_summary:
-                continue
-            elif isinstance(rec, Header):
-                status.library, status.profile = rec.library, rec.profile
-                yield rec
-            elif isinstance(rec, Chunk):
+        try:
+            for pos, opcode, _head, body, in_summary in walk_records(f, size, walk):
                 try:
-                    inner = _chunk_records(rec)
-                except (*_PARSE_ERRORS, zstandard.ZstdError, MemoryError) as exc:
-                    status.damaged_chunks += 1
-                    status.notes.append(f"damaged chunk at byte {pos - 9 - length} skipped: "
-                                        f"{_short(exc)}")
+                    rec = _parse(opcode, body)
+                except _PARSE_ERRORS as exc:
+                    status.damaged_records += 1
+                    status.problem = f"damaged record (opcode 0x{opcode:02x}) at byte {pos}: " \
+                        f"{_short(exc)}"
+                    return
+                if in_summary:
                     continue
-                yield from inner  # type: ignore[misc]
-            elif isinstance(rec, (Schema, Channel, Message, Metadata)):
-                yield rec
+                if isinstance(rec, Header):
+                    status.library, status.profile = rec.library, rec.profile
+                    yield rec
+                elif isinstance(rec, Chunk):
+                    try:
+                        inner = _chunk_records(rec)
+                    except (*_PARSE_ERRORS, zstandard.ZstdError, MemoryError) as exc:
+                        status.damaged_chunks += 1
+                        status.notes.append(f"damaged chunk at byte {pos} skipped: {_short(exc)}")
+                        continue
+                    yield from inner  # type: ignore[misc]
+                elif isinstance(rec, (Schema, Channel, Message, Metadata)):
+                    yield rec
+        finally:
+            status.valid_bytes = walk.end
+            status.complete = walk.complete
+            status.problem = status.problem or walk.problem
+            if walk.trailing:
+                status.notes.append(f"{walk.trailing} bytes after the end")
 
 
 def _short(exc: BaseException) -> str:
