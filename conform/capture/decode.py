@@ -223,12 +223,9 @@ class FrameDecoder:
                 frame["packet"], frame["packet_role"] = self.packet_id, "start"
                 owed = False
             elif result.name == "*E" and self.in_packet:
-                self.in_packet = False
-                frame["packet"], frame["packet_role"] = self.packet_id, "end"
-                packet_commands = self.packet_members
+                packet_commands = self._packet_end(frame)
             elif self.in_packet:
-                self.packet_members += 1
-                frame["packet"], frame["packet_role"] = self.packet_id, "member"
+                self._packet_member(frame)
                 owed = False
             elif result.name == "%":
                 checksum_after = result.args[0] == "+"
@@ -239,12 +236,9 @@ class FrameDecoder:
             frame["error"] = f"{result.kind}: {result.detail}"
             if self.in_packet and _PACKET_END.match(line.data):
                 # a damaged *E still ends the packet; the unit answers it (with an error)
-                self.in_packet = False
-                frame["packet"], frame["packet_role"] = self.packet_id, "end"
-                packet_commands = self.packet_members
+                packet_commands = self._packet_end(frame)
             elif self.in_packet:
-                self.packet_members += 1
-                frame["packet"], frame["packet_role"] = self.packet_id, "member"
+                self._packet_member(frame)
                 owed = False
             elif result.code is None:
                 owed = False  # the unit stays silent (another address, not a command)
@@ -255,6 +249,16 @@ class FrameDecoder:
             self.pending.append(_Pending(frame, line.t_last, frame["packet"], packet_commands,
                                          checksum_after, resets))
         return out
+
+    def _packet_end(self, frame: dict[str, Any]) -> int:
+        """Close the open packet at this frame; the number of lines it held."""
+        self.in_packet = False
+        frame["packet"], frame["packet_role"] = self.packet_id, "end"
+        return self.packet_members
+
+    def _packet_member(self, frame: dict[str, Any]) -> None:
+        self.packet_members += 1
+        frame["packet"], frame["packet_role"] = self.packet_id, "member"
 
     # -- unit side -------------------------------------------------------------------------
     def _answer(self, line: Line) -> list[Record]:
