@@ -90,22 +90,21 @@ class LineTracker:
                     self._pending_cr = True
                     continue
             if end:
-                length = pos + 1 - self._start
-                assert self._t_start is not None
-                lines.append(Line(self.direction, bytes(self._buf), self._start, length,
-                                  self._t_start, t_read))
-                self._buf.clear()
-                self._t_start = None
+                lines.append(self._take(pos, t_read))
                 continue
             self._buf.append(b)
             if len(self._buf) > MAX_LINE:
-                length = pos + 1 - self._start
-                assert self._t_start is not None
-                lines.append(Line(self.direction, bytes(self._buf), self._start, length,
-                                  self._t_start, t_read))
-                self._buf.clear()
-                self._t_start = None
+                lines.append(self._take(pos, t_read))
         return lines
+
+    def _take(self, pos: int, t_read: float) -> Line:
+        """The line that ends at stream offset ``pos``; the buffer starts afresh."""
+        assert self._t_start is not None
+        line = Line(self.direction, bytes(self._buf), self._start, pos + 1 - self._start,
+                    self._t_start, t_read)
+        self._buf.clear()
+        self._t_start = None
+        return line
 
     def rest(self, t: float) -> Line | None:
         """The unterminated tail, if any (end of capture)."""
