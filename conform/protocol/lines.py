@@ -31,26 +31,15 @@ class LineSplitter:
         return dropped
 
     def feed(self, data: bytes) -> list[bytes]:
-        buf = self._buf
-        buf += data
-        if self.mode == "crlf":
-            parts = bytes(buf).split(b"\r\n")
-        else:
-            if self.mode == "cr-or-lf":
-                parts = bytes(buf).replace(b"\n", b"\r").split(b"\r")
-            else:
-                parts = bytes(buf).split(b"\r")
-        tail = parts.pop()
-        buf.clear()
-        buf += tail
-        if self.mode == "crlf":
-            return parts
-        out = []
-        for part in parts:
-            if self.mode == "cr":
-                part = part.lstrip(b"\n")
-            if part or self.mode == "cr":
-                out.append(part)
-        if self.mode == "cr" and buf[:1] == b"\n":
-            del buf[: len(buf) - len(bytes(buf).lstrip(b"\n"))]
-        return out
+        self._buf += data
+        text = bytes(self._buf)
+        if self.mode == "cr-or-lf":
+            text = text.replace(b"\n", b"\r")
+        parts = text.split(b"\r\n" if self.mode == "crlf" else b"\r")
+        self._buf[:] = parts.pop()
+        if self.mode == "cr":  # the LF of a CR LF starts the next line: it is not part of it
+            self._buf[:] = self._buf.lstrip(b"\n")
+            return [p.lstrip(b"\n") for p in parts]
+        if self.mode == "cr-or-lf":
+            return [p for p in parts if p]
+        return parts
