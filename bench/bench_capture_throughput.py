@@ -6,11 +6,15 @@ proxy records everything. Afterwards the unit's count and CRC, the answers the s
 and both directions in the MCAP file are compared with what was sent.
 
     python bench/bench_capture_throughput.py --seconds 30      # the target run is 600 s
+
+It prints the proxy's CPU per second of traffic, the bytes lost and how long the proxy took
+to finish the file after SIGTERM; the last line is one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import signal
 import tempfile
@@ -26,6 +30,16 @@ from conform.capture.recover import capture_info
 from conform.link import open_port
 
 TARGET_RATE = 92_160  # bytes/s: 921 600 Bd, 8N1
+TARGET_CPU = 0.35  # core-seconds of the proxy per second of traffic, decoding on
+TARGET_STOP = 3.0  # seconds from SIGTERM to a complete file
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU of a running process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    import os
+
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def command_stream():
@@ -87,9 +101,14 @@ def main() -> None:
         time.sleep(0.2)  # let the last answers come back
     done.set()
     reader.join()
+    proxy_cpu = _cpu_seconds(proxy.pid)
     t_term = time.monotonic()
     proxy.send_signal(signal.SIGTERM)
-    proxy.wait(300)
+    try:
+        proxy.wait(60)
+    except Exception:  # noqa: BLE001 - a proxy that does not finish is the figure
+        proxy.kill()
+        proxy.wait()
     finish = time.monotonic() - t_term
     sender.close()
     unit_total, unit_crc = stop_unit(unit)
@@ -125,6 +144,21 @@ def main() -> None:
     print(f"recorder         writer backlog at most {end.get('max_backlog', '?')} items; "
           f"proxy finished {finish:.2f} s after SIGTERM")
     print(f"zero bytes lost: {'YES' if ok else 'NO'}")
+    writer_cpu = float(end.get("recorder_cpu_s") or "nan")
+    per_s = proxy_cpu / elapsed
+    print(f"recorder CPU     {per_s:.3f} core-s per s of traffic for the whole proxy process "
+          f"(pumps, recorder, decoding; target <= {TARGET_CPU}, ratio {per_s / TARGET_CPU:.2f}); "
+          f"writer thread alone {writer_cpu / elapsed:.3f}")
+    print(f"stop             complete file {finish:.2f} s after SIGTERM (target <= {TARGET_STOP} s, "
+          f"ratio {finish / TARGET_STOP:.2f})")
+    lost = max(lost_to_unit, lost_in_file, 2 * n_lines - unit_len)
+    print(json.dumps({"seconds": round(elapsed, 2), "decode": not args.no_decode,
+                      "sent_bytes": sent, "lost_bytes": lost, "zero_lost": ok,
+                      "recorder_cpu_per_s": round(per_s, 4),
+                      "writer_thread_cpu_per_s": round(writer_cpu / elapsed, 4),
+                      "stop_s": round(finish, 3), "state": info.state,
+                      "capture_mb": round(output.stat().st_size / 1e6, 2),
+                      "target_cpu_per_s": TARGET_CPU, "target_stop_s": TARGET_STOP}))
     if args.keep is None:
         shutil.rmtree(workdir, ignore_errors=True)
 

@@ -321,6 +321,10 @@ def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndar
 
     if col.raw_encoded[name]:
         return _raw_direction(name, payloads(), times, orders)
+    prefix = np.frombuffer(b'{"direction":"%s","offset":' % name.encode(), np.uint8)
+    if (lens > len(prefix)).all() and (
+            big[starts[:, None] + np.arange(len(prefix))] == prefix).all():
+        return _batch_direction(name, payloads(), status)
     try:
         return _fast_json(name, big, starts, lens, times, orders, quotes, commas)
     except ValueError:
@@ -423,6 +427,27 @@ def _fast_json(name: str, big: np.ndarray, starts: np.ndarray, lens: np.ndarray,
     start = np.concatenate([[0], np.cumsum(out_lens)[:-1]]).astype(np.int64)
     return Direction(name, data, start, out_lens.astype(np.int64), offset, t_read, t_first,
                      orders)
+
+
+def _batch_direction(name: str, payloads: list[bytes], status: ReadStatus) -> Direction:
+    """Format 2: each message a batch of reads (``conform.RawBatch``), bytes stored once."""
+    from conform.capture.batch import unbatch_arrays
+
+    parts = []
+    for raw in payloads:
+        try:
+            parts.append(unbatch_arrays(raw))
+        except ValueError:
+            status.bad_payloads += 1
+    if not parts:
+        return Direction.empty(name)
+    data = np.frombuffer(b"".join(p[0] for p in parts), np.uint8)
+    lens = np.concatenate([p[1] for p in parts])
+    start = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+    offset = np.concatenate([p[2] + np.concatenate([[0], np.cumsum(p[1])[:-1]])
+                             for p in parts]).astype(np.int64)
+    return Direction(name, data, start, lens, offset, *(np.concatenate([p[k] for p in parts])
+                                                        for k in (3, 4, 5)))
 
 
 def _raw_direction(name: str, payloads: list[bytes], times: np.ndarray,

@@ -22,11 +22,12 @@ from typing import Any
 
 from conform.capture.schemas import TOPIC_EXCHANGES, TOPIC_FRAMES
 from conform.capture.session import Record, escape_bytes, to_ns
-from conform.protocol import Answer, Command, CommandParser, Rejection, parse_answer
+from conform.protocol import Answer, Command, CommandParser, Garbled, Rejection, parse_answer
 from conform.protocol.checksum import split_checksum, verify
 from conform.spec import Dialect, Variant, load_spec
 
 _PACKET_END = re.compile(rb"^!\d\*E")
+Item = tuple[str, float, dict[str, Any]]  # (topic, time in seconds, payload)
 MAX_LINE = 4096  # a "line" longer than this is noise: cut it so memory stays bounded
 
 
@@ -58,6 +59,41 @@ class LineTracker:
         return bytes(self._buf)
 
     def feed(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Line]:
+        if self.mode == "cr":
+            return self._feed_cr(data, offset, t_read, t_first)
+        return self._feed_bytes(data, offset, t_read, t_first)
+
+    def _feed_cr(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Line]:
+        """CR-terminated lines, a whole run of bytes at a time (the recorder's hot path)."""
+        lines: list[Line] = []
+        n = len(data)
+        per_byte = (t_read - t_first) / n if n else 0.0
+        buf = self._buf
+        i = 0
+        while i < n:
+            if not buf and self._t_start is None:
+                while i < n and data[i] == 0x0A:  # an LF outside a line is ignored
+                    i += 1
+                if i == n:
+                    break
+                self._start = offset + i
+                self._t_start = min(t_read, t_first + i * per_byte)
+            j = data.find(b"\r", i)
+            end = n if j < 0 else j
+            if len(buf) + end - i > MAX_LINE:  # noise: cut at MAX_LINE + 1 bytes
+                take = MAX_LINE + 1 - len(buf)
+                buf += data[i : i + take]
+                lines.append(self._take(offset + i + take - 1, t_read))
+                i += take
+                continue
+            buf += data[i:end]
+            if j < 0:
+                break
+            lines.append(self._take(offset + j, t_read))
+            i = j + 1
+        return lines
+
+    def _feed_bytes(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Line]:
         lines: list[Line] = []
         per_byte = (t_read - t_first) / len(data) if data else 0.0
         for i, b in enumerate(data):
@@ -148,26 +184,34 @@ class FrameDecoder:
         self.packet_members = 0
         self.pending: list[_Pending] = []
         self.answer_packet: tuple[int, int] | None = None
+        self._answers: dict[tuple[bytes, bool], Answer | Garbled] = {}
 
     # -- entry points (the session's Decoder protocol) ------------------------------------
     def feed(self, direction: str, data: bytes, offset: int, t_read: float,
              t_first: float) -> list[Record]:
-        out: list[Record] = []
-        for line in self.lines[direction].feed(data, offset, t_read, t_first):
-            if direction == "host":
-                out.extend(self._command(line))
-            else:
-                out.extend(self._answer(line))
-        return out
+        return [Record(topic, to_ns(t), payload)
+                for topic, t, payload in self.feed_items(direction, data, offset, t_read, t_first)]
 
     def finish(self, t: float) -> list[Record]:
-        out: list[Record] = []
+        return [Record(topic, to_ns(t), payload) for topic, t, payload in self.finish_items(t)]
+
+    def feed_items(self, direction: str, data: bytes, offset: int, t_read: float,
+                   t_first: float) -> list[Item]:
+        """Like ``feed``, as plain (topic, time in seconds, payload) tuples (the fast path)."""
+        out: list[Item] = []
+        decode = self._command if direction == "host" else self._answer
+        for line in self.lines[direction].feed(data, offset, t_read, t_first):
+            out.extend(decode(line))
+        return out
+
+    def finish_items(self, t: float) -> list[Item]:
+        out: list[Item] = []
         for tracker in self.lines.values():
             line = tracker.rest(t)
             if line is not None:
                 frame = self._base(line, "garbled")
                 frame["error"] = "unterminated line at the end of the capture"
-                out.append(Record(TOPIC_FRAMES, to_ns(line.t_last), frame))
+                out.append((TOPIC_FRAMES, line.t_last, frame))
         while self.pending:
             out.append(self._exchange_unanswered(self.pending.pop(0)))
         return out
@@ -194,8 +238,8 @@ class FrameDecoder:
                 return other
         return result
 
-    def _command(self, line: Line) -> list[Record]:
-        out: list[Record] = []
+    def _command(self, line: Line) -> list[Item]:
+        out: list[Item] = []
         result = self._parse_command(line.data)
         frame = self._base(line, "command" if isinstance(result, Command) else "rejection")
         frame["checksum_mode"] = self.checksum_on
@@ -241,7 +285,7 @@ class FrameDecoder:
                 owed = False
             elif result.code is None:
                 owed = False  # the unit stays silent (another address, not a command)
-        out.append(Record(TOPIC_FRAMES, to_ns(line.t_last), frame))
+        out.append((TOPIC_FRAMES, line.t_last, frame))
         if owed:
             while self.pending:  # simplex: the sender gave up waiting for these
                 out.append(self._exchange_unanswered(self.pending.pop(0)))
@@ -260,16 +304,21 @@ class FrameDecoder:
         frame["packet"], frame["packet_role"] = self.packet_id, "member"
 
     # -- unit side -------------------------------------------------------------------------
-    def _answer(self, line: Line) -> list[Record]:
+    def _answer(self, line: Line) -> list[Item]:
         if (self.pending and self.pending[0].frame["name"] == ">" and line.data[:1] == b"!"):
             # `>` first sends the line it repeats (A9), then that line's answer
             frame = self._base(line, "echo")
-            return [Record(TOPIC_FRAMES, to_ns(line.t_last), frame)]
+            return [(TOPIC_FRAMES, line.t_last, frame)]
         pending = self.pending.pop(0) if self.pending else None
         with_sum = self.checksum_on
         if pending is not None and pending.checksum_after is not None:
             with_sum = pending.checksum_after  # the answer to %+ already carries one
-        parsed = parse_answer(line.data, with_sum)
+        key = (line.data, with_sum)
+        parsed = self._answers.get(key)
+        if parsed is None:
+            if len(self._answers) > 4096:  # answers repeat ("0"); keep the cache bounded
+                self._answers.clear()
+            parsed = self._answers[key] = parse_answer(line.data, with_sum)
         frame = self._base(line, "answer" if isinstance(parsed, Answer) else "garbled")
         frame["checksum_mode"] = with_sum
         if isinstance(parsed, Answer):
@@ -294,12 +343,12 @@ class FrameDecoder:
             frame["error"] = parsed.detail
         if pending is not None and pending.packet is not None:
             frame["packet"], frame["packet_role"] = pending.packet, "answer"
-        out = [Record(TOPIC_FRAMES, to_ns(line.t_last), frame)]
+        out = [(TOPIC_FRAMES, line.t_last, frame)]
         out.append(self._exchange(pending, frame, line))
         return out
 
     # -- exchanges -------------------------------------------------------------------------
-    def _exchange(self, pending: _Pending | None, answer: dict[str, Any], line: Line) -> Record:
+    def _exchange(self, pending: _Pending | None, answer: dict[str, Any], line: Line) -> Item:
         if pending is None:
             payload = {
                 "status": "unsolicited", "command": None, "name": None,
@@ -318,9 +367,9 @@ class FrameDecoder:
                 "command_offset": cmd["offset"], "answer_offset": line.offset,
                 "packet": pending.packet, "packet_commands": pending.packet_commands,
             }
-        return Record(TOPIC_EXCHANGES, to_ns(line.t_last), payload)
+        return (TOPIC_EXCHANGES, line.t_last, payload)
 
-    def _exchange_unanswered(self, pending: _Pending) -> Record:
+    def _exchange_unanswered(self, pending: _Pending) -> Item:
         cmd = pending.frame
         payload = {
             "status": "unanswered", "command": cmd["text"], "name": cmd["name"],
@@ -329,7 +378,7 @@ class FrameDecoder:
             "answer_offset": None, "packet": pending.packet,
             "packet_commands": pending.packet_commands,
         }
-        return Record(TOPIC_EXCHANGES, to_ns(pending.t_last), payload)
+        return (TOPIC_EXCHANGES, pending.t_last, payload)
 
 
 def make_decoder(variant: str | Variant, *, baud: int | None = None,

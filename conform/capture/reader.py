@@ -25,6 +25,14 @@ from typing import TYPE_CHECKING, Any
 
 from mcap.records import Channel, Message, Metadata
 
+from conform.capture.batch import (
+    EXCHANGE_KEYS,
+    FRAME_KEYS,
+    is_batch,
+    is_raw_batch,
+    rows,
+    unbatch_raw,
+)
 from conform.capture.scan import ScanStatus, check_magic, iter_records
 from conform.capture.schemas import (
     DIRECTION_TOPIC,
@@ -121,11 +129,27 @@ class Capture:
 
     # -- typed views -----------------------------------------------------------------------
     def raw_chunks(self, direction: str | None = None) -> Iterator[dict[str, Any]]:
-        """Raw chunk payloads (both directions merged in file order) with ``bytes`` added."""
+        """Raw chunks (reads), both directions merged in file order, with ``bytes`` added.
+
+        Format 2 batches are unpacked into one dict per read (``direction``, ``bytes``,
+        ``length``, ``offset``, ``t_read``, ``t_first``, ``order``, ``log_time``).
+        """
         if direction is not None and direction not in DIRECTION_TOPIC:
             raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
         topics = [DIRECTION_TOPIC[direction]] if direction else list(DIRECTION_TOPIC.values())
+        batched: list[dict[str, Any]] = []  # both directions: put back in call order
         for m in self.messages(topics):
+            if is_raw_batch(m.payload):
+                try:
+                    reads = unbatch_raw(m.payload, m.log_time)
+                except ValueError:
+                    self.bad_messages += 1
+                    continue
+                if direction:
+                    yield from reads
+                else:
+                    batched.extend(reads)
+                continue
             payload = dict(m.payload)
             try:
                 payload["bytes"] = base64.b64decode(payload.get("data", ""), validate=True)
@@ -134,16 +158,33 @@ class Capture:
                 continue
             payload["log_time"] = m.log_time
             yield payload
+        batched.sort(key=lambda r: r["order"])
+        yield from batched
 
     def _topic(self, topic: str) -> Iterator[dict[str, Any]]:
         for m in self.messages([topic]):
             yield {**m.payload, "log_time": m.log_time}
 
+    def _batched(self, topic: str, keys: tuple[str, ...]) -> Iterator[dict[str, Any]]:
+        for m in self.messages([topic]):
+            if not is_batch(m.payload):  # format 1: one message per item
+                yield {**m.payload, "log_time": m.log_time}
+                continue
+            try:
+                items = rows(m.payload, keys)
+            except ValueError:
+                self.bad_messages += 1
+                continue
+            for item in items:
+                yield {**item, "log_time": m.log_time}
+
     def frames(self) -> Iterator[dict[str, Any]]:
-        return self._topic(TOPIC_FRAMES)
+        """Decoded lines (``conform.Frame`` dicts), unpacked from format 2 batches."""
+        return self._batched(TOPIC_FRAMES, FRAME_KEYS)
 
     def exchanges(self) -> Iterator[dict[str, Any]]:
-        return self._topic(TOPIC_EXCHANGES)
+        """Exchanges (``conform.Exchange`` dicts), unpacked from format 2 batches."""
+        return self._batched(TOPIC_EXCHANGES, EXCHANGE_KEYS)
 
     def link_events(self) -> Iterator[dict[str, Any]]:
         return self._topic(TOPIC_LINK)
@@ -162,6 +203,10 @@ class Capture:
         by_topic = {t: d for d, t in DIRECTION_TOPIC.items()}
         if topic in DIRECTION_TOPIC or topic in by_topic:
             rows: Iterable[dict[str, Any]] = self.raw_chunks(by_topic.get(topic, topic))
+        elif topic == TOPIC_FRAMES:
+            rows = self.frames()
+        elif topic == TOPIC_EXCHANGES:
+            rows = self.exchanges()
         else:
             rows = self._topic(topic)
         return pd.DataFrame.from_records(list(rows))

@@ -31,8 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from conform import __version__
+from conform.capture.batch import BatchSession
 from conform.capture.schemas import DIRECTIONS, FORMAT_VERSION, LINK_KINDS
-from conform.capture.session import CaptureSession, Decoder, Record
+from conform.capture.session import Decoder, Record
 from conform.capture.sink import McapSink
 from conform.errors import UserError
 
@@ -100,7 +101,7 @@ class Recorder:
             decoder, why = _make_decoder(variant, baud)
             if why:
                 notes.append(why)
-        self._session = CaptureSession(baud=baud, decoder=decoder, name=name)
+        self._session = BatchSession(baud=baud, decoder=decoder, name=name)
         self.decoding = decoder is not None
         if self.part.exists() and not overwrite_part:
             raise RecordingError(
@@ -137,6 +138,7 @@ class Recorder:
         self.error: BaseException | None = None
         self.bytes = dict.fromkeys(DIRECTIONS, 0)
         self.max_backlog = 0  # most items ever waiting for the writer thread
+        self.cpu_s = 0.0  # CPU time the writer thread used (encoding, decoding, writing)
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
 
@@ -199,7 +201,8 @@ class Recorder:
                 end = {"ended": datetime.fromtimestamp(t, UTC).isoformat(),
                        "bytes_host": self._session.offsets["host"],
                        "bytes_unit": self._session.offsets["unit"],
-                       "messages": self._sink.count, "max_backlog": self.max_backlog}
+                       "messages": self._sink.count, "max_backlog": self.max_backlog,
+                       "recorder_cpu_s": round(self.cpu_s, 3)}
                 end.update(summary or {})
                 self._sink.metadata("conform.session_end", end)
                 self._sink.finish()
@@ -245,6 +248,7 @@ class Recorder:
                 except queue.Empty:
                     item = None
                 if item is _STOP:
+                    self._write(self._session.flush())
                     return
                 if item is not None:
                     for rec in self._records(item):
@@ -252,6 +256,7 @@ class Recorder:
                     dirty = True
                     self.max_backlog = max(self.max_backlog, self._queue.qsize())
                 if dirty and time.monotonic() - last_flush >= self.flush_interval:
+                    self._write(self._session.flush())
                     self._sink.flush()
                     last_flush = time.monotonic()
                     dirty = False
@@ -259,6 +264,12 @@ class Recorder:
                     last_flush = time.monotonic() - self.flush_interval  # flush the next one
         except BaseException as exc:  # noqa: BLE001 - reported by close() and the next call
             self.error = exc
+        finally:
+            self.cpu_s = time.thread_time()
+
+    def _write(self, records: list[Record]) -> None:
+        for rec in records:
+            self._sink.write(rec)
 
 
 def _make_decoder(variant: str, baud: int | None) -> tuple[Decoder | None, str]:

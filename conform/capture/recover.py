@@ -36,6 +36,7 @@ class CaptureInfo:
     messages: Counter[str] = field(default_factory=Counter)
     bytes: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
     gaps: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
+    reads: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     bad_messages: int = 0
 
@@ -83,13 +84,13 @@ def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
             info.last_ns = t if info.last_ns is None else max(info.last_ns, t)
             direction = _RAW_TOPICS.get(topic)
             if direction is not None:
-                try:
-                    payload = json.loads(rec.data)
-                    length, offset = int(payload["length"]), int(payload["offset"])
-                except (ValueError, KeyError, TypeError, RecursionError):
+                span = _raw_span(rec.data)
+                if span is None:
                     info.bad_messages += 1
                     continue
+                offset, length, reads = span
                 info.bytes[direction] += length
+                info.reads[direction] += reads
                 if offset != expected[direction]:
                     info.gaps[direction] += 1
                 expected[direction] = offset + length
@@ -98,6 +99,23 @@ def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
         elif isinstance(rec, Metadata):
             info.metadata[rec.name] = dict(rec.metadata)
     return info
+
+
+def _raw_span(data: bytes) -> tuple[int, int, int] | None:
+    """(stream offset, bytes, reads) of a raw message, format 1 or 2; None if unreadable."""
+    try:
+        payload = json.loads(data)
+        offset = int(payload["offset"])
+        if "lengths" in payload:
+            lengths = [int(n) for n in payload["lengths"]]
+            length, reads = sum(lengths), len(lengths)
+        else:
+            length, reads = int(payload["length"]), 1
+    except (ValueError, KeyError, TypeError, RecursionError, OverflowError):
+        return None
+    if offset < 0 or length < 0:
+        return None
+    return offset, length, reads
 
 
 def format_info(info: CaptureInfo) -> str:
@@ -115,7 +133,7 @@ def format_info(info: CaptureInfo) -> str:
     lines.append(f"{'duration:':<16}{info.duration:.3f} s")
     for d in DIRECTION_TOPIC:
         gap = f"  ({info.gaps[d]} gaps in offsets)" if info.gaps[d] else ""
-        lines.append(f"{'bytes ' + d + ':':<16}{info.bytes[d]}{gap}")
+        lines.append(f"{'bytes ' + d + ':':<16}{info.bytes[d]} in {info.reads[d]} reads{gap}")
     lines.append("messages:")
     for topic, n in sorted(info.messages.items()):
         lines.append(f"  {topic:<14}{n}")

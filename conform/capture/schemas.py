@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 1: one message per read and per line; 2: batches
 PROFILE = ""  # plain MCAP, JSON messages (no ROS profile)
 
 TOPIC_HOST = "/serial/host"
@@ -146,15 +146,57 @@ FOXGLOVE_LOG: dict[str, Any] = {
     "required": ["timestamp", "level", "message", "name", "file", "line"],
 }
 
-# topic -> (schema name, schema)
-CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
-    TOPIC_HOST: ("conform.RawChunk", RAW_CHUNK),
-    TOPIC_UNIT: ("conform.RawChunk", RAW_CHUNK),
-    TOPIC_FRAMES: ("conform.Frame", FRAME),
-    TOPIC_EXCHANGES: ("conform.Exchange", EXCHANGE),
-    TOPIC_LINK: ("conform.LinkEvent", LINK_EVENT),
-    TOPIC_LOG: ("foxglove.Log", FOXGLOVE_LOG),
+def _batch_of(title: str, item: dict[str, Any]) -> dict[str, Any]:
+    props: dict[str, Any] = {"count": {"type": "integer", "minimum": 0,
+                                       "description": "items in this batch"}}
+    for key, prop in item["properties"].items():
+        props[key] = {"type": "array", "items": prop, "description": prop.get("description", key)}
+    return {
+        "title": title,
+        "description": f"{item['description']}: everything decoded in one moment of the "
+                       "recording, one list per field (item i is the i-th of every list)",
+        "type": "object",
+        "properties": props,
+        "required": ["count"],
+    }
+
+
+_TIMES = {"type": "array", "items": {"type": "number"}}
+RAW_BATCH: dict[str, Any] = {
+    "title": "conform.RawBatch",
+    "description": "Consecutive reads in one direction, their bytes stored once",
+    "type": "object",
+    "properties": {
+        "direction": {"type": "string", "enum": list(DIRECTIONS)},
+        "offset": {"type": "integer", "minimum": 0, "description": "index of the first byte "
+                   "in this direction's stream"},
+        "lengths": {"type": "array", "items": {"type": "integer", "minimum": 1},
+                    "description": "bytes each read returned"},
+        "t_read": _TIMES | {"description": "when each read returned (seconds since the epoch)"},
+        "t_first": _TIMES | {"description": "estimated arrival of each read's first byte"},
+        "order": {"type": "array", "items": {"type": "integer"},
+                  "description": "call order of each read, one count for both directions"},
+        "data": {"type": "string", "contentEncoding": "base64",
+                 "description": "the bytes of all the reads, concatenated"},
+    },
+    "required": ["direction", "offset", "lengths", "t_read", "data"],
 }
+FRAME_BATCH = _batch_of("conform.FrameBatch", FRAME)
+EXCHANGE_BATCH = _batch_of("conform.ExchangeBatch", EXCHANGE)
+
+def _layout(raw: tuple[str, dict[str, Any]], frames: tuple[str, dict[str, Any]],
+            exchanges: tuple[str, dict[str, Any]]) -> dict[str, tuple[str, dict[str, Any]]]:
+    return {TOPIC_HOST: raw, TOPIC_UNIT: raw, TOPIC_FRAMES: frames, TOPIC_EXCHANGES: exchanges,
+            TOPIC_LINK: ("conform.LinkEvent", LINK_EVENT),
+            TOPIC_LOG: ("foxglove.Log", FOXGLOVE_LOG)}
+
+
+# topic -> (schema name, schema). Format 1 (one message per read and per line) is still
+# read, no longer written; format 2 batches (the same topics and the same channel ids).
+CHANNELS_V1 = _layout(("conform.RawChunk", RAW_CHUNK), ("conform.Frame", FRAME),
+                      ("conform.Exchange", EXCHANGE))
+CHANNELS = _layout(("conform.RawBatch", RAW_BATCH), ("conform.FrameBatch", FRAME_BATCH),
+                   ("conform.ExchangeBatch", EXCHANGE_BATCH))
 
 
 def schema_bytes(schema: dict[str, Any]) -> bytes:

@@ -9,6 +9,8 @@ drive it directly with made-up times.
 from __future__ import annotations
 
 import base64
+import math
+import re
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -44,24 +46,21 @@ class Decoder(Protocol):
 
 
 def to_ns(t: float) -> int:
-    return max(0, round(t * 1e9))
+    """Seconds to integer nanoseconds for ``log_time`` (0 for a time that is not finite)."""
+    ns = t * 1e9
+    return max(0, min(round(ns), 2**63 - 1)) if math.isfinite(ns) else 0
 
 
 _ESCAPES = {0x0D: "\\r", 0x0A: "\\n", 0x09: "\\t", 0x5C: "\\\\"}
+_ESCAPED = [_ESCAPES.get(b) or (chr(b) if 0x20 <= b < 0x7F else f"\\x{b:02x}") for b in range(256)]
+_NEEDS_ESCAPE = re.compile(rb"[^\x20-\x5b\x5d-\x7e]")
 
 
 def escape_bytes(data: bytes) -> str:
     """Printable ASCII as is, CR/LF/TAB/backslash as C escapes, everything else ``\\xNN``."""
-    out = []
-    for b in data:
-        esc = _ESCAPES.get(b)
-        if esc is not None:
-            out.append(esc)
-        elif 0x20 <= b < 0x7F:
-            out.append(chr(b))
-        else:
-            out.append(f"\\x{b:02x}")
-    return "".join(out)
+    if _NEEDS_ESCAPE.search(data) is None:
+        return data.decode("ascii")
+    return "".join([_ESCAPED[b] for b in data])
 
 
 def unescape_text(text: str) -> bytes:
@@ -110,6 +109,19 @@ class CaptureSession:
         t_first = t_read - wire_time(n_bytes, self.baud)
         return max(t_first, min(self._last_read[direction], t_read))
 
+    def advance(self, direction: str, n_bytes: int, t_read: float, t_first: float | None
+                ) -> tuple[int, float]:
+        """Count one read of ``n_bytes``: its stream offset and first-byte time."""
+        if direction not in DIRECTION_TOPIC:
+            raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
+        if t_first is None:
+            t_first = self.estimate_first(direction, n_bytes, t_read)
+        offset = self.offsets[direction]
+        self.offsets[direction] = offset + n_bytes
+        self.seq[direction] += 1
+        self._last_read[direction] = max(self._last_read[direction], t_read)
+        return offset, t_first
+
     def chunk(
         self, direction: str, data: bytes, t_read: float, t_first: float | None = None
     ) -> list[Record]:
@@ -117,12 +129,7 @@ class CaptureSession:
             raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
         if not data:
             return []
-        if t_first is None:
-            t_first = self.estimate_first(direction, len(data), t_read)
-        offset = self.offsets[direction]
-        self.offsets[direction] = offset + len(data)
-        self.seq[direction] += 1
-        self._last_read[direction] = max(self._last_read[direction], t_read)
+        offset, t_first = self.advance(direction, len(data), t_read, t_first)
         payload = {
             "direction": direction,
             "data": base64.b64encode(data).decode("ascii"),

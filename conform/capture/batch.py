@@ -1,0 +1,214 @@
+"""Format 2 of a capture: the reads and the decoded lines of a moment, one message each.
+
+A recorder at 921 600 Bd sees thousands of reads and lines a second; one MCAP message per
+read and per line (format 1) costs more CPU to encode than the traffic allows. Format 2
+keeps the same channels but batches them (docs/capture-format.md):
+
+* ``/serial/host``, ``/serial/unit``: ``conform.RawBatch``, the bytes of consecutive reads
+  in one direction stored once (base64 of their concatenation) with per-read lengths,
+  times and a call-order number shared by both directions, so the causal order of reads
+  survives batching;
+* ``/frames``, ``/exchanges``: ``conform.FrameBatch`` / ``conform.ExchangeBatch``, the
+  decoded lines and exchanges of the same moment, one list per field (``columns``;
+  ``rows`` turns a batch back into ``conform.Frame`` / ``conform.Exchange`` dicts).
+
+``BatchSession`` is sans-I/O like ``CaptureSession``: chunks in, nothing out until
+``flush(t)`` returns the batch records. Link events and logs are returned at once.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+from operator import itemgetter
+from typing import Any
+
+from conform.capture.schemas import DIRECTION_TOPIC, DIRECTIONS, TOPIC_EXCHANGES, TOPIC_FRAMES
+from conform.capture.session import CaptureSession, Decoder, Record, to_ns
+
+BATCH_BYTES = 32 * 1024  # a direction's pending bytes that force a batch out
+
+FRAME_KEYS = ("direction", "kind", "text", "offset", "length", "t_first", "t_last", "address",
+              "name", "args", "code", "inta", "fields", "checksum", "checksum_status",
+              "checksum_mode", "packet", "packet_role", "error")
+EXCHANGE_KEYS = ("status", "command", "name", "answer", "code", "inta", "t_command", "t_answer",
+                 "latency", "command_offset", "answer_offset", "packet", "packet_commands")
+
+
+def columns(items: list[dict[str, Any]], keys: tuple[str, ...]) -> dict[str, Any]:
+    """Items as one batch: ``count`` and one list per field (JSON of lists costs less)."""
+    out: dict[str, Any] = {"count": len(items)}
+    try:
+        cols = [list(c) for c in zip(*map(itemgetter(*keys), items), strict=True)]
+    except KeyError:  # a decoder that leaves fields out
+        cols = [[item.get(k) for item in items] for k in keys]
+    out.update(zip(keys, cols, strict=True)) if cols else out.update((k, []) for k in keys)
+    return out
+
+
+def rows(payload: dict[str, Any], keys: tuple[str, ...]) -> list[dict[str, Any]]:
+    """The items of a batch; ``ValueError`` if its columns do not hold together."""
+    n = payload.get("count")
+    if not isinstance(n, int) or isinstance(n, bool) or n < 0:
+        raise ValueError("batch without a count")
+    cols = []
+    for k in keys:
+        col = payload.get(k, [None] * n)
+        if not isinstance(col, list) or len(col) != n:
+            raise ValueError(f"batch column {k!r} is not a list of {n}")
+        cols.append(col)
+    return [dict(zip(keys, values, strict=True)) for values in zip(*cols, strict=True)] \
+        if n else []
+
+
+def is_batch(payload: dict[str, Any]) -> bool:
+    return "count" in payload
+
+
+class _Pending:
+    """Reads of one direction waiting for the next batch."""
+
+    __slots__ = ("data", "offset", "lengths", "t_read", "t_first", "order")
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self.offset = 0
+        self.lengths: list[int] = []
+        self.t_read: list[float] = []
+        self.t_first: list[float] = []
+        self.order: list[int] = []
+
+
+class BatchSession(CaptureSession):
+    """``CaptureSession`` writing format 2: ``chunk`` buffers, ``flush`` emits the batches."""
+
+    def __init__(self, *, baud: int | None = None, decoder: Decoder | None = None,
+                 name: str = "conform", batch_bytes: int = BATCH_BYTES) -> None:
+        super().__init__(baud=baud, decoder=decoder, name=name)
+        self.batch_bytes = batch_bytes
+        self._pending = {d: _Pending() for d in DIRECTIONS}
+        self._frames: list[dict[str, Any]] = []
+        self._exchanges: list[dict[str, Any]] = []
+        self._t_frames: float | None = None
+        self._calls = 0
+
+    def chunk(self, direction: str, data: bytes, t_read: float, t_first: float | None = None
+              ) -> list[Record]:
+        """Buffer one read; returns the batches if this read filled one."""
+        if not data:
+            return super().chunk(direction, data, t_read, t_first)
+        offset, t_first = self.advance(direction, len(data), t_read, t_first)
+        p = self._pending[direction]
+        if not p.lengths:
+            p.offset = offset
+        p.data += data
+        p.lengths.append(len(data))
+        p.t_read.append(t_read)
+        p.t_first.append(t_first)
+        p.order.append(self._calls)
+        self._calls += 1
+        if self.decoder is not None:
+            self._decode(direction, data, offset, t_read, t_first)
+        if len(p.data) >= self.batch_bytes:
+            return self.flush()
+        return []
+
+    def _derived(self, topic: str, t: float, payload: dict[str, Any]) -> None:
+        if self._t_frames is None:
+            self._t_frames = t
+        (self._frames if topic == TOPIC_FRAMES else self._exchanges).append(payload)
+
+    def _decode(self, direction: str, data: bytes, offset: int, t_read: float,
+                t_first: float) -> None:
+        fast = getattr(self.decoder, "feed_items", None)
+        if fast is not None:
+            for item in fast(direction, data, offset, t_read, t_first):
+                self._derived(*item)
+            return
+        assert self.decoder is not None
+        for rec in self.decoder.feed(direction, data, offset, t_read, t_first):
+            self._derived(rec.topic, rec.log_time / 1e9, rec.payload)
+
+    def flush(self) -> list[Record]:
+        """Everything buffered as batch records (raw first, then frames and exchanges)."""
+        out: list[Record] = []
+        for d in DIRECTIONS:
+            p = self._pending[d]
+            if not p.lengths:
+                continue
+            payload = {"direction": d, "offset": p.offset, "lengths": p.lengths,
+                       "t_read": p.t_read, "t_first": p.t_first, "order": p.order,
+                       "data": base64.b64encode(p.data).decode("ascii")}
+            out.append(Record(DIRECTION_TOPIC[d], to_ns(p.t_read[0]), payload))
+            self._pending[d] = _Pending()
+        t = to_ns(self._t_frames or 0.0)
+        if self._frames:
+            out.append(Record(TOPIC_FRAMES, t, columns(self._frames, FRAME_KEYS)))
+        if self._exchanges:
+            out.append(Record(TOPIC_EXCHANGES, t, columns(self._exchanges, EXCHANGE_KEYS)))
+        self._frames, self._exchanges, self._t_frames = [], [], None
+        return out
+
+    def finish(self, t: float) -> list[Record]:
+        """The decoder's leftovers and every pending batch."""
+        for rec in super().finish(t):
+            self._derived(rec.topic, rec.log_time / 1e9, rec.payload)
+        return self.flush()
+
+
+def is_raw_batch(payload: dict[str, Any]) -> bool:
+    return "lengths" in payload
+
+
+def unbatch_raw(payload: dict[str, Any], log_time: int) -> list[dict[str, Any]]:
+    """The reads of a ``conform.RawBatch`` as format-1 style chunk dicts (with ``bytes``).
+
+    ``ValueError`` if the batch does not hold together (lengths, times and data disagree).
+    """
+    try:
+        data = base64.b64decode(payload["data"], validate=True)
+        lengths = [int(n) for n in payload["lengths"]]
+        t_read = [float(t) for t in payload["t_read"]]
+        t_first = [float(t) for t in payload.get("t_first") or t_read]
+        order = list(payload.get("order") or range(len(lengths)))
+        offset = int(payload["offset"])
+        direction = str(payload["direction"])
+    except (KeyError, TypeError, ValueError, OverflowError, binascii.Error) as exc:
+        raise ValueError(f"bad raw batch: {exc}") from None
+    if any(n <= 0 for n in lengths) or sum(lengths) != len(data) \
+            or not len(t_read) == len(t_first) == len(order) == len(lengths):
+        raise ValueError("bad raw batch: lengths, times and data disagree")
+    out = []
+    pos = 0
+    for i, n in enumerate(lengths):
+        out.append({"direction": direction, "bytes": data[pos : pos + n], "length": n,
+                    "offset": offset + pos, "t_read": t_read[i], "t_first": t_first[i],
+                    "order": order[i], "log_time": to_ns(t_read[i]) if t_read[i] == t_read[i]
+                    else log_time})
+        pos += n
+    return out
+
+
+def unbatch_arrays(raw: bytes) -> tuple[bytes, Any, int, Any, Any, Any]:
+    """A ``conform.RawBatch`` message as (bytes, lengths, offset, t_read, t_first, order)
+    with numpy arrays, for the analyser; ``ValueError`` if it does not hold together."""
+    import json
+
+    import numpy as np
+
+    try:
+        obj = json.loads(raw)
+        data = binascii.a2b_base64(obj["data"], strict_mode=True)
+        lengths = np.asarray(obj["lengths"], np.int64)
+        t_read = np.asarray(obj["t_read"], np.float64)
+        t_first = np.asarray(obj.get("t_first", obj["t_read"]), np.float64)
+        order = np.asarray(obj.get("order", np.arange(len(lengths))), np.int64)
+        offset = int(obj["offset"])
+    except (KeyError, TypeError, ValueError, OverflowError, RecursionError,
+            binascii.Error) as exc:
+        raise ValueError(f"bad raw batch: {exc}") from None
+    n = len(lengths)
+    if lengths.ndim != 1 or (lengths <= 0).any() or int(lengths.sum()) != len(data) \
+            or not (t_read.shape == t_first.shape == order.shape == (n,)) or offset < 0:
+        raise ValueError("bad raw batch: lengths, times and data disagree")
+    return data, lengths, offset, t_read, t_first, order
