@@ -33,6 +33,7 @@ from conform.errors import UserError
 
 STANDARD_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
 DEFAULT_VARIANT = "gve64-v19"
+MIN_BAUD, MAX_BAUD = 50, 100_000_000  # a claimed rate outside this is not a baud rate
 Step = Callable[[str], None]
 
 
@@ -178,11 +179,17 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     dia = _dialect_from(spec, dialect or _session_value(raw, "dialect"))
     declared = baud
     source = "option"
+    if declared is not None and not MIN_BAUD <= declared <= MAX_BAUD:
+        raise UserError(f"baud {declared:g}: must be between {MIN_BAUD} and {MAX_BAUD}")
     if declared is None:
+        text = _session_value(raw, "baud")
         try:
-            declared = float(_session_value(raw, "baud")) or None
+            declared = float(text) or None
             source = "capture"
         except ValueError:
+            declared = None
+        if declared is not None and not MIN_BAUD <= declared <= MAX_BAUD:
+            notes.append(f"the capture's baud {text[:40]!r} is not a usable rate; ignored")
             declared = None
     if declared is None:
         declared = float(var.default_baud)

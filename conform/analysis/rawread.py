@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import zstandard
 
-from conform.capture.scan import Walk, check_magic, decompress_chunk, walk_records
+from conform.capture.scan import Walk, check_magic, decompress_chunk, opcode_damaged, walk_records
 from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
 from conform.errors import UserError
 
@@ -52,11 +52,34 @@ class ReadStatus:
     problem: str | None = None
     damaged_chunks: int = 0
     bad_payloads: int = 0
+    bad_times: int = 0  # reads whose time was not a usable number (timed by their neighbour)
     notes: list[str] = field(default_factory=list)
 
     @property
     def truncated(self) -> bool:
         return not self.complete
+
+    @property
+    def clean(self) -> bool:
+        """Complete, and nothing in it was damaged or unreadable."""
+        return self.complete and self.problem is None and not self.damaged_chunks \
+            and not self.bad_payloads and not self.bad_times
+
+    def describe(self) -> str:
+        """One line saying what is wrong ("" for a clean capture)."""
+        if self.clean:
+            return ""
+        what = [] if self.complete else [f"truncated ({self.problem})"]
+        if self.complete and self.problem:
+            what.append(self.problem)
+        if self.damaged_chunks:
+            what.append(f"{self.damaged_chunks} damaged record(s) skipped")
+        if self.bad_payloads:
+            what.append(f"{self.bad_payloads} unreadable message(s) skipped")
+        if self.bad_times:
+            what.append(f"{self.bad_times} read(s) with an unusable time (NaN, infinite, out "
+                        "of range or before the read preceding it), timed as the read before")
+        return "; ".join(what)
 
 
 @dataclass
@@ -208,11 +231,16 @@ class _Collector:
     def _link(self, payload: bytes, log_time: int) -> None:
         try:
             obj = json.loads(payload)
-        except ValueError:
+        except (ValueError, RecursionError):
+            obj = None
+        t = obj.get("t", log_time / 1e9) if isinstance(obj, dict) else None
+        if not isinstance(obj, dict) or not isinstance(obj.get("kind"), str) \
+                or not isinstance(t, (int, float)) or isinstance(t, bool) or not np.isfinite(t):
+            assert self.status is not None
+            self.status.bad_payloads += 1
             return
-        if isinstance(obj, dict):
-            obj.setdefault("t", log_time / 1e9)
-            self.link.append(obj)
+        obj["t"] = float(t)
+        self.link.append(obj)
 
 
 def _chunk_data(body: bytes) -> bytes:
@@ -240,6 +268,11 @@ def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | 
                     last_report = pos
                 if in_summary or op == OP_FOOTER:
                     continue
+                if opcode_damaged(op):
+                    status.damaged_chunks += 1
+                    status.notes.append(f"record with unknown opcode 0x{op:02x} at byte {pos} "
+                                        "skipped")
+                    continue
                 try:
                     if op == OP_CHUNK:
                         try:
@@ -258,6 +291,8 @@ def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | 
         finally:
             status.complete = walk.complete
             status.problem = status.problem or walk.problem
+            status.damaged_chunks += len(walk.crc_problems)
+            status.notes.extend(walk.crc_problems)
     if progress is not None:
         progress(size, size)
 
@@ -321,15 +356,15 @@ def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndar
 
     if col.raw_encoded[name]:
         return _raw_direction(name, payloads(), times, orders)
-    prefix = np.frombuffer(b'{"direction":"%s","offset":' % name.encode(), np.uint8)
-    if (lens > len(prefix)).all() and (
-            big[starts[:, None] + np.arange(len(prefix))] == prefix).all():
-        return _batch_direction(name, payloads(), status)
     try:
         return _fast_json(name, big, starts, lens, times, orders, quotes, commas)
     except ValueError:
         pass
     pl = payloads()
+    batch = [b'"lengths"' in p for p in pl]
+    if any(batch):  # format 2; a format-1 payload among batches is not readable
+        status.bad_payloads += len(batch) - sum(batch)
+        return _batch_direction(name, [p for p, b in zip(pl, batch, strict=True) if b], status)
     try:
         return _bulk_json(name, pl, times, orders)
     except (ValueError, KeyError, TypeError, ImportError):
@@ -467,6 +502,10 @@ def _bulk_json(name: str, payloads: list[bytes], times: np.ndarray,
 
     schema = pa.schema([("data", pa.string()), ("offset", pa.int64()),
                         ("t_read", pa.float64()), ("t_first", pa.float64())])
+    # pyarrow's reader must only ever see one JSON object per line: a payload such as
+    # ``null`` makes it crash the process, so anything else goes the slow, careful way
+    if not all(p[:1] == b"{" and p[-1:] == b"}" for p in payloads):
+        raise ValueError("not one JSON object per payload")
     blob = b"\n".join(payloads)
     if blob.count(b"\n") != len(payloads) - 1:
         raise ValueError("multi-line JSON")
@@ -507,11 +546,11 @@ def _slow_json(name: str, payloads: list[bytes], times: np.ndarray, orders: np.n
     for i, raw in enumerate(payloads):
         try:
             obj = json.loads(raw)
-            b = base64.b64decode(obj.get("data", ""), validate=True)
-        except (ValueError, binascii.Error, TypeError, AttributeError, RecursionError):
+            b = base64.b64decode(obj["data"], validate=True)
+        except (ValueError, binascii.Error, TypeError, AttributeError, KeyError, RecursionError):
             status.bad_payloads += 1
             continue
-        if not isinstance(obj, dict):
+        if not isinstance(obj, dict) or not b:
             status.bad_payloads += 1
             continue
         chunks.append(b)
@@ -543,6 +582,41 @@ def _merge(name: str, parts: list[Direction]) -> Direction:
           for f in ("length", "offset", "t_read", "t_first", "order")))
 
 
+MAX_TIME = 1e11  # seconds since the epoch (the year 5138): later is not a time
+
+
+def _sane_times(d: Direction) -> int:
+    """Replace read times that are not usable numbers; how many there were.
+
+    A NaN, infinite, negative or absurd ``t_read`` takes the last good one before it (the
+    first good one at the start), as does one earlier than the read before it; a ``t_first``
+    that is not finite or not within 10 s before its read is dropped (estimated from the
+    baud later).
+    """
+    t = d.t_read
+    bad = ~np.isfinite(t) | (t < 0) | (t > MAX_TIME)
+    n = int(bad.sum())
+    if n:
+        good = np.flatnonzero(~bad)
+        if len(good):
+            k = np.maximum.accumulate(np.where(bad, 0, np.arange(len(t))))
+            k[: good[0]] = good[0]
+            d.t_read = t[k]
+        else:
+            d.t_read = np.zeros(len(t))
+    # reads of one direction come back in stream order, so their times cannot go backwards
+    mono = np.maximum.accumulate(d.t_read) if len(d.t_read) else d.t_read
+    back = mono > d.t_read
+    if back.any():
+        n += int((back & ~bad).sum())
+        d.t_read = mono
+    tf = d.t_first
+    with np.errstate(invalid="ignore"):
+        off = ~np.isfinite(tf) | (tf > d.t_read + 1e-6) | (d.t_read - tf > 10.0) | bad
+    d.t_first = np.where(off, np.nan, tf)
+    return n
+
+
 def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
     """Read ``path`` (an MCAP capture) as far as it is intact."""
     p = check_magic(path)
@@ -556,6 +630,8 @@ def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> 
     col.flush()
     host = _merge("host", col.parts["host"])
     unit = _merge("unit", col.parts["unit"])
+    for d in (host, unit):
+        status.bad_times += _sane_times(d)
     if status.bad_payloads:
         status.notes.append(f"{status.bad_payloads} raw chunk message(s) unreadable, skipped")
     return RawCapture(status, col.metadata, host, unit, col.link, col.topics)

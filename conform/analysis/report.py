@@ -15,15 +15,16 @@ from conform.errors import UserError
 TEMPLATES = Path(__file__).with_name("templates")
 
 
-def _clean(x: Any) -> Any:
-    """JSON-safe: numpy scalars to Python, NaN/inf to None."""
+def _clean(x: Any, finite: bool = True) -> Any:
+    """Plain Python: numpy scalars to Python; NaN/inf to None for JSON (``finite``), kept
+    as floats for the templates (which format them as ``nan``/``inf``)."""
     if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
+        return {str(k): _clean(v, finite) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [_clean(v, finite) for v in x]
     if isinstance(x, np.generic):
         x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
+    if finite and isinstance(x, float) and not math.isfinite(x):
         return None
     return x
 
@@ -51,7 +52,7 @@ def _fmt_ms(v: Any) -> str:
 
 
 def _context(a: Any, plots: dict[str, str]) -> dict[str, Any]:
-    m = _clean(a.metrics)
+    m = _clean(a.metrics, finite=False)
     by_sev: dict[str, int] = {}
     for f in a.findings:
         by_sev[f.severity] = by_sev.get(f.severity, 0) + 1

@@ -175,7 +175,7 @@ def unbatch_raw(payload: dict[str, Any], log_time: int) -> list[dict[str, Any]]:
         direction = str(payload["direction"])
     except (KeyError, TypeError, ValueError, OverflowError, binascii.Error) as exc:
         raise ValueError(f"bad raw batch: {exc}") from None
-    if any(n <= 0 for n in lengths) or sum(lengths) != len(data) \
+    if offset < 0 or any(n <= 0 for n in lengths) or sum(lengths) != len(data) \
             or not len(t_read) == len(t_first) == len(order) == len(lengths):
         raise ValueError("bad raw batch: lengths, times and data disagree")
     out = []

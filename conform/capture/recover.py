@@ -8,6 +8,8 @@ lost. The damaged file is left untouched.
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import os
 from collections import Counter
@@ -18,13 +20,16 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from conform import __version__
+from conform.capture.batch import EXCHANGE_KEYS, FRAME_KEYS, is_batch, is_raw_batch, rows, unbatch_raw
 from conform.capture.recorder import PART_SUFFIX
 from conform.capture.scan import ScanStatus, iter_records
-from conform.capture.schemas import DIRECTION_TOPIC
+from conform.capture.schemas import DIRECTION_TOPIC, TOPIC_EXCHANGES, TOPIC_FRAMES, TOPIC_LINK
 from conform.capture.sink import default_layout
 from conform.errors import UserError
 
 _RAW_TOPICS = {topic: d for d, topic in DIRECTION_TOPIC.items()}
+_BATCH_KEYS = {TOPIC_FRAMES: FRAME_KEYS, TOPIC_EXCHANGES: EXCHANGE_KEYS}
+_CHECKED = {TOPIC_FRAMES, TOPIC_EXCHANGES, TOPIC_LINK}
 
 
 @dataclass
@@ -39,6 +44,7 @@ class CaptureInfo:
     reads: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DIRECTION_TOPIC, 0))
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     bad_messages: int = 0
+    bad_schemas: int = 0
 
     @property
     def duration(self) -> float:
@@ -48,6 +54,8 @@ class CaptureInfo:
 
     @property
     def state(self) -> str:
+        if self.status.clean and (self.bad_messages or self.bad_schemas):
+            return "damaged"  # whole, but some raw messages cannot be read
         if self.status.clean:
             return "recovered" if "conform.recovery" in self.metadata else "clean"
         if self.status.complete:
@@ -94,6 +102,13 @@ def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
                 if offset != expected[direction]:
                     info.gaps[direction] += 1
                 expected[direction] = offset + length
+            elif topic in _CHECKED and not _derived_ok(topic, rec.data):
+                info.bad_messages += 1
+        elif isinstance(rec, Schema) and rec.encoding == "jsonschema":
+            try:
+                json.loads(rec.data)
+            except (ValueError, RecursionError):
+                info.bad_schemas += 1
         elif isinstance(rec, Channel):
             channels.setdefault(rec.id, rec.topic)
         elif isinstance(rec, Metadata):
@@ -105,17 +120,36 @@ def _raw_span(data: bytes) -> tuple[int, int, int] | None:
     """(stream offset, bytes, reads) of a raw message, format 1 or 2; None if unreadable."""
     try:
         payload = json.loads(data)
-        offset = int(payload["offset"])
-        if "lengths" in payload:
-            lengths = [int(n) for n in payload["lengths"]]
-            length, reads = sum(lengths), len(lengths)
-        else:
-            length, reads = int(payload["length"]), 1
-    except (ValueError, KeyError, TypeError, RecursionError, OverflowError):
+        if not isinstance(payload, dict):
+            return None
+        if is_raw_batch(payload):
+            reads = unbatch_raw(payload, 0)
+            return int(payload["offset"]), sum(r["length"] for r in reads), len(reads)
+        offset, length = int(payload["offset"]), int(payload["length"])
+        if len(base64.b64decode(payload["data"], validate=True)) != length:
+            return None
+    except (ValueError, KeyError, TypeError, RecursionError, OverflowError, binascii.Error):
         return None
     if offset < 0 or length < 0:
         return None
-    return offset, length, reads
+    return offset, length, 1
+
+
+def _derived_ok(topic: str, data: bytes) -> bool:
+    """A ``/frames``, ``/exchanges`` or ``/link`` message that can be read (JSON objects;
+    format 2 batches whose columns hold together)."""
+    try:
+        payload = json.loads(data)
+    except (ValueError, RecursionError):
+        return False
+    if not isinstance(payload, dict):
+        return False
+    if topic in _BATCH_KEYS and is_batch(payload):
+        try:
+            rows(payload, _BATCH_KEYS[topic])
+        except ValueError:
+            return False
+    return True
 
 
 def format_info(info: CaptureInfo) -> str:
@@ -138,7 +172,9 @@ def format_info(info: CaptureInfo) -> str:
     for topic, n in sorted(info.messages.items()):
         lines.append(f"  {topic:<14}{n}")
     if info.bad_messages:
-        lines.append(f"unreadable raw messages: {info.bad_messages}")
+        lines.append(f"unreadable messages: {info.bad_messages}")
+    if info.bad_schemas:
+        lines.append(f"unreadable schemas: {info.bad_schemas}")
     return "\n".join(lines)
 
 

@@ -126,11 +126,7 @@ def decompress_chunk(compression: str, raw: bytes, usize: int, crc: int) -> byte
     elif compression == "":
         data = bytes(raw)
     elif compression == "lz4":
-        try:
-            import lz4.frame  # type: ignore[import-not-found]
-        except ImportError:
-            raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
-        data = lz4.frame.decompress(raw)
+        data = _lz4_bounded(raw, usize)
     else:
         raise ValueError(f"unknown chunk compression {compression[:20]!r}")
     if len(data) != usize:
@@ -138,6 +134,34 @@ def decompress_chunk(compression: str, raw: bytes, usize: int, crc: int) -> byte
     if crc and zlib.crc32(data) != crc:
         raise ValueError("chunk CRC mismatch")
     return data
+
+
+def _lz4_bounded(raw: bytes, usize: int) -> bytes:
+    """An lz4 frame decompressed to at most ``usize`` bytes (a bomb stops there)."""
+    try:
+        import lz4.frame  # type: ignore[import-not-found]
+    except ImportError:
+        raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
+    try:
+        declared = lz4.frame.get_frame_info(raw).get("content_size") or 0
+        if declared > usize:
+            raise ValueError("lz4 frame is larger than its chunk claims")
+        dec = lz4.frame.LZ4FrameDecompressor()
+        data = dec.decompress(raw, max_length=usize + 1)
+    except RuntimeError as exc:  # what the lz4 binding raises for a damaged frame
+        raise ValueError(f"lz4: {exc}") from None
+    if len(data) > usize:
+        raise ValueError("lz4 frame is larger than its chunk claims")
+    return data
+
+
+# opcodes the MCAP specification defines (0x80..0xFF are left to users); anything else in
+# the data section is a damaged record, not something to skip
+KNOWN_OPCODES = frozenset(range(0x01, 0x10))
+
+
+def opcode_damaged(opcode: int) -> bool:
+    return opcode not in KNOWN_OPCODES and opcode < 0x80
 
 
 def _chunk_records(chunk: Chunk) -> list[object]:
@@ -167,6 +191,7 @@ class Walk:
     complete: bool = False  # footer and closing magic reached
     end: int = len(MAGIC)  # end of the last whole record the caller went past
     trailing: int = 0  # bytes after the closing magic
+    crc_problems: list[str] = field(default_factory=list)  # data or summary CRC mismatch
 
 
 def walk_records(f: BinaryIO, size: int, walk: Walk) -> Iterator[tuple[int, int, bytes, bytes, bool]]:
@@ -179,6 +204,8 @@ def walk_records(f: BinaryIO, size: int, walk: Walk) -> Iterator[tuple[int, int,
     pos = len(MAGIC)
     f.seek(pos)
     in_summary = False  # after DATA_END: the summary repeats schemas and channels
+    crc = zlib.crc32(MAGIC)  # of the data section, then of the summary section
+    summary_at = -1
     while True:
         if pos == size:
             walk.problem = "file ends without a footer"
@@ -197,6 +224,17 @@ def walk_records(f: BinaryIO, size: int, walk: Walk) -> Iterator[tuple[int, int,
                 f"({size - pos - 9} of {length} bytes present)"
             return
         body = f.read(length)
+        if opcode == Opcode.DATA_END and not in_summary:
+            if len(body) >= 4 and (want := struct.unpack_from("<I", body)[0]) and want != crc:
+                walk.crc_problems.append(f"data section CRC mismatch (DataEnd at byte {pos})")
+            crc, summary_at = 0, pos + 9 + length
+        elif opcode == Opcode.FOOTER and len(body) >= 20:
+            summary_start, _offsets, want = struct.unpack_from("<QQI", body)
+            crc = zlib.crc32(body[:16], zlib.crc32(head, crc))
+            if want and summary_start == summary_at and want != crc:
+                walk.crc_problems.append("summary section CRC mismatch")
+        else:
+            crc = zlib.crc32(body, zlib.crc32(head, crc))
         in_summary = in_summary or opcode == Opcode.DATA_END
         yield pos, opcode, head, body, in_summary
         pos += 9 + length
@@ -223,6 +261,11 @@ def iter_records(status: ScanStatus) -> Iterator[Item]:
         size = status.size = os.fstat(f.fileno()).st_size
         try:
             for pos, opcode, _head, body, in_summary in walk_records(f, size, walk):
+                if opcode_damaged(opcode):
+                    status.damaged_records += 1
+                    status.notes.append(f"record with unknown opcode 0x{opcode:02x} at byte "
+                                        f"{pos} skipped ({len(body)} bytes)")
+                    continue
                 try:
                     rec = _parse(opcode, body)
                 except _PARSE_ERRORS as exc:
@@ -249,6 +292,8 @@ def iter_records(status: ScanStatus) -> Iterator[Item]:
             status.valid_bytes = walk.end
             status.complete = walk.complete
             status.problem = status.problem or walk.problem
+            status.damaged_records += len(walk.crc_problems)
+            status.notes.extend(walk.crc_problems)
             if walk.trailing:
                 status.notes.append(f"{walk.trailing} bytes after the end")
 

@@ -40,7 +40,8 @@ class McapSink:
         topics: Mapping[str, tuple[str, dict[str, Any]]] = CHANNELS,
     ) -> None:
         self._stream = stream
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=compression)
+        self._writer = Writer(stream, chunk_size=chunk_size, compression=compression,
+                              enable_data_crcs=True)
         self._writer.start(profile=PROFILE, library=library)
         self._channels: dict[str, int] = {}
         schema_ids: dict[str, int] = {}

@@ -59,8 +59,9 @@ def cli(file: str, report_dir: str | None, parquet_dir: str | None, variant: str
     click.echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
                f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
                f"baud {int(m['baud']['used'])}")
-    if not a.raw.status.complete:
-        click.echo(f"capture incomplete: {a.raw.status.problem}")
+    damage = a.raw.status.describe()
+    if damage:
+        click.echo(f"capture damaged: {damage}; analysed what is intact")
     counts = m.get("finding_counts", {})
     if counts:
         click.echo("findings: " + ", ".join(f"{k} {n}" for k, n in counts.items()))
@@ -75,6 +76,8 @@ def cli(file: str, report_dir: str | None, parquet_dir: str | None, variant: str
     if parquet_dir:
         write_parquet(a, parquet_dir)
         click.echo(f"tables: {parquet_dir}")
+    if damage:
+        raise SystemExit(1)
 
 
 def _tty() -> bool:

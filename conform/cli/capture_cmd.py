@@ -31,6 +31,8 @@ def info(file: str, as_json: bool) -> None:
         }, indent=2))
     else:
         click.echo(format_info(result))
+    if result.state not in ("clean", "recovered"):
+        raise SystemExit(1)  # truncated or damaged: said above, and in the exit status
 
 
 @cli.command(name="recover")
@@ -50,5 +52,7 @@ def recover_cmd(file: str, output: str | None, force: bool) -> None:
         click.echo(f"{res.source} was already complete; rewritten unchanged")
     else:
         lost = s.size - s.valid_bytes
-        click.echo(f"lost: {s.problem or 'damaged chunks'} ({lost} bytes after the intact part"
-                   f", {s.damaged_chunks} damaged chunks skipped)")
+        click.echo(f"lost: {s.problem or 'damaged records'} ({lost} bytes after the intact "
+                   f"part, {s.damaged_chunks} damaged chunks and {s.damaged_records} damaged "
+                   "records skipped)")
+        raise SystemExit(1)  # salvaged, but the source was not whole
