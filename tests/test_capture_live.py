@@ -194,3 +194,39 @@ def test_sniff_cli_until_sigint(tmp_path):
     cap = open_capture(out)
     assert cap.stream("host") == b"!0?\r" and cap.stream("unit") == b"0,v\r"
     assert cap.metadata["conform.session"]["baud"] == "38400"
+
+
+def test_proxy_records_the_sender_closing_and_reopening_its_pty(tmp_path):
+    out = tmp_path / "reopen.mcap"
+    unit = PtyEndpoint()
+    proc, host_path = start_proxy("--unit", unit.path, "-o", str(out), "--no-decode")
+    part = tmp_path / "reopen.mcap.part"
+    try:
+        with open_port(host_path, 115200) as sender:
+            exchange(sender, unit, b"!0?\r", b"0,v19\r")
+        wait_for(lambda: any(e["kind"] == "disconnect" for e in open_capture(part).link_events()))
+        with open_port(host_path, 115200) as sender:
+            exchange(sender, unit, b"!0PF\r", b"0,0,0,0\r")
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 0
+    finally:
+        proc.kill()
+        unit.close()
+    cap = open_capture(out)
+    assert cap.stream("host") == b"!0?\r!0PF\r"
+    host_events = [e["kind"] for e in cap.link_events() if e["side"] == "host"]
+    assert host_events[0] == "open"
+    assert host_events.index("reconnect") > host_events.index("disconnect")
+
+
+def test_peer_watch_reports_edges_only():
+    from conform.link.peerwatch import IN_CLOSE_NOWRITE, IN_CLOSE_WRITE, IN_OPEN, PeerWatch
+
+    seen = []
+    w = PeerWatch("/nonexistent/pty", lambda kind, detail: seen.append(kind))
+    assert not w.active
+    w.feed([IN_OPEN, IN_OPEN, IN_CLOSE_WRITE])  # a sender that opens the device twice
+    assert seen == []
+    w.feed([IN_CLOSE_NOWRITE, IN_OPEN, IN_CLOSE_WRITE])
+    assert seen == ["disconnect", "reconnect", "disconnect"]
+    w.close()

@@ -276,6 +276,12 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     say("metrics")
     for link in raw.link_events:
         kind = str(link.get("kind", ""))
+        if kind in ("disconnect", "reconnect") and link.get("side") == "host" \
+                and _session_value(raw, "capture_method") == "proxy":
+            # the proxy's own pty: the sender closed or reopened its port, nothing was lost
+            notes.append(f"sender {'closed' if kind == 'disconnect' else 'reopened'} its port "
+                         f"at {float(link.get('t', t0)) - t0:.3f} s")
+            continue
         if kind in ("disconnect", "reconnect", "error"):
             out.add("reset" if kind == "reconnect" else "capture-damaged",
                     float(link.get("t", t0)), "warning",

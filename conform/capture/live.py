@@ -21,6 +21,7 @@ from conform.capture.recorder import Recorder
 from conform.capture.session import wire_time
 from conform.link.endpoint import Endpoint
 from conform.link.forward import Forwarder, Tap
+from conform.link.peerwatch import PeerWatch
 from conform.link.ports import open_port
 from conform.link.pty import PtyEndpoint
 
@@ -100,6 +101,9 @@ class ProxyCapture(_Live):
             clock=self.recorder.now, reopen_unit=opener if reconnect else None,
         )
         self.runner.start()
+        # the pty stays open on our side, so only the device node shows the sender leaving
+        self.peer = PeerWatch(self.host.device,
+                              lambda kind, detail: self._event(kind, "host", detail))
 
     def _chunk(self, direction: str, data: bytes, t_read: float) -> None:
         if direction == "host":
@@ -115,6 +119,7 @@ class ProxyCapture(_Live):
         self.recorder.chunk("unit", data, t_read, t_first)
 
     def close(self) -> None:
+        self.peer.close()
         self.runner.join()
         dropped = dict(self.runner.dropped)
         for side in ("host", "unit"):
