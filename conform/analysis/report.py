@@ -64,14 +64,20 @@ def _context(a: Any, plots: dict[str, str]) -> dict[str, Any]:
     }
 
 
-def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
-    from conform.analysis.plots import all_plots
-
+def report_folder(out_dir: str | Path) -> Path:
+    """The report folder, created if needed (``UserError`` if it cannot be)."""
     d = Path(out_dir)
     try:
         d.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"{d}: cannot create the report folder: {exc.strerror}") from None
+    return d
+
+
+def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
+    from conform.analysis.plots import all_plots
+
+    d = report_folder(out_dir)
     plots = all_plots(a)
     env = _env()
     ctx = _context(a, plots)

@@ -12,7 +12,7 @@ BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
 
 
 @click.command(name="analyze")
-@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=True, path_type=str))
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Write DIR/index.html, DIR/summary.md, DIR/findings.json.")
 @click.option("--parquet", "parquet_dir", type=click.Path(file_okay=False, path_type=str),
@@ -24,11 +24,26 @@ BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
 @click.option("--no-whatif", is_flag=True, help="Skip the what-if queue replays.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress display (default: on for large files on a terminal).")
-def cli(file: str, report_dir: str | None, parquet_dir: str | None, variant: str | None,
-        baud: float | None, dialect: str | None, no_whatif: bool, progress: bool | None) -> None:
-    """Analyse a capture: findings with manual clauses, latency split, throughput, queue."""
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Several captures: local processes to use (default: every core).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Several captures: run on this Dask distributed scheduler "
+                   "(e.g. tcp://host:8786) instead of local processes.")
+def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
+        variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
+        progress: bool | None, jobs: int | None, scheduler: str | None) -> None:
+    """Analyse a capture: findings with manual clauses, latency split, throughput, queue.
+
+    Several files or a folder: each capture analysed in parallel, one Parquet dataset and a
+    fleet summary (per machine and session) in the report folder.
+    """
     from conform.analysis.analyze import analyze
     from conform.analysis.report import write_parquet, write_report
+
+    if len(files) > 1 or os.path.isdir(files[0]):
+        _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler)
+        return
+    file = files[0]
 
     try:
         size = os.path.getsize(file)
@@ -78,6 +93,34 @@ def cli(file: str, report_dir: str | None, parquet_dir: str | None, variant: str
         click.echo(f"tables: {parquet_dir}")
     if damage:
         raise SystemExit(1)
+
+
+def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
+           variant: str | None, baud: float | None, dialect: str | None, jobs: int | None,
+           scheduler: str | None) -> None:
+    from conform.analysis.fleet import analyze_fleet, write_fleet_report
+
+    options = {"variant": variant, "baud": baud, "dialect": dialect}
+    s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
+                      scheduler=scheduler)
+    t = s["totals"]
+    click.echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
+               f"exchanges, {t['hazards']} hazards, {t['errors']} not analysed")
+    for m in s["machines"]:
+        click.echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges, "
+                   f"{m['hazards']} hazards, {m['starvations']} starvations"
+                   + (f", {m['damaged']} damaged" if m["damaged"] else "")
+                   + (f", {m['errors']} not analysed" if m["errors"] else ""))
+    for r in s["sessions"]:
+        if r["error"]:
+            click.echo(f"  {r['path']}: {r['error']}")
+    if report_dir:
+        paths = write_fleet_report(s, report_dir)
+        click.echo(f"report: {paths['html']}")
+    if parquet_dir:
+        click.echo(f"tables: {parquet_dir}/exchanges (one dataset, partitioned by machine)")
+    if any(r["state"] != "clean" for r in s["sessions"]):
+        raise SystemExit(1)  # some captures damaged or not analysed: listed above
 
 
 def _tty() -> bool:

@@ -1,0 +1,218 @@
+"""Analyse many captures at once: a fleet of machines, a week of shifts.
+
+    conform analyze captures/ --report fleet/ --parquet tables/          # all local cores
+    conform analyze m1/*.mcap m2/*.mcap --scheduler tcp://sched:8786     # Dask distributed
+
+Every capture is analysed on its own (one task per file) by a pool of local processes or by
+the workers of an existing Dask distributed scheduler; each task writes its tables into one
+Parquet dataset (``DIR/exchanges/machine=M/session=S.parquet``, hive partitioned, so pandas,
+polars or DuckDB read the whole fleet as one table) and returns a small summary row. The
+rows become the fleet summary (per machine and session: hazards, latency percentiles,
+starvation time, throughput) as HTML, Markdown and JSON.
+
+A file that cannot be analysed is a row with its error, not the end of the run. Workers of a
+distributed scheduler must see the files and the output folder at the same paths.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from conform.errors import UserError
+
+SUMMARY_KEYS = ("machine", "session", "path", "state", "error", "duration_s", "exchanges",
+                "vectors_accepted", "exchanges_per_s", "vectors_per_s", "hazards",
+                "findings", "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms", "rtt_max_ms",
+                "starvations", "starved_s", "standstill_s")
+
+
+def expand_inputs(items: Iterable[str]) -> list[Path]:
+    """Files as given; directories walked for ``*.mcap`` (sorted). ``UserError`` if none."""
+    out: list[Path] = []
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            out.extend(sorted(q for q in p.rglob("*.mcap") if q.is_file()))
+        elif p.exists():
+            out.append(p)
+        else:
+            raise UserError(f"{p}: no such file or folder")
+    if not out:
+        raise UserError(f"no .mcap captures in {', '.join(map(str, items))}")
+    return out
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._")[:80] or "unnamed"
+
+
+def machine_of(path: Path, metadata: dict[str, dict[str, str]]) -> str:
+    """The machine a capture belongs to: the session's ``machine`` key, else its folder."""
+    session = metadata.get("conform.session", {})
+    return str(session.get("machine") or path.parent.name or session.get("hostname") or "-")
+
+
+def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> dict[str, Any]:
+    """One fleet task: analyse ``path``, write its Parquet part, return its summary row."""
+    from conform.analysis.analyze import analyze
+
+    p = Path(path)
+    row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)
+    row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error")
+    try:
+        a = analyze(p, whatif_replays=False, **options)
+    except UserError as exc:
+        row["error"] = str(exc)
+        return row
+    except Exception as exc:  # noqa: BLE001 - one bad file must not end a fleet run
+        row["error"] = f"{type(exc).__name__}: {exc}"
+        return row
+    m = a.metrics
+    row["machine"] = machine_of(p, a.raw.metadata)
+    row["state"] = "clean" if a.raw.status.clean else "damaged"
+    rtt = m.get("latency", {}).get("rtt", {})
+    q = m.get("queue") or {}
+    row.update(
+        duration_s=m["duration_s"], exchanges=m["exchanges"],
+        vectors_accepted=m["vectors_accepted"], exchanges_per_s=m["exchanges_per_s"],
+        vectors_per_s=m["vectors_per_s"], hazards=m["hazards"],
+        findings=dict(m.get("finding_counts", {})),
+        rtt_p50_ms=_ms(rtt.get("median")), rtt_p95_ms=_ms(rtt.get("p95")),
+        rtt_p99_ms=_ms(rtt.get("p99")), rtt_max_ms=_ms(rtt.get("max")),
+        starvations=q.get("starvations"), starved_s=q.get("starved_s"),
+        standstill_s=q.get("standstill_s"),
+    )
+    if parquet_dir:
+        _write_part(a, Path(parquet_dir), row["machine"], row["session"])
+    return row
+
+
+def _ms(v: Any) -> float | None:
+    return None if v is None else round(float(v) * 1000, 4)
+
+
+def _write_part(a: Any, root: Path, machine: str, session: str) -> None:
+    """This capture's exchanges as one file of the fleet's hive-partitioned dataset."""
+    ex = a.exchanges.copy()
+    for col in ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"):
+        ex[col] = ex[col] - a.t0
+    ex.insert(0, "t0", a.t0)
+    ex.insert(0, "session", session)
+    for col in ex.columns:
+        if ex[col].dtype == object:
+            ex[col] = ex[col].astype("category")
+    d = root / "exchanges" / f"machine={_safe(machine)}"
+    d.mkdir(parents=True, exist_ok=True)
+    ex.to_parquet(d / f"{_safe(session)}.parquet", index=False)
+
+
+Runner = Callable[[list[str], str | None, dict[str, Any]], list[dict[str, Any]]]
+
+
+def run_local(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
+              jobs: int | None = None) -> list[dict[str, Any]]:
+    """Every file on a pool of local processes (all cores by default)."""
+    jobs = jobs or os.cpu_count() or 1
+    if jobs == 1 or len(paths) == 1:
+        return [analyze_one(p, parquet_dir, options) for p in paths]
+    with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
+        return list(pool.map(analyze_one, paths, [parquet_dir] * len(paths),
+                             [options] * len(paths)))
+
+
+def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
+             scheduler: Any) -> list[dict[str, Any]]:
+    """Every file as a task on Dask distributed (``scheduler``: an address or a cluster)."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise UserError("--scheduler needs Dask distributed: pip install 'dask[distributed]'") \
+            from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise UserError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
+    try:
+        futures = client.map(analyze_one, paths, parquet_dir=parquet_dir, options=options,
+                             pure=False)
+        return client.gather(futures)
+    finally:
+        client.close()
+
+
+def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
+                  options: dict[str, Any] | None = None, jobs: int | None = None,
+                  scheduler: Any = None) -> dict[str, Any]:
+    """Analyse every capture in ``inputs``; the fleet summary (see ``summarise``)."""
+    paths = [str(p.resolve()) for p in expand_inputs(inputs)]
+    if parquet_dir:
+        Path(parquet_dir).mkdir(parents=True, exist_ok=True)
+    opts = dict(options or {})
+    if scheduler is not None:
+        rows = run_dask(paths, parquet_dir, opts, scheduler)
+    else:
+        rows = run_local(paths, parquet_dir, opts, jobs)
+    return summarise(rows)
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Sessions sorted by machine and session, and one aggregate row per machine."""
+    rows = sorted(rows, key=lambda r: (str(r["machine"]), str(r["session"])))
+    machines: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        m = machines.setdefault(r["machine"], {
+            "machine": r["machine"], "sessions": 0, "errors": 0, "damaged": 0,
+            "duration_s": 0.0, "exchanges": 0, "vectors_accepted": 0, "hazards": 0,
+            "starvations": 0, "starved_s": 0.0, "standstill_s": 0.0, "rtt_p95_ms_worst": None,
+            "rtt_p99_ms_worst": None})
+        m["sessions"] += 1
+        if r["state"] == "error":
+            m["errors"] += 1
+            continue
+        m["damaged"] += r["state"] == "damaged"
+        for k in ("duration_s", "exchanges", "vectors_accepted", "hazards", "starvations",
+                  "starved_s", "standstill_s"):
+            m[k] += r.get(k) or 0
+        for k in ("rtt_p95_ms", "rtt_p99_ms"):
+            v = r.get(k)
+            if v is not None:
+                key = k + "_worst"
+                m[key] = v if m[key] is None else max(m[key], v)
+    for m in machines.values():
+        d = m["duration_s"]
+        m["exchanges_per_s"] = m["exchanges"] / d if d > 0 else None
+        m["vectors_per_s"] = m["vectors_accepted"] / d if d > 0 else None
+    return {"sessions": rows, "machines": list(machines.values()),
+            "totals": {"sessions": len(rows), "machines": len(machines),
+                       "errors": sum(r["state"] == "error" for r in rows),
+                       "hazards": sum(r.get("hazards") or 0 for r in rows),
+                       "exchanges": sum(r.get("exchanges") or 0 for r in rows)}}
+
+
+def write_fleet_report(summary: dict[str, Any], out_dir: str | Path) -> dict[str, Path]:
+    """``fleet.json``, ``summary.md`` and a self-contained ``index.html``."""
+    from conform.analysis.report import _clean, _env, report_folder
+
+    d = report_folder(out_dir)
+    doc = _clean(summary)
+    env = _env()
+    paths = {"json": d / "fleet.json", "markdown": d / "summary.md", "html": d / "index.html"}
+    paths["json"].write_text(json.dumps(doc, indent=1), "utf-8")
+    ctx = {"s": doc, "fmt": _fmt}
+    paths["markdown"].write_text(env.get_template("fleet.md.j2").render(**ctx), "utf-8")
+    paths["html"].write_text(env.get_template("fleet.html.j2").render(**ctx), "utf-8")
+    return paths
+
+
+def _fmt(v: Any, spec: str = ".2f") -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return format(v, spec)
+    return str(v)

@@ -1,0 +1,78 @@
+"""Fleet analysis: several captures or a folder, in parallel locally or on Dask distributed."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from conform.analysis.fleet import analyze_fleet, write_fleet_report
+from conform.cli.main import main
+
+CAPTURES = Path(__file__).resolve().parent.parent / "captures"
+
+
+def fleet_dir(tmp_path: Path) -> Path:
+    """Two machines: one with the noisy careless session, one with two clean ones."""
+    root = tmp_path / "fleet"
+    for machine, names in {"mill-1": ["careless-noisy"], "mill-2": ["good-rs232", "usb-packets"]}.items():
+        (root / machine).mkdir(parents=True)
+        for n in names:
+            shutil.copy(CAPTURES / f"{n}.mcap", root / machine / f"{n}.mcap")
+    (root / "mill-2" / "broken.mcap").write_text("not a capture")
+    return root
+
+
+def check(summary: dict, tables: Path) -> None:
+    by = {(r["machine"], r["session"]): r for r in summary["sessions"]}
+    assert by[("mill-1", "careless-noisy")]["hazards"] == 5
+    assert by[("mill-2", "good-rs232")]["hazards"] == 0
+    assert by[("mill-2", "broken")]["state"] == "error"
+    assert "not an MCAP" in by[("mill-2", "broken")]["error"]
+    machines = {m["machine"]: m for m in summary["machines"]}
+    assert machines["mill-2"]["sessions"] == 3 and machines["mill-2"]["errors"] == 1
+    assert machines["mill-1"]["exchanges"] == by[("mill-1", "careless-noisy")]["exchanges"]
+    assert by[("mill-2", "usb-packets")]["rtt_p95_ms"] > 0
+    df = pd.read_parquet(tables / "exchanges")  # one dataset for the whole fleet
+    assert set(df["machine"].astype(str)) == {"mill-1", "mill-2"}
+    assert len(df[df["session"] == "usb-packets"]) > 0
+
+
+def test_fleet_on_local_processes_writes_one_dataset_and_a_summary(tmp_path):
+    root = fleet_dir(tmp_path)
+    s = analyze_fleet([str(root)], parquet_dir=str(tmp_path / "pq"), jobs=2)
+    check(s, tmp_path / "pq")
+    paths = write_fleet_report(s, tmp_path / "rep")
+    doc = json.loads(paths["json"].read_text())
+    assert doc["totals"]["sessions"] == 4 and doc["totals"]["errors"] == 1
+    assert "| mill-1 |" in paths["markdown"].read_text()
+    assert "mill-2" in paths["html"].read_text()
+
+
+def test_fleet_cli_exit_status_and_report(tmp_path, capsys):
+    root = fleet_dir(tmp_path)
+    with pytest.raises(SystemExit) as ex:
+        main(["analyze", str(root / "mill-1"), str(root / "mill-2" / "good-rs232.mcap"),
+              "--report", str(tmp_path / "r"), "--jobs", "1"])
+    assert ex.value.code == 0
+    out = capsys.readouterr().out
+    assert "2 captures on 2 machines" in out
+    assert (tmp_path / "r" / "fleet.json").exists()
+    with pytest.raises(SystemExit) as ex:
+        main(["analyze", str(root), "--jobs", "1"])
+    assert ex.value.code == 1  # one capture could not be analysed: listed, and the status says so
+    assert "broken.mcap" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_fleet_on_a_dask_local_cluster(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    root = fleet_dir(tmp_path)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        s = analyze_fleet([str(root)], parquet_dir=str(tmp_path / "pq"),
+                          scheduler=cluster.scheduler_address)
+    check(s, tmp_path / "pq")
