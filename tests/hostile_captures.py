@@ -8,6 +8,7 @@ the sample captures and a small format-2 recording; nothing is downloaded.
 
 from __future__ import annotations
 
+import base64
 import io
 import json
 import random
@@ -84,20 +85,22 @@ def written(messages: list[tuple[str, bytes, int]], *, metadata: dict[str, str] 
     return f.getvalue()
 
 
-def _batch(direction: str, reads: list[bytes], times: list, **over: object) -> bytes:
-    import base64
+def _batch(direction: str, chunks: list[bytes], times: list, **over: object) -> bytes:
+    from conform.capture.batch import raw_batch
+    from conform.capture.sink import encode_payload
 
-    off = over.pop("offset", 0)
-    p = {"direction": direction, "offset": off, "lengths": [len(r) for r in reads],
-         "t_read": times, "t_first": times, "order": list(range(len(reads))),
-         "data": base64.b64encode(b"".join(reads)).decode()}
+    off = int(over.pop("offset", 0))  # type: ignore[call-overload]
+    rec = raw_batch(direction, max(off, 0), b"".join(chunks), [len(r) for r in chunks],
+                    [float(t) for t in times], [float(t) for t in times],
+                    list(range(len(chunks))))
+    p = dict(rec.payload)
+    if off < 0:
+        p["offset"] = off
     p.update(over)
-    return json.dumps(p).encode()
+    return encode_payload(p)
 
 
 def _v1(direction: str, data: bytes, offset: int, t: object) -> bytes:
-    import base64
-
     return json.dumps({"direction": direction, "data": base64.b64encode(data).decode(),
                        "hex": "", "text": "", "length": len(data), "offset": offset,
                        "t_read": t, "t_first": t, "seq": 1}).encode()
@@ -202,13 +205,16 @@ def corpus(dest: Path, *, seed: int = 7, bomb_bytes: int = 1 << 30, count: int =
     for label, payload in {
         "null": b"null", "list": b"[]", "empty-object": b"{}", "not-utf8": b"\xff\xfe\x00",
         "deep": b"[" * 100_000, "number": b"5", "string": b'"x"', "truncated-json": b'{"dir',
-        "data-not-b64": b'{"direction":"host","offset":0,"lengths":[3],"t_read":[1],'
-                        b'"data":"!!!!"}',
-        "lengths-strings": _batch("host", [b"ab"], [1.0], lengths=["a"]),
-        "lengths-negative": _batch("host", [b"ab"], [1.0], lengths=[-2]),
-        "lengths-huge": _batch("host", [b"ab"], [1.0], lengths=[2**70]),
+        "data-not-b64": _batch("host", [b"ab"], [1.0], data="!!!!"),
+        "reads-not-b64": _batch("host", [b"ab"], [1.0], reads="!!!!"),
+        "reads-number": _batch("host", [b"ab"], [1.0], reads=5),
+        "reads-partial": _batch("host", [b"ab"], [1.0], reads="AAAA"),
+        "reads-zero-lengths": _batch("host", [b"ab"], [1.0],
+                                     reads=base64.b64encode(bytes(28)).decode()),
+        "count-wrong": _batch("host", [b"ab", b"c"], [1.0, 2.0], count=7),
+        "offset-huge": _batch("host", [b"ab"], [1.0], offset=2**70),
         "offset-negative": _batch("host", [b"ab"], [1.0], offset=-5),
-        "times-short": _batch("host", [b"ab", b"c"], [1.0]),
+        "data-short": _batch("host", [b"ab", b"c"], [1.0, 2.0], data="YWI="),
         "v1-data-number": b'{"direction":"host","data":5,"length":1,"offset":0,"t_read":1}',
         "v1-null-fields": b'{"direction":null,"data":null,"length":null,"offset":null}',
     }.items():

@@ -72,8 +72,8 @@ def test_batches_store_each_byte_once_and_validate_against_their_schemas(tmp_pat
             payload = json.loads(message.data)
             jsonschema.Draft202012Validator(json.loads(schema.data)).validate(payload)
             if channel.topic.startswith("/serial/"):
-                assert set(payload) == {"direction", "offset", "lengths", "t_read", "t_first",
-                                        "order", "data"}
+                assert set(payload) == {"direction", "offset", "count", "t_start", "t_end",
+                                        "bytes", "reads", "data"}
                 raw_bytes += len(base64.b64decode(payload["data"]))
     assert raw_bytes == 50 * 2 + sum(len(b"!0L%d,0,0\r" % i) for i in range(50))
     cap = open_capture(path)

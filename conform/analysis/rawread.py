@@ -217,11 +217,16 @@ class _Collector:
         if not self.buffers:
             return
         big = np.concatenate(self.buffers) if len(self.buffers) > 1 else self.buffers[0]
-        quotes = np.flatnonzero(big == ord('"'))
-        commas = np.flatnonzero(big == ord(","))
+        found: list[np.ndarray] = []
+
+        def marks() -> list[np.ndarray]:  # quotes and commas, found once if needed
+            if not found:
+                found.extend((np.flatnonzero(big == ord('"')), np.flatnonzero(big == ord(","))))
+            return found
+
         assert self.status is not None
         for d in ("host", "unit"):
-            part = _parse_payloads(d, self, big, quotes, commas, self.status)
+            part = _parse_payloads(d, self, big, marks, self.status)
             if part.chunks:
                 self.parts[d].append(part)
             self.spans[d] = []
@@ -340,8 +345,8 @@ def b64decode_many(chars: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, 
     return flat, out_lens
 
 
-def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndarray,
-                    commas: np.ndarray, status: ReadStatus) -> Direction:
+def _parse_payloads(name: str, col: _Collector, big: np.ndarray,
+                    marks: Callable[[], list[np.ndarray]], status: ReadStatus) -> Direction:
     spans = col.spans[name]
     if not spans:
         return Direction.empty(name)
@@ -356,12 +361,14 @@ def _parse_payloads(name: str, col: _Collector, big: np.ndarray, quotes: np.ndar
 
     if col.raw_encoded[name]:
         return _raw_direction(name, payloads(), times, orders)
-    try:
-        return _fast_json(name, big, starts, lens, times, orders, quotes, commas)
-    except ValueError:
-        pass
+    v1 = b'{"direction":"%s","data":"' % name.encode()
+    if big[starts[0] : starts[0] + len(v1)].tobytes() == v1:  # format 1, conform's layout
+        try:
+            return _fast_json(name, big, starts, lens, times, orders, *marks())
+        except ValueError:
+            pass
     pl = payloads()
-    batch = [b'"lengths"' in p for p in pl]
+    batch = [b'"reads"' in p for p in pl]
     if any(batch):  # format 2; a format-1 payload among batches is not readable
         status.bad_payloads += len(batch) - sum(batch)
         return _batch_direction(name, [p for p, b in zip(pl, batch, strict=True) if b], status)
@@ -566,7 +573,8 @@ def _slow_json(name: str, payloads: list[bytes], times: np.ndarray, orders: np.n
 
 
 def _num(value: Any, default: float) -> Any:
-    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else default
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) < 2**62
+    return value if ok else default
 
 
 def _merge(name: str, parts: list[Direction]) -> Direction:

@@ -5,9 +5,9 @@ read and per line (format 1) costs more CPU to encode than the traffic allows. F
 keeps the same channels but batches them (docs/capture-format.md):
 
 * ``/serial/host``, ``/serial/unit``: ``conform.RawBatch``, the bytes of consecutive reads
-  in one direction stored once (base64 of their concatenation) with per-read lengths,
-  times and a call-order number shared by both directions, so the causal order of reads
-  survives batching;
+  in one direction stored once (base64 of their concatenation) with a packed table of
+  per-read lengths, times and a call-order number shared by both directions (so the causal
+  order of reads survives batching);
 * ``/frames``, ``/exchanges``: ``conform.FrameBatch`` / ``conform.ExchangeBatch``, the
   decoded lines and exchanges of the same moment, one list per field (``columns``;
   ``rows`` turns a batch back into ``conform.Frame`` / ``conform.Exchange`` dicts).
@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import base64
 import binascii
+import json
 from operator import itemgetter
 from typing import Any
+
+import numpy as np
 
 from conform.capture.schemas import DIRECTION_TOPIC, DIRECTIONS, TOPIC_EXCHANGES, TOPIC_FRAMES
 from conform.capture.session import CaptureSession, Decoder, Record, to_ns
@@ -63,6 +66,27 @@ def rows(payload: dict[str, Any], keys: tuple[str, ...]) -> list[dict[str, Any]]
 
 def is_batch(payload: dict[str, Any]) -> bool:
     return "count" in payload
+
+
+# one entry of a RawBatch's ``reads``: bytes the read returned, its call order (one count for
+# both directions), when it returned and the estimated arrival of its first byte
+READ_DTYPE = np.dtype([("length", "<u4"), ("order", "<u8"), ("t_read", "<f8"),
+                       ("t_first", "<f8")])
+
+
+def raw_batch(direction: str, offset: int, data: bytes | bytearray, lengths: list[int],
+              t_read: list[float], t_first: list[float], order: list[int]) -> Record:
+    """The ``conform.RawBatch`` record of consecutive reads in one direction."""
+    reads = np.empty(len(lengths), READ_DTYPE)
+    reads["length"] = lengths
+    reads["order"] = order
+    reads["t_read"] = t_read
+    reads["t_first"] = t_first
+    payload = {"direction": direction, "offset": offset, "count": len(lengths),
+               "t_start": t_read[0], "t_end": t_read[-1], "bytes": len(data),
+               "reads": base64.b64encode(reads.tobytes()).decode("ascii"),
+               "data": base64.b64encode(data).decode("ascii")}
+    return Record(DIRECTION_TOPIC[direction], to_ns(t_read[0]), payload)
 
 
 class _Pending:
@@ -136,10 +160,7 @@ class BatchSession(CaptureSession):
             p = self._pending[d]
             if not p.lengths:
                 continue
-            payload = {"direction": d, "offset": p.offset, "lengths": p.lengths,
-                       "t_read": p.t_read, "t_first": p.t_first, "order": p.order,
-                       "data": base64.b64encode(p.data).decode("ascii")}
-            out.append(Record(DIRECTION_TOPIC[d], to_ns(p.t_read[0]), payload))
+            out.append(raw_batch(d, p.offset, p.data, p.lengths, p.t_read, p.t_first, p.order))
             self._pending[d] = _Pending()
         t = to_ns(self._t_frames or 0.0)
         if self._frames:
@@ -157,58 +178,44 @@ class BatchSession(CaptureSession):
 
 
 def is_raw_batch(payload: dict[str, Any]) -> bool:
-    return "lengths" in payload
+    return "reads" in payload
+
+
+def unbatch_arrays(raw: bytes | dict[str, Any]) -> tuple[bytes, Any, int, Any, Any, Any]:
+    """A ``conform.RawBatch`` message (JSON text or parsed) as (bytes, lengths, offset, t_read,
+    t_first, order), numpy arrays; ``ValueError`` if it does not hold together."""
+    try:
+        obj = json.loads(raw) if isinstance(raw, (bytes, bytearray, str)) else raw
+        packed = binascii.a2b_base64(obj["reads"], strict_mode=True)
+        data = binascii.a2b_base64(obj["data"], strict_mode=True)
+        offset = obj["offset"]
+        if not isinstance(offset, int) or isinstance(offset, bool) or not 0 <= offset < 2**62:
+            raise ValueError("offset is not a stream offset")
+        if len(packed) % READ_DTYPE.itemsize:
+            raise ValueError("reads are not whole entries")
+        reads = np.frombuffer(packed, READ_DTYPE)
+    except (KeyError, TypeError, ValueError, AttributeError, RecursionError,
+            binascii.Error) as exc:
+        raise ValueError(f"bad raw batch: {exc}") from None
+    lengths = reads["length"].astype(np.int64)
+    if (lengths <= 0).any() or int(lengths.sum()) != len(data) \
+            or obj.get("count", len(reads)) != len(reads):
+        raise ValueError("bad raw batch: lengths, count and data disagree")
+    return (data, lengths, offset, reads["t_read"].astype(np.float64),
+            reads["t_first"].astype(np.float64), reads["order"].astype(np.int64))
 
 
 def unbatch_raw(payload: dict[str, Any], log_time: int) -> list[dict[str, Any]]:
-    """The reads of a ``conform.RawBatch`` as format-1 style chunk dicts (with ``bytes``).
-
-    ``ValueError`` if the batch does not hold together (lengths, times and data disagree).
-    """
-    try:
-        data = base64.b64decode(payload["data"], validate=True)
-        lengths = [int(n) for n in payload["lengths"]]
-        t_read = [float(t) for t in payload["t_read"]]
-        t_first = [float(t) for t in payload.get("t_first") or t_read]
-        order = list(payload.get("order") or range(len(lengths)))
-        offset = int(payload["offset"])
-        direction = str(payload["direction"])
-    except (KeyError, TypeError, ValueError, OverflowError, binascii.Error) as exc:
-        raise ValueError(f"bad raw batch: {exc}") from None
-    if offset < 0 or any(n <= 0 for n in lengths) or sum(lengths) != len(data) \
-            or not len(t_read) == len(t_first) == len(order) == len(lengths):
-        raise ValueError("bad raw batch: lengths, times and data disagree")
+    """The reads of a ``conform.RawBatch`` as chunk dicts like format 1's (with ``bytes``);
+    ``ValueError`` if the batch does not hold together."""
+    data, lengths, offset, t_read, t_first, order = unbatch_arrays(payload)
+    direction = str(payload.get("direction"))
     out = []
     pos = 0
-    for i, n in enumerate(lengths):
+    for n, tr, tf, o in zip(lengths.tolist(), t_read.tolist(), t_first.tolist(),
+                            order.tolist(), strict=True):
         out.append({"direction": direction, "bytes": data[pos : pos + n], "length": n,
-                    "offset": offset + pos, "t_read": t_read[i], "t_first": t_first[i],
-                    "order": order[i], "log_time": to_ns(t_read[i]) if t_read[i] == t_read[i]
-                    else log_time})
+                    "offset": offset + pos, "t_read": tr, "t_first": tf, "order": o,
+                    "log_time": to_ns(tr) if tr == tr else log_time})
         pos += n
     return out
-
-
-def unbatch_arrays(raw: bytes) -> tuple[bytes, Any, int, Any, Any, Any]:
-    """A ``conform.RawBatch`` message as (bytes, lengths, offset, t_read, t_first, order)
-    with numpy arrays, for the analyser; ``ValueError`` if it does not hold together."""
-    import json
-
-    import numpy as np
-
-    try:
-        obj = json.loads(raw)
-        data = binascii.a2b_base64(obj["data"], strict_mode=True)
-        lengths = np.asarray(obj["lengths"], np.int64)
-        t_read = np.asarray(obj["t_read"], np.float64)
-        t_first = np.asarray(obj.get("t_first", obj["t_read"]), np.float64)
-        order = np.asarray(obj.get("order", np.arange(len(lengths))), np.int64)
-        offset = int(obj["offset"])
-    except (KeyError, TypeError, ValueError, OverflowError, RecursionError,
-            binascii.Error) as exc:
-        raise ValueError(f"bad raw batch: {exc}") from None
-    n = len(lengths)
-    if lengths.ndim != 1 or (lengths <= 0).any() or int(lengths.sum()) != len(data) \
-            or not (t_read.shape == t_first.shape == order.shape == (n,)) or offset < 0:
-        raise ValueError("bad raw batch: lengths, times and data disagree")
-    return data, lengths, offset, t_read, t_first, order

@@ -161,7 +161,6 @@ def _batch_of(title: str, item: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-_TIMES = {"type": "array", "items": {"type": "number"}}
 RAW_BATCH: dict[str, Any] = {
     "title": "conform.RawBatch",
     "description": "Consecutive reads in one direction, their bytes stored once",
@@ -170,16 +169,19 @@ RAW_BATCH: dict[str, Any] = {
         "direction": {"type": "string", "enum": list(DIRECTIONS)},
         "offset": {"type": "integer", "minimum": 0, "description": "index of the first byte "
                    "in this direction's stream"},
-        "lengths": {"type": "array", "items": {"type": "integer", "minimum": 1},
-                    "description": "bytes each read returned"},
-        "t_read": _TIMES | {"description": "when each read returned (seconds since the epoch)"},
-        "t_first": _TIMES | {"description": "estimated arrival of each read's first byte"},
-        "order": {"type": "array", "items": {"type": "integer"},
-                  "description": "call order of each read, one count for both directions"},
+        "count": {"type": "integer", "minimum": 1, "description": "reads in this batch"},
+        "t_start": _TIME | {"description": "when the first read returned"},
+        "t_end": _TIME | {"description": "when the last read returned"},
+        "bytes": {"type": "integer", "minimum": 0, "description": "bytes in this batch"},
+        "reads": {"type": "string", "contentEncoding": "base64",
+                  "description": "per read, 28 bytes little-endian: u32 bytes the read "
+                                 "returned, u64 call order (one count for both directions), "
+                                 "f64 when it returned, f64 estimated arrival of its first "
+                                 "byte (seconds since the epoch)"},
         "data": {"type": "string", "contentEncoding": "base64",
                  "description": "the bytes of all the reads, concatenated"},
     },
-    "required": ["direction", "offset", "lengths", "t_read", "data"],
+    "required": ["direction", "offset", "reads", "data"],
 }
 FRAME_BATCH = _batch_of("conform.FrameBatch", FRAME)
 EXCHANGE_BATCH = _batch_of("conform.ExchangeBatch", EXCHANGE)
