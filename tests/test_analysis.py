@@ -275,3 +275,19 @@ def test_report_and_parquet_api(tmp_path: Path) -> None:
 
     ex = pd.read_parquet(tables["exchanges"])
     assert len(ex) == len(a.exchanges)
+
+
+def test_report_plots_over_time_and_time_range(tmp_path: Path) -> None:
+    from conform.analysis.plots import all_plots
+    from conform.cli.main import main
+
+    src = Path(__file__).resolve().parent.parent / "captures" / "careless-noisy.mcap"
+    a = analyze(src)
+    plots = all_plots(a)
+    assert {"latency", "latency_time", "throughput", "queue", "path"} <= set(plots)
+    a.time_range = (2.0, 6.0)
+    zoomed = all_plots(a)
+    assert zoomed["latency_time"] != plots["latency_time"]
+    with pytest.raises(SystemExit) as exc:
+        main(["analyze", str(src), "--time-range", "9:3"])
+    assert exc.value.code == 2

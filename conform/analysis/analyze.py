@@ -54,6 +54,7 @@ class Analysis:
     queue: QueueReplay | None
     t0: float
     notes: list[str] = field(default_factory=list)
+    time_range: tuple[float, float] | None = None  # plots over time: seconds from the start
 
     def frames(self, direction: str) -> pd.DataFrame:
         """The decoded lines of one direction as a DataFrame (text escaped)."""

@@ -1,7 +1,9 @@
 """Plots of an analysis, as base64 PNG for a self-contained HTML report (matplotlib, Agg).
 
 Large sessions are decimated for drawing only (never for the numbers): at most
-``MAX_POINTS`` points per line.
+``MAX_POINTS`` points per line. The plots over time are drawn for the analysis's
+``time_range`` (seconds from the start) when one is set (``conform analyze --time-range``),
+so a stutter can be looked at closely; legends sit beside the axes, not over the curves.
 """
 
 from __future__ import annotations
@@ -37,6 +39,28 @@ def _png(fig: Any) -> str:
     fig.savefig(buf, format="png")
     plt.close(fig)
     return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _legend(ax: Any, handles: Any = None, labels: Any = None) -> None:
+    """A legend beside the axes, never over the curves."""
+    if handles is None:
+        handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                  borderaxespad=0.0, fontsize=8, frameon=False)
+
+
+def _window(a: Any, t: np.ndarray) -> np.ndarray:
+    """Mask of times (seconds from the start) inside the report's time range."""
+    lo, hi = getattr(a, "time_range", None) or (-np.inf, np.inf)
+    return (t >= lo) & (t <= hi)
+
+
+def _limit(ax: Any, a: Any) -> None:
+    rng = getattr(a, "time_range", None)
+    if rng:
+        lo, hi = rng
+        ax.set_xlim(left=lo if np.isfinite(lo) else None, right=hi if np.isfinite(hi) else None)
 
 
 def _thin(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -75,7 +99,53 @@ def latency_plots(a: Any) -> str | None:
     c.set_xlabel("ms")
     c.set_ylabel("fraction")
     c.set_title("Latency CDF")
-    c.legend(fontsize=8)
+    _legend(c)
+    return _png(fig)
+
+
+ERROR_CODES = (2, 3, 4, 5, 6, 7)
+
+
+def latency_time_plot(a: Any) -> str | None:
+    """Round trip of every exchange over time, errors and starvations marked."""
+    ex = a.exchanges
+    t = ex["t_cmd_first"].to_numpy() - a.t0
+    rtt = ex["rtt"].to_numpy() * 1000
+    status = ex["status"].to_numpy()
+    ok = (status == "answered") & np.isfinite(rtt) & np.isfinite(t)
+    if not ok.any():
+        return None
+    w = _window(a, t)
+    fig, ax = _fig(9.0, 3.4)
+    ts, ys = _thin(t[ok & w], rtt[ok & w])
+    ax.plot(ts, ys, ".", ms=2, color="#4477aa", alpha=0.6, label="round trip")
+    code = ex["code"].to_numpy()
+    err = ok & w & np.isin(code, ERROR_CODES)
+    bad = w & np.isfinite(t) & ((status == "unanswered") | (
+        ex["answer_kind"].to_numpy() == "garbled"))
+    top = float(np.nanmax(ys)) if len(ys) else 1.0
+    if err.any():
+        et, ey = _thin(t[err], rtt[err])
+        ax.plot(et, ey, "x", ms=6, color="#cc3311", label=f"error answer ({int(err.sum())})")
+    if bad.any():
+        bt = _thin(t[bad])[0]
+        ax.plot(bt, np.full(len(bt), top * 1.05), "|", ms=10, color="#aa3377",
+                label=f"no or garbled answer ({int(bad.sum())})")
+    rep = a.queue
+    if rep is not None and rep.starvations:
+        st = np.array([e["t"] for e in rep.starvations]) - a.t0
+        st = st[_window(a, st)]
+        for k, x in enumerate(_thin(st)[0]):
+            ax.axvline(x, color="#ee7733", lw=0.8, alpha=0.5,
+                       label=f"starvation ({len(st)})" if k == 0 else None)
+    pos = ys[ys > 0]
+    if len(pos) and pos.max() / pos.min() > 30:  # long tails: a log scale keeps both visible
+        ax.set_yscale("log")
+    ax.set_xlabel("s from the start")
+    ax.set_ylabel("round trip, ms")
+    ax.set_title("Latency over time")
+    _limit(ax, a)
+    _legend(ax)
     return _png(fig)
 
 
@@ -86,17 +156,23 @@ def throughput_plot(a: Any) -> str | None:
     fig, ax = _fig()
     ax.plot(s["t"], s["exchanges_per_s"], label="exchanges/s", color="#4477aa")
     ax.plot(s["t"], s["vectors_per_s"], label="vectors/s", color="#228833")
-    ax.set_xlabel("s")
+    ax.set_xlabel("s from the start")
     ax.set_ylabel("per second")
+    handles, labels = ax.get_legend_handles_labels()
     if "utilisation_host" in s:
         ax2 = ax.twinx()
         ax2.plot(s["t"], 100 * s["utilisation_host"], label="line use host→unit %",
                  color="#aa3377", alpha=0.6)
         ax2.set_ylabel("line utilisation %")
         ax2.set_ylim(0, max(100, float(100 * s["utilisation_host"].max()) * 1.1))
-        ax2.legend(loc="upper right", fontsize=8)
-    ax.legend(loc="upper left", fontsize=8)
+        h2, l2 = ax2.get_legend_handles_labels()
+        handles, labels = handles + h2, labels + l2
+        fig.subplots_adjust(right=0.7)
+    _legend(ax, handles, labels)
+    if "utilisation_host" in s:  # the right axis's labels sit between the plot and the legend
+        ax.get_legend().set_bbox_to_anchor((1.12, 1.0))
     ax.set_title("Throughput over time")
+    _limit(ax, a)
     return _png(fig)
 
 
@@ -104,18 +180,22 @@ def queue_plot(a: Any) -> str | None:
     rep = a.queue
     if rep is None or len(rep.depth_t) == 0:
         return None
-    fig, ax = _fig()
-    t, d = _thin(rep.depth_t - a.t0, rep.depth)
+    fig, ax = _fig(9.0, 3.4)
+    t_all = rep.depth_t - a.t0
+    w = _window(a, t_all)
+    t, d = _thin(t_all[w], rep.depth[w])
     ax.step(t, d, where="post", color="#4477aa", label="predicted queue depth")
     ax.axhline(rep.capacity, color="#999999", ls="--", lw=0.8, label=f"capacity {rep.capacity}")
     if rep.starvations:
         st = np.array([e["t"] for e in rep.starvations]) - a.t0
-        ax.plot(st, np.zeros(len(st)), "v", color="#cc3311", ms=7,
+        st = st[_window(a, st)]
+        ax.plot(st, np.zeros(len(st)), "^", color="#cc3311", ms=7,
                 label=f"starvation ({len(st)})")
-    ax.set_xlabel("s")
+    ax.set_xlabel("s from the start")
     ax.set_ylabel("vectors queued")
-    ax.legend(fontsize=8)
-    ax.set_title("Queue depth (replayed through the unit's motion model)")
+    ax.set_title("Queue depth over time (replayed through the unit's motion model)")
+    _limit(ax, a)
+    _legend(ax)
     return _png(fig)
 
 
@@ -129,9 +209,12 @@ def path_plot(a: Any) -> str | None:
     dy = ex["dy"].to_numpy()[rows]
     x = np.concatenate([[0], np.cumsum(dx)])
     y = np.concatenate([[0], np.cumsum(dy)])
-    fig, ax = _fig(6.5, 6.0)
+    fig, ax = _fig(8.0, 6.0)
     xs, ys = _thin(x, y)
-    ax.plot(xs, ys, color="#4477aa", lw=0.8)
+    ax.plot(xs, ys, color="#4477aa", lw=0.8, label="path")
+    if len(x) > 2:  # every junction (a vector's end where the next one starts)
+        jx, jy = _thin(x[1:-1], y[1:-1])
+        ax.plot(jx, jy, ".", ms=2, color="#88aacc", label=f"junction ({len(x) - 2})")
     if len(rep.done_rows):
         # exit speed of every finished vector marks the junction at its end
         idx = np.searchsorted(rows, rep.done_rows)
@@ -151,14 +234,14 @@ def path_plot(a: Any) -> str | None:
     ax.set_xlabel("X pulses")
     ax.set_ylabel("Y pulses")
     ax.set_title("X/Y path, junctions where the motion stopped or slowed")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=8)
+    _legend(ax)
     return _png(fig)
 
 
 def all_plots(a: Any) -> dict[str, str]:
     out = {}
-    for key, fn in (("latency", latency_plots), ("throughput", throughput_plot),
+    for key, fn in (("latency", latency_plots), ("latency_time", latency_time_plot),
+                    ("throughput", throughput_plot),
                     ("queue", queue_plot), ("path", path_plot)):
         try:
             img = fn(a)

@@ -24,6 +24,9 @@ BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
 @click.option("--no-whatif", is_flag=True, help="Skip the what-if queue replays.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress display (default: on for large files on a terminal).")
+@click.option("--time-range", default=None, metavar="START:END",
+              help="Draw the plots over time for this range only, in seconds from the start "
+                   "(either end may be left out), to look closely at a stutter.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Several captures: local processes to use (default: every core).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -31,7 +34,8 @@ BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
                    "(e.g. tcp://host:8786) instead of local processes.")
 def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
-        progress: bool | None, jobs: int | None, scheduler: str | None) -> None:
+        progress: bool | None, time_range: str | None, jobs: int | None,
+        scheduler: str | None) -> None:
     """Analyse a capture: findings with manual clauses, latency split, throughput, queue.
 
     Several files or a folder: each capture analysed in parallel, one Parquet dataset and a
@@ -44,6 +48,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler)
         return
     file = files[0]
+    window = _time_range(time_range)
 
     try:
         size = os.path.getsize(file)
@@ -70,6 +75,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     else:
         a = analyze(file, variant=variant, baud=baud, dialect=dialect,
                     whatif_replays=not no_whatif)
+    a.time_range = window
     m = a.metrics
     click.echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
                f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
@@ -93,6 +99,20 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         click.echo(f"tables: {parquet_dir}")
     if damage:
         raise SystemExit(1)
+
+
+def _time_range(text: str | None) -> tuple[float, float] | None:
+    """``START:END`` in seconds (either may be empty) as a pair; ``UserError`` if malformed."""
+    if text is None:
+        return None
+    lo, sep, hi = text.partition(":")
+    try:
+        pair = (float(lo) if lo.strip() else float("-inf"), float(hi) if hi.strip() else float("inf"))
+    except ValueError:
+        pair = (float("nan"), float("nan"))
+    if not sep or not pair[0] < pair[1]:
+        raise UserError(f"--time-range {text!r}: expected START:END in seconds, START < END")
+    return pair
 
 
 def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
