@@ -75,7 +75,7 @@ class ReadStatus:
         if self.damaged_chunks:
             what.append(f"{self.damaged_chunks} damaged record(s) skipped")
         if self.bad_payloads:
-            what.append(f"{self.bad_payloads} unreadable message(s) skipped")
+            what.append(f"{self.bad_payloads} unreadable message(s) or schema(s)")
         if self.bad_times:
             what.append(f"{self.bad_times} read(s) with an unusable time (NaN, infinite, out "
                         "of range or before the read preceding it), timed as the read before")
@@ -140,6 +140,20 @@ class _Collector:
         enc = body[12 + n : 12 + n + m].decode("utf-8", "replace")
         self.channels.setdefault(cid, (topic, enc))
 
+    def schema(self, body: bytes) -> None:
+        """A JSON schema that is not JSON makes the file unreadable for Foxglove: say so."""
+        (n,) = struct.unpack_from("<I", body, 2)
+        (m,) = struct.unpack_from("<I", body, 6 + n)
+        encoding = body[10 + n : 10 + n + m]
+        (k,) = struct.unpack_from("<I", body, 10 + n + m)
+        if encoding == b"jsonschema":
+            try:
+                json.loads(body[14 + n + m : 14 + n + m + k])
+            except (ValueError, RecursionError):
+                assert self.status is not None
+                self.status.bad_payloads += 1
+                self.status.notes.append("a channel's JSON schema is not JSON")
+
     def metadata_record(self, body: bytes) -> None:
         (n,) = struct.unpack_from("<I", body, 0)
         name = body[4 : 4 + n].decode("utf-8", "replace")
@@ -175,6 +189,8 @@ class _Collector:
         lens = _gather(arr, at + 1, 8, "<u8").astype(np.int64)
         for i in np.flatnonzero(ops == OP_CHANNEL).tolist():
             self.channel(data[at[i] + 9 : at[i] + 9 + lens[i]])
+        for i in np.flatnonzero(ops == OP_SCHEMA).tolist():
+            self.schema(data[at[i] + 9 : at[i] + 9 + lens[i]])
         msg = np.flatnonzero(ops == OP_MESSAGE)
         if len(msg) == 0:
             return
@@ -288,7 +304,7 @@ def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | 
                             status.notes.append(f"damaged chunk at byte {pos} skipped: {exc}")
                     elif op == OP_METADATA:
                         col.metadata_record(body)
-                    elif op in (OP_CHANNEL, OP_MESSAGE):
+                    elif op in (OP_CHANNEL, OP_MESSAGE, OP_SCHEMA):
                         col.records(head + body, 0, 9 + len(body))
                 except (ValueError, struct.error, UnicodeDecodeError) as exc:
                     status.problem = f"damaged record (opcode 0x{op:02x}) at byte {pos}: {exc}"
