@@ -114,3 +114,19 @@ def test_cr_fast_path_cuts_lines_like_the_byte_loop(blocks, max_line):
         assert a.rest(20.0) == b.rest(20.0)
     finally:
         decode.MAX_LINE = old
+
+
+def test_format1_samples_still_match_the_format1_schemas():
+    import jsonschema
+
+    from conform.capture.schemas import CHANNELS_V1
+
+    with open(CAPTURES / "usb-packets.mcap", "rb") as f:
+        reader = make_reader(f)
+        seen = set()
+        for schema, channel, message in reader.iter_messages():
+            name, want = CHANNELS_V1[channel.topic]
+            assert schema.name == name
+            jsonschema.Draft202012Validator(want).validate(json.loads(message.data))
+            seen.add(channel.topic)
+    assert {"/serial/host", "/serial/unit"} <= seen

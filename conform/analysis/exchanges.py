@@ -189,7 +189,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
         "packet": packets.packet,
         "packet_role": pd.Series(packets.role, dtype=object),
         "dx": host.vec[:, 0], "dy": host.vec[:, 1], "dz": host.vec[:, 2], "da": host.vec[:, 3],
-    })
+    }, copy=False)  # one block per column: no consolidated copy of a million-row table
     df["uncertain"] = uncertain_mask(df)
     return df, unsolicited
 

@@ -80,15 +80,11 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     removals: list[float] = []
     notes: list[str] = []
     advance, push = exe.advance, exe.push
-    trow = t[rows].tolist()
-    vrows = vec[rows].tolist()
-    is_vec_l = is_vec.tolist()
-    cont_l = cont.tolist()
-    for k, r in enumerate(rows.tolist()):
-        tk = trow[k]
+    done: list[np.ndarray] = []  # finished vectors, drained from the log block by block
+    for r, tk, vk, is_v, c in _blocks(rows, t, vec, is_vec, cont, log, done):
         advance(tk)
-        if is_vec_l[k]:
-            push(vrows[k], cont_l[k])
+        if is_v:
+            push(vk, c)
             continue
         name = names[r]
         cmd = host_parsed(r)
@@ -136,8 +132,9 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         exe.advance(end)
         end = exe.next_event_time()
         guard += 1
-    if log:
-        arr = np.array(log, float)  # Completion is a NamedTuple: one row per finished vector
+    _drain(log, done)
+    if done:
+        arr = np.concatenate(done)  # one row per finished vector: the Completion fields
         f = Completion._fields
         seq = arr[:, f.index("seq")].astype(np.int64)
         starts, ends = arr[:, f.index("t_start")], arr[:, f.index("t_end")]
@@ -162,6 +159,28 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
                       removals_a, depth_t, depth, notes=notes, capacity=variant.queue)
     rep.starvations = _starvation_events(rep)
     return rep
+
+
+REPLAY_BLOCK = 65_536  # rows turned into Python values at a time (memory stays flat)
+
+
+def _drain(log: list, done: list[np.ndarray]) -> None:
+    """Move the executor's Completion tuples into a float array (the list is reused)."""
+    if log:
+        done.append(np.array(log, float))
+        del log[:]
+
+
+def _blocks(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray,
+            cont: np.ndarray, log: list, done: list[np.ndarray]) -> Any:
+    """(row, time, vector, is a vector, continuous) for every replayed row, converted
+    to Python values one block at a time; the completion log is drained between blocks."""
+    for b in range(0, len(rows), REPLAY_BLOCK):
+        sl = slice(b, b + REPLAY_BLOCK)
+        r = rows[sl]
+        yield from zip(r.tolist(), t[r].tolist(), vec[r].tolist(), is_vec[sl].tolist(),
+                       cont[sl].tolist(), strict=True)
+        _drain(log, done)
 
 
 def _global_seq(seq: np.ndarray) -> np.ndarray:
