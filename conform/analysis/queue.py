@@ -233,13 +233,13 @@ def whatif(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     if len(vec_rows) < 2 or not baud:
         return []
     byte_t = 10.0 / baud
-    single = ex.iloc[vec_rows]
-    plain = single[single["packet"].to_numpy() < 0]
-    src = plain if len(plain) else single
-    cmd_w = float(np.median(src["cmd_bytes"])) * byte_t
+    # medians of three columns over the single (unpacketed) vectors: no copy of the table
+    plain = vec_rows[ex["packet"].to_numpy()[vec_rows] < 0]
+    src = plain if len(plain) else vec_rows
+    cmd_w = float(np.median(ex["cmd_bytes"].to_numpy()[src])) * byte_t
     ans_w = 2 * byte_t
-    ut = src["unit_time"].to_numpy()
-    ht = src["host_time"].to_numpy()
+    ut = ex["unit_time"].to_numpy()[src]
+    ht = ex["host_time"].to_numpy()[src]
     lat = float(np.nanmedian(ut)) if np.isfinite(ut).any() else 0.0
     host = float(np.nanmedian(ht)) if np.isfinite(ht).any() else 0.0
     lat, host = max(lat, 0.0), max(host, 0.0)
