@@ -10,7 +10,7 @@ The proxy, the sniffer and the emulator (``conform emulate --record``) all use t
     rec.log("info", "sender reconnected")
     rec.close()                                      # run.mcap.part -> run.mcap
 
-Calls only queue the data (cheap, never blocks on disk); one writer thread encodes, decodes
+Calls only queue the data (cheap, never blocks on disk); one writer thread batches, decodes
 frames and writes. The file is ``<path>.part`` until ``close()`` finishes it cleanly and
 renames it; the writer flushes a chunk at least every ``flush_interval`` seconds (default
 0.25), so a killed recorder loses at most that much and ``conform capture recover`` salvages
