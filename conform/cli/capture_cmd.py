@@ -26,7 +26,8 @@ def info(file: str, as_json: bool) -> None:
         click.echo(json.dumps({
             "file": str(result.path), "state": result.state, "problem": s.problem,
             "intact_bytes": s.valid_bytes, "size": s.size, "duration": result.duration,
-            "bytes": result.bytes, "gaps": result.gaps, "messages": dict(result.messages),
+            "bytes": result.bytes, "reads": result.reads, "gaps": result.gaps,
+            "messages": dict(result.messages), "unreadable_messages": result.bad_messages,
             "metadata": result.metadata,
         }, indent=2))
     else:
