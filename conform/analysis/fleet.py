@@ -99,17 +99,16 @@ def _ms(v: Any) -> float | None:
 
 def _write_part(a: Any, root: Path, machine: str, session: str) -> None:
     """This capture's exchanges as one file of the fleet's hive-partitioned dataset."""
+    from conform.analysis.report import coded
+
     ex = a.exchanges.copy()
     for col in ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"):
         ex[col] = ex[col] - a.t0
     ex.insert(0, "t0", a.t0)
     ex.insert(0, "session", session)
-    for col in ex.columns:
-        if ex[col].dtype == object:
-            ex[col] = ex[col].astype("category")
     d = root / "exchanges" / f"machine={_safe(machine)}"
     d.mkdir(parents=True, exist_ok=True)
-    ex.to_parquet(d / f"{_safe(session)}.parquet", index=False)
+    coded(ex).to_parquet(d / f"{_safe(session)}.parquet", index=False)
 
 
 Runner = Callable[[list[str], str | None, dict[str, Any]], list[dict[str, Any]]]

@@ -109,10 +109,17 @@ def write_parquet(a: Any, out_dir: str | Path) -> dict[str, Path]:
     out = {}
     for name, df in tables.items():
         p = d / f"{name}.parquet"
-        df = df.copy()
-        for col in df.columns:
-            if df[col].dtype == object:
-                df[col] = df[col].astype("string")
-        df.to_parquet(p, index=False)
+        coded(df).to_parquet(p, index=False)
         out[name] = p
     return out
+
+
+def coded(df: Any) -> Any:
+    """A copy whose text columns are integer-coded (categorical: names, kinds, statuses)
+    when their values repeat, else plain strings (command lines)."""
+    df = df.copy()
+    for col in df.columns:
+        if df[col].dtype == object:
+            s = df[col].astype("string")
+            df[col] = s.astype("category") if s.nunique() <= max(1, len(s) // 2) else s
+    return df
