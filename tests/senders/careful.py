@@ -1,0 +1,185 @@
+"""A careful GVE sender for check-sender's tests: checksums on, strictly simplex, and after a
+garbled or lost answer it asks `>` and `@` before doing anything (GVE64 §13.5.13).
+
+    python careful.py PORT JOB [--no-checksums]
+
+It reads `@` before every vector, so after an uncertain answer an unchanged index means the
+vector never arrived (send it again) and a changed one means it did (the `>` answer, asked
+first, is its answer). Queue full (1): wait 20 ms and send it again. An answer with INTA: stop
+sending vectors, wait until the stop input is released (I1 bit 7 back high), then `G`.
+Exit 0 when every job line was acknowledged, 1 otherwise.
+"""
+
+import sys
+import time
+
+import serial
+
+TIMEOUT = 0.15
+
+
+def summed(body: str) -> str:
+    s = body + ","
+    return s + "%02X" % (sum(s.encode()) & 0xFF)
+
+
+class Link:
+    def __init__(self, port: str, checksums: bool) -> None:
+        self.port = serial.Serial(port, 115200, timeout=0.02)
+        self.cs = False
+        self.want_cs = checksums
+        self.buf = b""
+
+    def line(self, body: str) -> bytes:
+        return ((summed("!0" + body) if self.cs else "!0" + body) + "\r").encode()
+
+    def read_line(self, timeout: float = TIMEOUT) -> str | None:
+        end = time.monotonic() + timeout
+        while b"\r" not in self.buf:
+            if time.monotonic() > end:
+                return None
+            self.buf += self.port.read(self.port.in_waiting or 1)
+        line, _, self.buf = self.buf.partition(b"\r")
+        return line.decode("latin-1")
+
+    def settle(self) -> None:
+        time.sleep(0.05)
+        self.port.reset_input_buffer()
+        self.buf = b""
+
+    def parse(self, text: str | None) -> tuple[int, list[str]] | None:
+        """(code incl. INTA, fields) of a clean answer, else None."""
+        if not text or text[0] not in "0123456789ABCDEF":
+            return None
+        parts = text.split(",")
+        if self.cs:
+            if len(parts) < 2 or len(parts[-1]) != 2:
+                return None
+            head = text[: text.rfind(",") + 1]
+            try:
+                if (sum(head.encode()) & 0xFF) != int(parts[-1], 16):
+                    return None
+            except ValueError:
+                return None
+            parts = parts[:-1]
+        if len(parts[0]) != 1:
+            return None
+        return int(parts[0], 16), parts[1:]
+
+    def ask(self, body: str, tries: int = 40) -> tuple[int, list[str]]:
+        """A command that may be repeated safely: send until a clean answer."""
+        for _ in range(tries):
+            self.port.write(self.line(body))
+            ans = self.parse(self.read_line())
+            if ans is not None:
+                return ans
+            self.settle()
+        raise SystemExit(f"careful: no clean answer to {body}")
+
+    def repeat(self) -> tuple[str | None, tuple[int, list[str]] | None]:
+        """`>`: (the echoed line, its answer) or (None, None) when damaged."""
+        self.port.write(self.line(">"))
+        echo = self.read_line()
+        if echo is None or not echo.startswith("!"):
+            return None, None
+        return echo, self.parse(self.read_line())
+
+
+def main() -> int:
+    port, job = sys.argv[1], sys.argv[2]
+    link = Link(port, "--no-checksums" not in sys.argv)
+    lines = [x.strip() for x in open(job) if x.strip()]
+    if link.want_cs:
+        for _ in range(40):
+            link.port.write(b"!0%+\r")
+            text = link.read_line()
+            link.cs = True
+            if link.parse(text) is not None:
+                break
+            link.cs = False
+            link.settle()
+        else:
+            return 3
+    inta_seen = False
+    k = 0
+    while k < len(lines):
+        body = lines[k]
+        vector = body[0] in "CL"
+        before = None
+        if vector:
+            code, fields = link.ask("@")
+            inta_seen |= bool(code & 8)
+            before = fields[0] if fields else None
+        if inta_seen:
+            inta_seen = False
+            resume(link)
+            continue
+        link.port.write(link.line(body))
+        ans = link.parse(link.read_line())
+        if ans is None and vector:
+            ans = recover(link, body, before)
+            if ans == "resend":
+                continue
+        elif ans is None:
+            link.settle()
+            continue  # not a vector: sending it again is harmless
+        code, _ = ans
+        if code & 8:
+            inta_seen = True
+        code &= 7
+        if code == 1:
+            time.sleep(0.02)
+            continue
+        if code in (2, 3, 4, 5):
+            continue  # refused: certainly not taken (damaged on the way)
+        if code not in (0, 6):
+            return 1
+        k += 1
+    if link.cs:  # leave the unit as found; the answer to %- has no checksum
+        line = link.line("%-")
+        link.cs = False
+        for _ in range(40):
+            link.port.write(line)
+            if link.parse(link.read_line()) is not None:
+                break
+            link.settle()
+    return 0
+
+
+def recover(link: Link, body: str, before: str | None):
+    """After a garbled answer or none: `>` first (it repeats the last line and its answer),
+    then `@` (asking `@` first would make `>` repeat the `@`)."""
+    ours = link.line(body).decode().rstrip("\r")
+    for _ in range(40):
+        link.settle()
+        echo, rep = link.repeat()
+        if rep is None:
+            continue
+        _code, fields = link.ask("@")
+        now = fields[0] if fields else None
+        if now == before:
+            return "resend"  # the vector never arrived
+        if echo == ours:
+            return rep  # it arrived: the repeated answer is its answer
+        if rep[0] & 7 in (2, 3, 4, 5):
+            return "resend"  # it arrived damaged and was refused
+        raise SystemExit(f"careful: index moved but `>` shows {echo!r}: stopping")
+    raise SystemExit("careful: no clean answer to `>`")
+
+
+def resume(link: Link) -> None:
+    """Interrupted (INTA): wait for the stop input to be released, then G."""
+    while True:
+        code, fields = link.ask("I1")
+        if fields and int(fields[0], 16) & 0x80:
+            break
+        time.sleep(0.05)
+    while True:
+        code, _ = link.ask("G")
+        if code & 7 in (0, 6):
+            return
+        time.sleep(0.05)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
