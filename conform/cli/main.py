@@ -28,6 +28,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "capture",
     "analyze",
     "send",
+    "check-sender",
 )
 
 
@@ -40,9 +41,9 @@ def cli() -> None:
 def _register() -> None:
     for name in SUBCOMMANDS:
         try:
-            module = importlib.import_module(f"conform.cli.{name}_cmd")
+            module = importlib.import_module(f"conform.cli.{name.replace('-', '_')}_cmd")
         except ModuleNotFoundError as exc:
-            if exc.name == f"conform.cli.{name}_cmd":
+            if exc.name == f"conform.cli.{name.replace('-', '_')}_cmd":
                 continue  # not built yet
             raise
         cli.add_command(module.cli, name=name)

@@ -12,9 +12,9 @@ the unit could not recognise as damaged: no checksums).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from difflib import SequenceMatcher
 
 Vec = tuple[str, tuple[int, ...]]
+LOOKAHEAD = 3
 
 
 @dataclass
@@ -44,30 +44,69 @@ def _fmt(v: Vec) -> str:
     return v[0] + ",".join(str(x) for x in v[1])
 
 
+def _resyncs(job: list[Vec], i: int, acc: list[Vec], j: int, k: int = LOOKAHEAD) -> bool:
+    a, b = job[i:i + k], acc[j:j + k]
+    n = min(len(a), len(b))
+    return a[:n] == b[:n] and (n == k or len(job) - i == len(acc) - j)
+
+
 def compare(job: list[Vec], accepted: list[Vec], *, tail_may_be_missing: bool = False
             ) -> Comparison:
-    """Align ``accepted`` with ``job``; ``tail_may_be_missing``: the run was ended on purpose
-    (an interrupt answered with D), so job vectors never sent after the last accepted one
-    are not lost."""
+    """Walk ``job`` and ``accepted`` side by side; at a difference, the explanation that
+    brings the two back in step for the next few vectors wins: an extra accepted vector
+    (a double move when it repeats its neighbour), a job vector never accepted (lost), or
+    one replaced by another (altered). ``tail_may_be_missing``: the run was ended on purpose
+    (an interrupt answered with D), so job vectors after the last accepted one are not lost.
+    """
     c = Comparison(len(job), len(accepted))
-    sm = SequenceMatcher(None, job, accepted, autojunk=False)
-    for op, i1, i2, j1, j2 in sm.get_opcodes():
-        if op == "equal":
+    i = j = 0
+    while i < len(job) or j < len(accepted):
+        if i < len(job) and j < len(accepted) and job[i] == accepted[j]:
+            i += 1
+            j += 1
             continue
-        if op == "replace" and i2 - i1 == j2 - j1:
-            for k in range(i2 - i1):
-                c.altered.append({"job_index": i1 + k, "job": _fmt(job[i1 + k]),
-                                  "accepted_index": j1 + k, "accepted": _fmt(accepted[j1 + k])})
-            continue
-        for j in range(j1, j2):  # inserted (or the longer side of a replace)
-            near = {job[i] for i in (i1 - 1, i1, i2 - 1, i2) if 0 <= i < len(job)}
-            item = {"accepted_index": j, "vector": _fmt(accepted[j]), "after_job_index": i1 - 1}
-            (c.doubles if accepted[j] in near or accepted[j] in accepted[max(0, j - 1):j]
-             else c.extras).append(item)
-        for i in range(i1, i2):
+        if i >= len(job):
+            extra = True
+        elif j >= len(accepted):
+            extra = False
+        else:
+            repeat = accepted[j] == accepted[j - 1] if j else False
+            extra_ok = _resyncs(job, i, accepted, j + 1)
+            lost_ok = _resyncs(job, i + 1, accepted, j)
+            if extra_ok and (repeat or not lost_ok):
+                extra = True
+            elif lost_ok:
+                extra = False
+            else:
+                c.altered.append({"job_index": i, "job": _fmt(job[i]), "accepted_index": j,
+                                  "accepted": _fmt(accepted[j])})
+                i += 1
+                j += 1
+                continue
+        if extra:
+            near = accepted[j] in job[max(0, i - 1):i + 1] or (j and accepted[j] == accepted[j - 1])
+            (c.doubles if near else c.extras).append(
+                {"accepted_index": j, "vector": _fmt(accepted[j]), "after_job_index": i - 1})
+            j += 1
+        else:
             c.lost.append({"job_index": i, "vector": _fmt(job[i])})
+            i += 1
     c.prefix = accepted == job[: len(accepted)]
     if tail_may_be_missing and c.lost:
-        last = max((m[0] + m[2] for m in sm.get_matching_blocks() if m[2]), default=0)
-        c.lost = [x for x in c.lost if x["job_index"] < last]
+        last = max((x["after_job_index"] for x in c.doubles + c.extras), default=-1)
+        matched_upto = _last_matched(job, accepted)
+        c.lost = [x for x in c.lost if x["job_index"] < max(last, matched_upto)]
     return c
+
+
+def _last_matched(job: list[Vec], accepted: list[Vec]) -> int:
+    """How far into the job the accepted vectors reach (for an aborted run)."""
+    reach = 0
+    i = 0
+    for v in accepted:
+        while i < len(job) and job[i] != v:
+            i += 1
+        if i < len(job):
+            i += 1
+            reach = i
+    return reach

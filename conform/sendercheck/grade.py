@@ -8,6 +8,7 @@ harness failed).
 from __future__ import annotations
 
 import shlex
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -142,6 +143,8 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
 
     if not command:
         raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS...")
+    if shutil.which(command[0]) is None:
+        raise UserError(f"{command[0]}: no such program (not found or not executable)")
     spec = load_spec()
     var = spec.variant(variant or GVE.default_variant)
     family = family_for(var.id)

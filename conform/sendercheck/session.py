@@ -28,9 +28,8 @@ from conform.capture.live import ProxyCapture
 from conform.link.faults import FaultConfig
 from conform.link.pty import PtyEndpoint
 from conform.sendercheck.compare import Comparison, compare
-from conform.sendercheck.faults import ScriptedFaults
 from conform.sendercheck.family import Family, Scenario
-from conform.unit.control import run_control
+from conform.sendercheck.faults import ScriptedFaults
 from conform.unit.model import Unit, run_until_idle
 from conform.unit.serve import Emulator
 from conform.unit.truth import GroundTruth

@@ -1,0 +1,77 @@
+"""``conform check-sender [OPTIONS] -- COMMAND ARGS...``: grade a user's sender program.
+
+The program runs once per scenario against the reference unit on a pty; ``{port}`` in its
+arguments becomes the device path (also in ``CONFORM_PORT``), ``{job}`` the vector file it
+should stream (``CONFORM_JOB``). Exit status: 0 no MUST rule failed, 1 one did, 2 usage.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from conform.errors import UserError
+
+
+@click.command(name="check-sender", context_settings={"ignore_unknown_options": True})
+@click.option("--variant", default=None, help="The unit to emulate (default gve64-v19).")
+@click.option("--scenario", "scenarios", multiple=True, metavar="NAME",
+              help="Run only these scenarios (repeatable; default: all). `--scenario list` "
+                   "lists them.")
+@click.option("--report", "report_dir", default=None, type=click.Path(file_okay=False),
+              help="Write index.html, summary.md, junit.xml, results.json here "
+                   "(default reports/check-sender-<timestamp>/).")
+@click.option("--timeout", type=float, default=None,
+              help="Seconds before a program still running is stopped and graded as hung "
+                   "(default per scenario, 30).")
+@click.option("--job", "job_file", default=None, type=click.Path(dir_okay=False),
+              help="A vector file to use as the job in every scenario instead of the "
+                   "scenario's own.")
+@click.option("--seed", type=int, default=1, show_default=True, help="Seed of the faults.")
+@click.option("--json", "as_json", is_flag=True, help="Print results.json to stdout.")
+@click.argument("command", nargs=-1, type=click.UNPROCESSED)
+def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
+        timeout: float | None, job_file: str | None, seed: int, as_json: bool,
+        command: tuple[str, ...]) -> None:
+    """Run COMMAND once per scenario against the emulator and grade it per rule and clause."""
+    import json
+    from pathlib import Path
+
+    from conform.report.render import default_dir
+    from conform.sendercheck.grade import GVE, check
+    from conform.sendercheck.report import write_reports
+
+    if "list" in scenarios:
+        for s in GVE.scenarios.values():
+            click.echo(f"{s.name:14} {s.title}")
+        return
+    if not command:
+        raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS... "
+                        "(`{port}` in ARGS becomes the device path)")
+    if timeout is not None and not 0 < timeout <= 86400:
+        raise UserError(f"--timeout {timeout:g}: must be between 0 and 86400 seconds")
+    job_lines = None
+    if job_file is not None:
+        from conform.errors import read_user_text
+
+        job_lines = [x for x in read_user_text(job_file).splitlines() if x.strip()]
+        if not job_lines:
+            raise UserError(f"{job_file}: no commands in the file")
+    directory = Path(report_dir) if report_dir else default_dir().with_name(
+        "check-sender-" + default_dir().name)
+
+    def say(msg: str) -> None:
+        click.echo(f"check-sender: {msg}", err=True)
+
+    results = check(list(command), variant=variant, names=list(scenarios) or None,
+                    directory=directory, timeout=timeout, seed=seed, job_lines=job_lines,
+                    progress=say)
+    write_reports(results, directory)
+    if as_json:
+        click.echo(json.dumps(results.to_json(), indent=1, default=str))
+    else:
+        counts = ", ".join(f"{g} {n}" for g, n in sorted(results.counts().items()))
+        click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: {counts}")
+        click.echo(f"report: {directory / 'index.html'}")
+    sys.exit(results.exit_code)
