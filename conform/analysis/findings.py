@@ -184,6 +184,7 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     cum_rec = np.cumsum(is_rec)
     res: dict[str, np.ndarray] = {"doubles": np.zeros(0, np.int64),
                                   "checked_resends": np.zeros(0, np.int64),
+                                  "unclear_resends": np.zeros(0, np.int64),
                                   "lost": np.zeros(0, np.int64),
                                   "contrib": np.zeros(len(ex), bool),
                                   "recovered": np.zeros(len(ex), bool)}
@@ -202,6 +203,15 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     code = ctx.code[rows]
     answered_clean = (ctx.status[rows] == "answered") & ~unc
     has_next = nxt >= 0
+
+    # a careful sender may ask `>`, learn that the vector arrived, and go on to the next job
+    # vector which happens to be the same: that is not a resend (GVE64 §13.5.13)
+    went_on = np.zeros(len(rows), bool)
+    unclear = np.zeros(len(rows), bool)
+    for i in np.flatnonzero(unc & rec_between & same_next).tolist():
+        said = _repeat_says_arrived(ctx, rows[i], nxt[i])
+        went_on[i], unclear[i] = said is True, said is None
+    resent = same_next & ~went_on
 
     blind = unc & same_next & ~rec_between
     moved_on = unc & has_next & ~same_next & ~rec_between
@@ -244,7 +254,7 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
         hi = nxt[i] if nxt[i] >= 0 else len(ex)
         which = [k for k in range(lo, hi) if is_rec[k]][:3]
         asked = ", ".join(f"`{ctx.cmd(k)}` → {ctx.ans(k)}" for k in which)
-        then = "sent it again" if same_next[i] else "moved on"
+        then = "sent it again" if resent[i] else "moved on"
         return (ctx.t[which[0]] if which else ctx.t[r],
                 f"`{ctx.cmd(r)}` got {ctx.ans(r)}; the sender asked {asked} and then {then}",
                 [_fr("host", r)] + [_fr("host", k) for k in which], {"row": int(r)})
@@ -261,18 +271,44 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
 
     # what the sender meant to move: every unit once, except one replaced by a resend
     contrib = np.zeros(len(ex), bool)
-    contrib[rows] = (answered_clean & (code == 0)) | (unc & ~same_next)
+    contrib[rows] = (answered_clean & (code == 0)) | (unc & ~resent)
     res["contrib"] = contrib
     # uncertain, then checked with @ / > and not sent again: the unit had taken it
     recovered = np.zeros(len(ex), bool)
-    recovered[rows] = unc & rec_between & ~same_next & has_next
+    recovered[rows] = unc & rec_between & ~resent & has_next
     res["recovered"] = recovered
     res["doubles"] = rows[blind]
     # sent again after asking `@`/`>`: safe only if the answers said it had not arrived, so
     # these too may explain a position that shows a vector executed twice
-    res["checked_resends"] = rows[checked & same_next]
+    res["checked_resends"] = rows[checked & resent]
+    res["unclear_resends"] = rows[checked & resent & unclear]
     res["lost"] = rows[moved_on]
     return res
+
+
+def _repeat_says_arrived(ctx: Context, r: int, hi: int) -> bool | None:
+    """What the `>` answers after row ``r`` (up to row ``hi``) say about it: True it arrived
+    and was taken (the repeated line is ours, answered 0), False it was not, None unclear
+    (no clean echo, or the line before ours was the same text)."""
+    if ctx.name[r] not in MOTION:
+        return None
+    ours = ctx.cmd(r)
+    before = ctx.cmd(r - 1) if r > 0 else ""
+    if before == ours:
+        return None
+    kind = ctx.ex["answer_kind"].to_numpy()
+    for k in range(r + 1, hi if hi >= 0 else len(ctx.ex)):
+        if ctx.name[k] != ">" or ctx.status[k] != "answered" or kind[k] != ANSWER:
+            continue
+        e = int(ctx.answer[k]) - 1
+        echo = ctx.unit_text(e) if e >= 0 else ""
+        if not echo.startswith("!"):
+            continue  # the unit line before the answer is not the echo of the repeated line
+        if echo == ours:
+            return bool(ctx.code[k] == 0)
+        if echo == before:
+            return False
+    return None
 
 
 def _repeat_used(ctx: Context, out: Findings, uncertain: np.ndarray, is_rec: np.ndarray) -> None:

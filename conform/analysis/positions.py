@@ -59,6 +59,7 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
     cut = np.flatnonzero(clean & np.isin(name, ("H", "D", "K")))
     doubles = np.concatenate([rec["doubles"], rec.get("checked_resends", np.zeros(0, np.int64))])
     checked_resends = set(rec.get("checked_resends", np.zeros(0, np.int64)).tolist())
+    unclear = set(rec.get("unclear_resends", np.zeros(0, np.int64)).tolist())
     lost = rec["lost"]
     used: set[int] = set()
     prev_vals: tuple[int, ...] | None = None
@@ -110,13 +111,26 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
             adjust -= mot_all[lv]
         for d in dd:
             used.add(d)
+            if d in unclear:
+                # the line before it was the same text: `>` cannot tell a resend from the
+                # job's next identical vector, and neither can a position
+                summary["possible_double"] = summary.get("possible_double", 0) + 1
+                out.add("double-move", ctx.t[r], "hazard",
+                        f"`{ctx.cmd(d)}` may have been executed twice: the sender asked `@`/`>` "
+                        "and sent the same vector again, but with the same line just before "
+                        "it neither the answers nor the position "
+                        f"(`{ctx.cmd(r)}` reports {vals}) tell a resend from the job's next "
+                        "identical vector", frames=[f"host:{d}"] + ctx.frames(r), row=d,
+                        position_row=r, confirmed=False)
+                continue
             summary["confirmed_double"] += 1
             how = (" The sender asked `@`/`>` before sending it again, but the unit had taken "
                    "the first copy." if d in checked_resends else "")
             out.add("double-move", ctx.t[r], "hazard",
                     f"`{ctx.cmd(d)}` was executed twice: `{ctx.cmd(r)}` reports {vals}, "
                     f"which is the job's position plus that vector once more.{how}",
-                    frames=[f"host:{d}"] + ctx.frames(r), row=d, position_row=r)
+                    frames=[f"host:{d}"] + ctx.frames(r), row=d, position_row=r,
+                    confirmed=True)
         for lv in ll:
             used.add(lv)
             summary["confirmed_lost"] += 1

@@ -396,7 +396,9 @@ class Sender:
             if echo == self._before:
                 self._wake = t  # the unit's last line is the one before ours: ours never arrived
                 return
-        self._repeat_ans = None if self.repeat_echo else ans
+        # the echo is our text but so was the line before: once the index shows that ours
+        # arrived, ours is the last line and the repeated answer is its answer
+        self._repeat_ans = ans if (not self.repeat_echo or echo == ours) else None
         self._recover(t, "recover-index")
 
     def _after_index(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
