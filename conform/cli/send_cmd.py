@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+import time
+
 import click
 
 from conform.errors import LinkError, UserError
@@ -20,9 +23,56 @@ def _floats(text: str) -> tuple[float, ...]:
         vals = tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise UserError(f"--steps-per-mm: expected numbers, not {text!r}") from None
-    if not vals or any(v <= 0 for v in vals):
+    if not vals or any(not math.isfinite(v) or v <= 0 for v in vals):
         raise UserError(f"--steps-per-mm: expected positive numbers, not {text!r}")
     return vals
+
+
+def _check_number(name: str, value: float, lo: float, hi: float = math.inf,
+                  lo_open: bool = False) -> None:
+    """One line naming the option when a number is not finite or outside its range."""
+    bad = not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo)
+    if bad:
+        where = f"{'above' if lo_open else 'from'} {lo:g}" + ("" if hi == math.inf else
+                                                              f" to {hi:g}")
+        raise UserError(f"{name} {value:g}: must be a number {where}")
+
+
+class Progress:
+    """A line on stderr at most every ``every`` seconds of wall time while streaming."""
+
+    def __init__(self, sender: object, every: float = 1.0) -> None:
+        self.sender = sender
+        self.every = every
+        self.next = time.monotonic() + every
+        self.shown = False
+
+    def __call__(self, _t: float) -> None:
+        now = time.monotonic()
+        if now < self.next:
+            return
+        self.next = now + self.every
+        self.show()
+
+    def show(self) -> None:
+        done, total = self.sender.progress  # type: ignore[attr-defined]
+        st = self.sender.stats  # type: ignore[attr-defined]
+        click.echo(f"conform send: {done}/{total} job lines ({100 * done // max(total, 1)} %), "
+                   f"{st.timeouts} timeouts, {st.garbled} garbled, {st.queue_full} queue full",
+                   err=True)
+        self.shown = True
+
+
+def _finish(sender: object) -> None:
+    """Exit 1 unless every job line was acknowledged."""
+    s = sender  # type: ignore[assignment]
+    if s.failed:  # type: ignore[attr-defined]
+        raise UserError(f"send failed: {s.failed}", exit_code=1)  # type: ignore[attr-defined]
+    st = s.stats  # type: ignore[attr-defined]
+    if st.unacknowledged:
+        raise UserError(f"send incomplete: {st.unacknowledged} job line(s) were never "
+                        "acknowledged with 0 (the policy moved on without an answer)",
+                        exit_code=1)
 
 
 @click.command(name="send")
@@ -51,12 +101,14 @@ def _floats(text: str) -> tuple[float, ...]:
 @click.option("--feed", type=float, default=600.0, show_default=True,
               help="G-code: mm/min before the first F.")
 @click.option("--accel", type=float, default=500.0, show_default=True, help="G-code: mm/s².")
+@click.option("--lenient", is_flag=True,
+              help="G-code: skip words outside the subset and what cannot be read.")
 @click.option("--allow-motion", is_flag=True,
               help="Required to send motion to anything but an emulator.")
 def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, packet: int,
         policy: str, latency: float, timeout: float, noise: float, seed: int,
         corrupt_command: str, corrupt_answer: str, record: str | None, steps_per_mm: str,
-        feed: float, accel: float, allow_motion: bool) -> None:
+        feed: float, accel: float, lenient: bool, allow_motion: bool) -> None:
     """Stream JOB (one command per line, or .nc/.gcode) and report what happened."""
     from conform.sender.job import load_job
     from conform.spec import load_spec
@@ -72,54 +124,100 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
         raise UserError(f"--packet {packet}: must be 1 or more")
     if baud <= 0:
         raise UserError(f"--baud {baud}: must be positive")
+    _check_number("--noise", noise, 0.0, 1.0)
+    _check_number("--latency", latency, 0.0, 10_000.0)
+    _check_number("--timeout", timeout, 0.0, 600_000.0, lo_open=True)
+    _check_number("--feed", feed, 0.0, lo_open=True)
+    _check_number("--accel", accel, 0.0, lo_open=True)
     spm = _floats(steps_per_mm)
-    items = load_job(job, var, dialect, steps_per_mm=spm if len(spm) > 1 else spm * 3,
-                     feed=feed, accel=accel)
-    motion = any(i.motion for i in items)
-    if not emu and motion and not allow_motion:
-        raise UserError(f"{job}: the job moves the machine; sending it to {target} needs "
-                        "--allow-motion")
+    gopts = {"steps_per_mm": spm if len(spm) > 1 else spm * 3, "feed": feed, "accel": accel,
+             "lenient": lenient}
     if not emu and (record or noise or corrupt_command or corrupt_answer):
         raise UserError("--record, --noise and --corrupt-* work with emu: targets only "
                         "(record a real port with `conform proxy`)")
-    if emu:
-        from conform.sender.links import LinkModel
-        from conform.sender.session import send_emulated
-
-        link = LinkModel(baud=baud, latency=latency / 1000.0, noise=noise, seed=seed,
-                         corrupt_commands=_ints(corrupt_command),
-                         corrupt_answers=_ints(corrupt_answer))
-        res = send_emulated(items, var, dialect, policy=policy, checksums=checksums,
-                            packet=packet, link=link, record=record, timeout=timeout / 1000.0)
-        s = res.sender
-        click.echo(f"sent {len(items)} job lines to {target}: {s.stats.sent} writes, "
-                   f"{s.stats.answers} answers, {s.stats.garbled} garbled, "
-                   f"{s.stats.timeouts} timeouts, {s.stats.queue_full} queue full, "
-                   f"{s.stats.resent} resent")
-        click.echo(f"final position: {res.position}")
-        if record:
-            click.echo(f"capture: {record}")
-        if s.failed:
-            raise UserError(f"send failed: {s.failed}", exit_code=1)
+    if not emu:
+        _send_port(job, gopts, spec, variant, target, baud, checksums, packet, policy,
+                   latency, timeout, allow_motion)
         return
-    _send_port(items, var, target, baud, checksums, packet, policy, latency, timeout)
+    items = load_job(job, var, dialect, **gopts)
+    from conform.sender.links import LinkModel
+    from conform.sender.session import send_emulated
+
+    link = LinkModel(baud=baud, latency=latency / 1000.0, noise=noise, seed=seed,
+                     corrupt_commands=_ints(corrupt_command),
+                     corrupt_answers=_ints(corrupt_answer))
+    res = send_emulated(items, var, dialect, policy=policy, checksums=checksums,
+                        packet=packet, link=link, record=record, timeout=timeout / 1000.0,
+                        progress=Progress)
+    s = res.sender
+    click.echo(f"sent {len(items)} job lines to {target}: {s.stats.sent} writes, "
+               f"{s.stats.answers} answers, {s.stats.garbled} garbled, "
+               f"{s.stats.timeouts} timeouts, {s.stats.queue_full} queue full, "
+               f"{s.stats.resent} resent")
+    click.echo(f"final position: {res.position}")
+    if record:
+        click.echo(f"capture: {record}")
+    _finish(s)
+    expected = [0] * len(res.position)
+    for it in items:
+        for k, x in enumerate(it.vector or ()):
+            expected[k] += x
+    if tuple(expected) != tuple(res.position):
+        raise UserError(f"send incomplete: the unit ended at {res.position}, the job's vectors "
+                        f"add up to {tuple(expected)}: a damaged line was executed as received "
+                        "(--checksums guards against that)", exit_code=1)
 
 
-def _send_port(items: list, var: object, target: str, baud: int, checksums: bool, packet: int,
-               policy: str, latency: float, timeout: float) -> None:
+def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target: str,
+               baud: int, checksums: bool, packet: int, policy: str, latency: float,
+               timeout: float, allow_motion: bool) -> None:
+    """A real port (or any pyserial URL): ``?`` first (variant, checksum mode), then stream."""
+    import serial
+
+    from conform.conformance.target import variant_for_firmware
+    from conform.sender.job import load_job
+    from conform.sender.probe import probe_unit
+
+    # the job is read before the port is touched: a bad file or a motion job without
+    # --allow-motion never reaches the unit; it is read again for the variant `?` finds
+    first = load_job(job, spec.variant(variant or "gve64-v19"), spec.dialect(), **gopts)  # type: ignore[attr-defined]
+    if any(i.motion for i in first) and not allow_motion:
+        raise UserError(f"{job}: the job moves the machine; sending it to {target} needs "
+                        "--allow-motion")
+    try:
+        port = serial.serial_for_url(target, baudrate=baud, timeout=0.05, write_timeout=2.0)
+    except (serial.SerialException, ValueError, OSError) as exc:
+        raise LinkError(f"{target}: cannot open: {exc}") from None
+    try:
+        try:
+            found = probe_unit(port, target)
+        except (serial.SerialException, OSError) as exc:
+            raise LinkError(f"{target}: {exc}") from None
+        vid, how = variant_for_firmware(spec, found.firmware)
+        if variant and variant != vid:
+            raise UserError(f"--variant {variant}: the unit on {target} answers `?` with "
+                            f"{found.firmware!r} ({how})")
+        click.echo(f"conform send: {how}" + ("; checksums were left on: cleared with %-"
+                                             if found.checksum_was_on else ""), err=True)
+        var = spec.variant(vid)  # type: ignore[attr-defined]
+        items = load_job(job, var, spec.dialect(), **gopts)  # type: ignore[attr-defined]
+        _stream(items, var, port, target, checksums, packet, policy, latency, timeout)
+    finally:
+        port.close()
+
+
+def _stream(items: list, var: object, port: object, target: str, checksums: bool, packet: int,
+            policy: str, latency: float, timeout: float) -> None:
     import serial
 
     from conform.sender.core import Sender
     from conform.sender.links import halt_and_delete, run_serial
 
-    try:
-        port = serial.serial_for_url(target, baudrate=baud, timeout=0.05)
-    except (serial.SerialException, ValueError, OSError) as exc:
-        raise LinkError(f"{target}: cannot open: {exc}") from None
     sender = Sender(items, var, policy=policy, checksums=checksums, packet=packet,  # type: ignore[arg-type]
                     timeout=timeout / 1000.0)
+    progress = Progress(sender)
     try:
-        run_serial(sender, port, latency=latency / 1000.0)
+        run_serial(sender, port, latency=latency / 1000.0, on_progress=progress)
     except KeyboardInterrupt:
         answers = halt_and_delete(sender, port)
         port.close()
@@ -128,11 +226,11 @@ def _send_port(items: list, var: object, target: str, baud: int, checksums: bool
                         exit_code=130) from None
     except (serial.SerialException, OSError) as exc:
         raise LinkError(f"{target}: {exc}") from None
-    port.close()
+    if progress.shown:
+        progress.show()
     s = sender.stats
     click.echo(f"sent {len(items)} job lines to {target}: {s.sent} writes, {s.answers} answers, "
                f"{s.garbled} garbled, {s.timeouts} timeouts, {s.queue_full} queue full")
     if sender.last_position is not None:
         click.echo(f"final position: {sender.last_position}")
-    if sender.failed:
-        raise UserError(f"send failed: {sender.failed}", exit_code=1)
+    _finish(sender)

@@ -140,6 +140,28 @@ def characterize(spec: Any, target: Target, variant_id: str, *,
                  progress: Callable[[Finding], None] | None = None,
                  passes: int = 2) -> tuple[Any, dict[str, Finding]]:
     """Probe every open question; (the dialect found, the finding per question)."""
+    checksums_before = target.checksum_on
+    try:
+        return _characterize(spec, target, variant_id, progress, passes)
+    finally:
+        leave_checksums(target, checksums_before)
+
+
+def leave_checksums(target: Target, on: bool, tries: int = 3) -> None:
+    """Put the checksum mode back as it was found (probes for A11/A29 turn it on), so that a
+    sender that follows does not meet a unit answering 4 to every plain line (GVE64 §13.3.2)."""
+    for _ in range(tries):
+        if target.checksum_on == on:
+            return
+        try:
+            target.exchange(target.frame("!0%+" if on else "!0%-", checksum=target.checksum_on))
+        except HarnessError:
+            return
+
+
+def _characterize(spec: Any, target: Target, variant_id: str,
+                  progress: Callable[[Finding], None] | None, passes: int
+                  ) -> tuple[Any, dict[str, Finding]]:
     variant = spec.variant(variant_id)
     belief = dict(spec.dialect().choices)
     findings: dict[str, Finding] = {}

@@ -75,6 +75,8 @@ class Stats:
     resent: int = 0
     repeats: int = 0
     index_checks: int = 0
+    acknowledged: int = 0  # job lines answered 0 (packets: every member)
+    unacknowledged: int = 0  # job lines given up or moved past without an answer 0
     errors: list[str] = field(default_factory=list)
 
 
@@ -83,7 +85,8 @@ class Sender:
                  checksums: bool = False, packet: int = 1, timeout: float = 0.25,
                  queue_wait: float = 0.02, max_tries: int = 200, address: int | None = None,
                  finish: bool = True, poll_interval: float = 0.1,
-                 index_every: str = "answered-except-recovery", repeat_echo: bool = True) -> None:
+                 index_every: str = "answered-except-recovery", repeat_echo: bool = True,
+                 give_up: float = 5.0) -> None:
         if policy not in POLICIES:
             raise ValueError(f"policy must be one of {POLICIES}")
         self.variant = variant
@@ -97,9 +100,12 @@ class Sender:
         self.poll_interval = poll_interval
         self.repeat_echo = repeat_echo  # `>` sends the repeated line before its answer (A9)
         self.finish = finish
+        self.give_up = give_up  # seconds without a byte from the unit before failing
+        self._heard = 0.0
         self.stats = Stats()
         self.cs_on = False  # checksums as the unit has them now
         self.units: deque[Unit_] = deque(self._group(items))
+        self.total = len(items)
         self.done = False
         self.failed: str | None = None
         self.index: int | None = None  # the unit's @ index as we believe it
@@ -162,8 +168,17 @@ class Sender:
         return b"".join(parts)
 
     # ------------------------------------------------------------------ driver API
+    @property
+    def progress(self) -> tuple[int, int]:
+        """(job lines finished, job lines in all)."""
+        left = sum(len(u.items) for u in self.units)
+        if self._current is not None:
+            left += len(self._current.items)
+        return self.total - left, self.total
+
     def start(self, t: float) -> None:
         self._wake = t
+        self._heard = t
         self._phase = "checksum" if self.checksums else (
             "sync" if self.policy == "careful" else "job")
 
@@ -194,6 +209,8 @@ class Sender:
         return self._next(t)
 
     def receive(self, data: bytes, t: float) -> None:
+        if data:
+            self._heard = t
         self._buf += data
         while b"\r" in self._buf:
             line, _, self._buf = self._buf.partition(b"\r")
@@ -282,6 +299,10 @@ class Sender:
         what = self._await
         self._await = None
         self.stats.timeouts += 1
+        if t - self._heard >= self.give_up:
+            self._fail(f"no answer from the unit for {t - self._heard:.1f} s (is it connected, "
+                       "powered and at this baud?)")
+            return
         handler = getattr(self, "_after_" + str(what))
         handler(None, t, timed_out=True)
 
@@ -322,7 +343,7 @@ class Sender:
         if pol == "blind" or (pol == "careless" and not timed_out):
             self._wake = t  # same unit again
             return
-        self._done_unit(t)  # move on
+        self._done_unit(t, acked=False)  # move on
 
     def _pending_send(self, data: bytes) -> None:
         self._out = data
@@ -334,12 +355,13 @@ class Sender:
             counted = 2 + (int(ans.fields[0]) if ans.fields and ans.fields[0].isdigit() else 0)
         self._ok_index(ans, counted)
         if ans.code == 0:
-            self._done_unit(t)
+            self._done_unit(t, acked=True)
             return
         if ans.code == 1 and u.motion:
             self.stats.queue_full += 1
             if u.packet and ans.fields and ans.fields[0].isdigit():
                 taken = int(ans.fields[0])
+                self.stats.acknowledged += taken
                 u.items = u.items[taken:]
                 if not u.items:
                     self._done_unit(t)
@@ -361,9 +383,15 @@ class Sender:
         if u.motion:
             self._fail(f"`{name}` refused with error {ans.code}")
             return
-        self._done_unit(t)
+        self._done_unit(t, acked=False)
 
-    def _done_unit(self, t: float) -> None:
+    def _done_unit(self, t: float, acked: bool | None = None) -> None:
+        u = self._current
+        if u is not None and acked is not None:
+            if acked:
+                self.stats.acknowledged += len(u.items)
+            else:
+                self.stats.unacknowledged += len(u.items)
         self._current = None
         self._recoveries = 0
         self._wake = t

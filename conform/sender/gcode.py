@@ -28,6 +28,7 @@ from conform.sender.job import Item, parse_item
 from conform.spec.model import Dialect, Variant
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+SUPPORTED = "GFXYZIJN"  # N (a line number) is read and ignored
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,7 @@ class GcodeOptions:
     period: float = 0.001  # interpolation period T, s
     path_error: float = 0.01  # L, mm
     stop_angle: float = 120.0  # degrees: sharper junctions stop
+    lenient: bool = False  # skip what cannot be read and words outside the subset
     chord_tolerance: float = 0.002  # mm
     b_min: int = 100  # pulses/s: the "stop" speed at a junction too sharp to pass
     short: int = 16  # the $ threshold: only vectors shorter than this run at the B speed
@@ -53,9 +55,59 @@ class Segment:
     where: str
 
 
-def _parse_words(line: str) -> list[tuple[str, float]]:
-    line = re.sub(r"\(.*?\)", " ", line).split(";", 1)[0]
-    return [(m.group(1).upper(), float(m.group(2))) for m in _WORD.finditer(line)]
+def _blank_comments(line: str, where: str) -> str:
+    """Parenthesised comments become spaces (columns stay right); ``;`` ends the line."""
+    out = []
+    depth_start = -1
+    for k, ch in enumerate(line):
+        if depth_start >= 0:
+            out.append(" ")
+            if ch == ")":
+                depth_start = -1
+        elif ch == "(":
+            depth_start = k
+            out.append(" ")
+        elif ch == ";":
+            break
+        else:
+            out.append(ch)
+    if depth_start >= 0:
+        raise UserError(f"{where}:{depth_start + 1}: comment not closed with ')'")
+    return "".join(out)
+
+
+def _parse_words(line: str, where: str = "", lenient: bool = False) -> list[tuple[str, float]]:
+    """The words of one line; anything that is not a letter and a number is an error naming
+    ``file:line:column`` (``X1O``: the ``O``), as is a word outside the subset, unless
+    ``lenient`` (then it is skipped)."""
+    if lenient:
+        line = re.sub(r"\(.*?\)", " ", line).split(";", 1)[0]
+        return [(m.group(1).upper(), float(m.group(2))) for m in _WORD.finditer(line)
+                if m.group(1).upper() in SUPPORTED + "MST"]
+    text = _blank_comments(line, where)
+    if text.strip() == "%":
+        return []  # program start/end marker
+    words: list[tuple[str, float]] = []
+    pos = 0
+    while pos < len(text):
+        if text[pos].isspace():
+            pos += 1
+            continue
+        m = _WORD.match(text, pos)
+        if m is None:
+            shown = text[pos:pos + 10].rstrip()
+            raise UserError(f"{where}:{pos + 1}: cannot read {shown!r} (a word is a letter and "
+                            "a number; --lenient skips what it cannot read)")
+        letter, value = m.group(1).upper(), float(m.group(2))
+        if letter not in SUPPORTED:
+            raise UserError(f"{where}:{pos + 1}: word {letter}{m.group(2)} is not in the supported "
+                            "subset (G0-G3, G17, G20/G21, G90/G91, F, X, Y, Z, I, J, N); "
+                            "--lenient skips it")
+        if abs(value) > 1e6:
+            raise UserError(f"{where}:{pos + 1}: {letter}{m.group(2)} is too large")
+        words.append((letter, value))
+        pos = m.end()
+    return words
 
 
 def gcode_segments(text: str, opts: GcodeOptions, source: str = "") -> list[Segment]:
@@ -66,7 +118,7 @@ def gcode_segments(text: str, opts: GcodeOptions, source: str = "") -> list[Segm
     segs: list[Segment] = []
     for no, raw in enumerate(text.splitlines(), 1):
         where = f"{source}:{no}"
-        words = _parse_words(raw)
+        words = _parse_words(raw, where, opts.lenient)
         if not words:
             continue
         target: dict[str, float] = {}

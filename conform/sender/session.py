@@ -9,6 +9,7 @@ capture ``Recorder`` fed with the virtual times.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,7 +42,9 @@ def send_emulated(items: list[Item], variant: Any, dialect: Any, *, policy: str 
                   checksums: bool = False, packet: int = 1, link: LinkModel | None = None,
                   answer_delay: float = 0.0003, record: str | os.PathLike[str] | None = None,
                   timeout: float = 0.25, queue_wait: float = 0.02,
-                  note: str = "", limit: float = 3600.0) -> SendResult:
+                  note: str = "", limit: float = 3600.0,
+                  progress: Callable[[Sender], Callable[[float], None]] | None = None
+                  ) -> SendResult:
     from conform.unit import Unit
 
     link = link or LinkModel()
@@ -71,8 +74,12 @@ def send_emulated(items: list[Item], variant: Any, dialect: Any, *, policy: str 
             path.unlink()
         rec = Recorder(path, meta, clock=clock, overwrite_part=True)
 
+    shown = progress(sender) if progress is not None else None
+
     def tick(t: float) -> None:
         clock.t = t
+        if shown is not None:
+            shown(t)
 
     try:
         end = run_emulated(sender, unit, link, rec, t0=EPOCH, limit=limit, on_progress=tick)
