@@ -44,7 +44,7 @@ class Progress:
     def __init__(self, sender: object, every: float = 1.0) -> None:
         self.sender = sender
         self.every = every
-        self.next = time.monotonic() + every
+        self.next = time.monotonic()  # a first line at once, then one per ``every`` s
         self.shown = False
 
     def __call__(self, _t: float) -> None:

@@ -16,6 +16,8 @@ CR = b"\r"
 # error codes (specs/errors.toml)
 OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = range(8)
 
+MAX_DIGITS = 40  # no parameter of any command needs more characters than this
+
 
 @dataclass(frozen=True, slots=True)
 class Command:
@@ -157,6 +159,9 @@ class _Form:
                     if kind == "axis":
                         return None, f"{self.spec.id}: empty {param.name}", SYNTAX
                     raw = "0"
+            if len(raw) > MAX_DIGITS and kind in ("int", "uint", "hex"):
+                # far outside every range (and past Python's int-from-text limit)
+                return None, f"{self.spec.id}: {param.name} has {len(raw)} digits", RANGE
             if kind == "int" or kind == "uint":
                 value: Any = int(raw)
             elif kind == "hex":

@@ -639,7 +639,8 @@ class Unit:
         spec_l = self._specs["L"].params[0]
         self._pulse_lo, self._pulse_hi = spec_l.lo, spec_l.hi
         need = spec_l.min_count or self._naxes
-        fields = rb"(-?[0-9]+(?:,-?[0-9]+){%d,%d})" % (need - 1, self._naxes - 1)
+        # at most 40 digits (the parser then answers 5): longer numbers cannot be int()ed
+        fields = rb"(-?[0-9]{1,40}(?:,-?[0-9]{1,40}){%d,%d})" % (need - 1, self._naxes - 1)
         head = b"!%d([CL])" % self.variant.interpolator_address
         self._fast_plain = re.compile(head + fields + rb"\r\Z")
         self._fast_cs = re.compile(head + fields + rb",([0-9A-Fa-f]{2})\r\Z")
