@@ -84,10 +84,13 @@ def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
               help="Distance from a W's start to that axis's reference switch (default 3000).")
 @click.option("--answer-delay", type=float, default=0.0, show_default=True,
               help="Processing time of the unit before each answer, seconds.")
+@click.option("--truth", "truth_path", default=None, metavar="FILE.json",
+              help="On exit, write what the unit accepted and executed (every vector, D/K/R/"
+                   "H/G/J, final position) as JSON: the ground truth beside a recording.")
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pairs: tuple[str, ...],
               profile: str | None, faults: str | None, seed: int | None,
               control_path: str | None, link_path: str | None, record_path: str | None,
-              switch_pairs: tuple[str, ...], answer_delay: float) -> None:
+              switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path."""
     from conform.link.faults import FaultConfig, FaultInjector
     from conform.unit.model import Unit
@@ -106,6 +109,11 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
                     answer_delay=answer_delay)
     except ValueError as exc:
         raise UserError(f"--switch: {exc}") from None
+    truth = None
+    if truth_path:
+        from conform.unit.truth import GroundTruth
+
+        truth = GroundTruth(unit, t0=t_start)
     injector = None
     if faults:
         config = FaultConfig.parse(faults)
@@ -157,6 +165,11 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
         control.close()
         if recorder is not None:
             recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out})
+        if truth is not None and truth_path:
+            try:
+                truth.write(truth_path)
+            except OSError as exc:
+                report(f"--truth {truth_path}: cannot write: {exc.strerror or exc}")
         report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out)")
 
 

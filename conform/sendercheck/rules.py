@@ -201,7 +201,12 @@ def interrupt_resolved(s: Any) -> Result:
 
 def interrupt_krd_idle(s: Any) -> Result:
     ev = s.truth.get("events", [])
-    refused = [e for e in ev if e["command"] in ("K", "R", "D") and e["code"] == 7]
+    refused: list[str] = []
+    if s.analysis is not None:  # refused while running: the handler never ran, the wire shows it
+        ex = s.analysis.exchanges
+        rows = np.flatnonzero(np.isin(ex["name"].to_numpy(), ("K", "R", "D"))
+                              & (ex["code"].to_numpy() == 7))
+        refused = [f"host:{r} {ex['name'].iat[r]} answered 7" for r in rows.tolist()]
     keeps = 0
     twice = False
     for e in ev:
@@ -216,7 +221,7 @@ def interrupt_krd_idle(s: Any) -> Result:
         return FAIL, "K sent twice without R in between (KEEP without RESTORE only once)", []
     if refused:
         return FAIL, f"{len(refused)} K/R/D sent while the unit was still running (answered " \
-                     "7); read F or SR6 until RUN is clear first", [str(e) for e in refused[:5]]
+                     "7); read F or SR6 until RUN is clear first", refused[:5]
     return PASS, "K/R/D only when the unit was at rest", []
 
 

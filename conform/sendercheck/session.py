@@ -13,7 +13,6 @@ time, the ground truth is written beside the capture, and the capture is analyse
 
 from __future__ import annotations
 
-import json
 import os
 import queue
 import signal
@@ -32,7 +31,7 @@ from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
 from conform.unit.model import Unit, run_until_idle
 from conform.unit.serve import Emulator
-from conform.unit.truth import GroundTruth
+from conform.unit.truth import GroundTruth, dumps
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL
@@ -151,7 +150,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
         run_until_idle(unit, unit.now, unit.now + 3600.0)  # the queue runs out
     s.truth = truth.to_dict()
     s.faults = dict(faults.counts)
-    (directory / "truth.json").write_text(json.dumps(s.truth, indent=1) + "\n", "utf-8")
+    (directory / "truth.json").write_text(dumps(s.truth), "utf-8")
     accepted = [(a["kind"], tuple(a["vector"])) for a in s.truth["accepted"]]
     deleted = any(e["command"] == "D" and e["code"] == 0 for e in s.truth["events"])
     s.comparison = compare(s.job, accepted, tail_may_be_missing="stop" in scn.tags and deleted)

@@ -136,5 +136,16 @@ class GroundTruth:
 
     def write(self, path: str | os.PathLike[str]) -> Path:
         p = Path(path)
-        p.write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+        p.write_text(dumps(self.to_dict()), encoding="utf-8")
         return p
+
+
+def dumps(d: dict[str, Any]) -> str:
+    """JSON with one line per accepted vector and per event (readable, diff-friendly)."""
+    head = {k: v for k, v in d.items() if k not in ("accepted", "events")}
+    out = [json.dumps(head)[:-1] + ","]
+    for key in ("events", "accepted"):
+        rows = [json.dumps(x) for x in d.get(key, [])]
+        out.append(f' "{key}": [' + ("\n  " + ",\n  ".join(rows) + "\n ]" if rows else "]")
+                   + ("," if key == "events" else ""))
+    return "\n".join(out) + "\n}\n"
