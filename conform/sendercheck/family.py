@@ -94,4 +94,5 @@ class Family:
     job: Callable[[Scenario, Any], list[str]]  # (scenario, variant) -> job lines
     vectors: Callable[[list[str]], list[tuple[str, tuple[int, ...]]]]  # job lines -> vectors
     prepare: Callable[[Any, Scenario, float], None]  # (unit, scenario, t) before the run
+    make_unit: Callable[[Any, Any, float], Any]  # (variant, dialect, t0) -> sans-I/O unit
     fast: tuple[str, ...] = ()  # scenarios for a quick run

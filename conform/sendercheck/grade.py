@@ -23,6 +23,7 @@ from conform.sendercheck.session import Session, run_session
 GVE = Family(
     name="gve", default_variant="gve64-v19", scenarios=scenarios.SCENARIOS, rules=rules.RULES,
     job=scenarios.make_job, vectors=scenarios.job_vectors, prepare=scenarios.prepare_unit,
+    make_unit=scenarios.make_unit,
     fast=scenarios.FAST,
 )
 FAMILIES = {"gve": GVE}

@@ -94,9 +94,29 @@ def recovery_asks(s: Any) -> Result:
     if moved or blind:
         return FAIL, (f"{unc} vector(s) got a garbled answer or none; {len(blind)} resent and "
                       f"{len(moved)} passed over without asking `>` or `@`"), _msgs(blind + moved)
+    misused = _index_before_repeat(s)
+    if misused:
+        return FAIL, ("`@` asked before `>` after an uncertain vector: `>` then repeats the "
+                      "`@`, not the vector"), misused[:5]
     used = s.count("repeat-used") + s.count("index-checked")
     return PASS, f"{unc} uncertain vector answer(s), each followed by `>` or `@` ({used} " \
                  "recoveries seen)", []
+
+
+def _index_before_repeat(s: Any) -> list[str]:
+    """Uncertain vectors after which the sender asked `@` and only then `>`."""
+    ex = s.analysis.exchanges
+    name = ex["name"].to_numpy()
+    motion = np.flatnonzero(np.isin(name, MOTION + ("*E",)))
+    unc = motion[ex["uncertain"].to_numpy()[motion]]
+    out = []
+    for r in unc.tolist():
+        k = int(np.searchsorted(motion, r)) + 1
+        hi = int(motion[k]) if k < len(motion) else len(name)
+        seg = [n for n in name[r + 1:hi] if n in ("@", ">")]
+        if "@" in seg and ">" in seg and seg.index("@") < seg.index(">"):
+            out.append(f"host:{r} `{name[r]}` uncertain, then " + " ".join(seg[:4]))
+    return out
 
 
 def no_blind_resend(s: Any) -> Result:

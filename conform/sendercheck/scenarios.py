@@ -88,3 +88,10 @@ def prepare_unit(unit: Any, scn: Scenario, t: float) -> None:
     setup leaves it; a program that writes ST0 itself overrides this."""
     if "stop" in scn.tags:
         unit.handlers["SW"]((0, 1 << STOP_INPUT[1]), t)
+
+
+def make_unit(variant: Any, dialect: Any, t0: float) -> Any:
+    """The GVE reference unit (sans-I/O, on the emulator's wall clock)."""
+    from conform.unit.model import Unit
+
+    return Unit(variant, dialect, t0=t0)

@@ -29,7 +29,7 @@ from conform.link.pty import PtyEndpoint
 from conform.sendercheck.compare import Comparison, compare
 from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
-from conform.unit.model import Unit, run_until_idle
+from conform.unit.model import run_until_idle
 from conform.unit.serve import Emulator
 from conform.unit.truth import GroundTruth, dumps
 
@@ -123,7 +123,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     s = Session(scn, variant, list(command), directory, directory / "session.mcap", lines,
                 family.vectors(lines), timeout=timeout if timeout is not None else scn.timeout)
     t0 = time.monotonic()
-    unit = Unit(variant, dialect, t0=t0)
+    unit = family.make_unit(variant, dialect, t0)
     truth = GroundTruth(unit, t0=t0)
     family.prepare(unit, scn, t0)
     cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
