@@ -19,6 +19,7 @@ from conform.sendercheck.family import FAIL, MUST, PASS, SHOULD, Rule
 Result = tuple[str, str, list[str]]
 MOTION = ("C", "L")
 RESOLVING = ("G", "D", "K")  # after an interrupt: resume, delete, keep (GVE64 §13.5.9)
+HAMMER_TRIES = 5  # tries per queue-full run, sent at once, that count as hammering
 
 
 def _msgs(findings: list[Any], limit: int = 5) -> list[str]:
@@ -165,7 +166,8 @@ def queue_full_paced(s: Any) -> Result:
     detail = (f"{f.extra.get('polls')} tries answered 1 in {f.extra.get('runs')} run(s); "
               f"median {gap * 1000:.1f} ms between the answer and the next try; retries are "
               f"{share:.0%} of the bytes sent")
-    if f.extra.get("pattern") == "immediate" or share > 0.5:
+    tries = f.extra.get("polls", 0) / max(f.extra.get("runs", 1), 1)
+    if (f.extra.get("pattern") == "immediate" and tries >= HAMMER_TRIES) or share > 0.5:
         return FAIL, "hammering: " + detail, _msgs(polls)
     return PASS, detail, []
 
