@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from conform.cli.main import main
 from conform.sendercheck.compare import compare
 from conform.sendercheck.family import FAIL, MUST, NA, PASS, WARN
 from conform.sendercheck.grade import GVE, check
@@ -94,11 +95,12 @@ def test_cli_reports_and_exit_codes(tmp_path):
 @pytest.mark.parametrize("args", [[], ["--scenario", "nope", "--", "true"],
                                   ["--", "/nonexistent/sender", "{port}"],
                                   ["--timeout", "-1", "--", "true"]])
-def test_cli_usage_errors(args):
-    p = subprocess.run([sys.executable, "-m", "conform", "check-sender", *args],
-                       capture_output=True, text=True, timeout=60)
-    assert p.returncode == 2
-    assert p.stderr.count("\n") == 1 and "Traceback" not in p.stderr
+def test_cli_usage_errors(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["check-sender", *args])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err
 
 
 def test_compare_names_doubles_lost_and_altered():
