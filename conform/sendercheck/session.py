@@ -131,7 +131,15 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     control = _Control()
     endpoint = PtyEndpoint()
     emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control)
-    thread = threading.Thread(target=emulator.run, name="check-sender-unit", daemon=True)
+    died: list[str] = []
+
+    def serve() -> None:
+        try:
+            emulator.run()
+        except Exception as exc:  # noqa: BLE001 - the reference unit failing is a harness ERROR
+            died.append(f"the emulator stopped: {type(exc).__name__}: {exc}")
+
+    thread = threading.Thread(target=serve, name="check-sender-unit", daemon=True)
     thread.start()
     proxy = None
     try:
@@ -146,6 +154,8 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
             proxy.close()
         emulator.stop()
         thread.join(5.0)
+    if died and not s.error:
+        s.error = died[0]
     if not unit.inta:
         run_until_idle(unit, unit.now, unit.now + 3600.0)  # the queue runs out
     s.truth = truth.to_dict()

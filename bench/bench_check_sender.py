@@ -1,0 +1,56 @@
+"""What a `conform check-sender` run costs: every scenario for the careful test sender, wall
+time per scenario and in all, and the process CPU time, against a target of 60 s for the full
+matrix (a check a user runs often must stay short).
+
+    python bench/bench_check_sender.py [--repeat N]
+
+Most of the time is the program's own (its timeouts, the unit's motion); the median of N runs
+is reported because the machine may be shared.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from conform.sendercheck.grade import GVE, check
+
+TARGET_S = 60.0
+SENDER = Path(__file__).resolve().parents[1] / "tests" / "senders" / "careful.py"
+
+
+def cpu() -> float:
+    ru = [resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    return sum(r.ru_utime + r.ru_stime for r in ru)
+
+
+def main() -> None:
+    repeat = int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1
+    totals, per, cpus = [], {n: [] for n in GVE.scenarios}, []
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as d:
+            c0, t0 = cpu(), time.perf_counter()
+            r = check([sys.executable, str(SENDER), "{port}", "{job}"], directory=Path(d))
+            totals.append(time.perf_counter() - t0)
+            cpus.append(cpu() - c0)
+        for s in r.scenarios:
+            per[s.name].append(s.session.duration)
+        if r.exit_code != 0:
+            print(f"  the careful sender failed a MUST rule (exit {r.exit_code})")
+    for name, ts in per.items():
+        print(f"  {name:14} {statistics.median(ts):6.2f} s (program run)")
+    total = statistics.median(totals)
+    print(f"full matrix: {total:.1f} s wall (median of {repeat}), {statistics.median(cpus):.1f} s "
+          f"CPU; target {TARGET_S:.0f} s, ratio {total / TARGET_S:.2f}")
+    print(json.dumps({"total_s": round(total, 2), "cpu_s": round(statistics.median(cpus), 2),
+                      "target_s": TARGET_S, "ratio": round(total / TARGET_S, 3),
+                      "scenarios_s": {n: round(statistics.median(t), 2) for n, t in per.items()}}))
+
+
+if __name__ == "__main__":
+    main()
