@@ -95,4 +95,5 @@ class Family:
     vectors: Callable[[list[str]], list[tuple[str, tuple[int, ...]]]]  # job lines -> vectors
     prepare: Callable[[Any, Scenario, float], None]  # (unit, scenario, t) before the run
     make_unit: Callable[[Any, Any, float], Any]  # (variant, dialect, t0) -> sans-I/O unit
+    control_line: Callable[[str, bool, Any], str]  # (action kind, on, variant) -> control request
     fast: tuple[str, ...] = ()  # scenarios for a quick run

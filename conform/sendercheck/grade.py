@@ -23,7 +23,7 @@ from conform.sendercheck.session import Session, run_session
 GVE = Family(
     name="gve", default_variant="gve64-v19", scenarios=scenarios.SCENARIOS, rules=rules.RULES,
     job=scenarios.make_job, vectors=scenarios.job_vectors, prepare=scenarios.prepare_unit,
-    make_unit=scenarios.make_unit,
+    make_unit=scenarios.make_unit, control_line=scenarios.control_line,
     fast=scenarios.FAST,
 )
 FAMILIES = {"gve": GVE}
@@ -149,7 +149,8 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
     spec = load_spec()
     var = spec.variant(variant or GVE.default_variant)
     family = family_for(var.id)
-    chosen = names or list(family.scenarios)
+    chosen = [n.strip() for x in (names or list(family.scenarios)) for n in x.split(",")
+              if n.strip()]
     unknown = [n for n in chosen if n not in family.scenarios]
     if unknown:
         raise UserError(f"--scenario {unknown[0]!r}: unknown; choose from "

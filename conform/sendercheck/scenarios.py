@@ -49,6 +49,19 @@ _PATTERN = ((1, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 1, 0), (0, 1, 0), (-
 STOP_INPUT = (1, 7)  # IN7: the stop button of GVE64 §13.5.12
 
 
+def stop_input(variant: Any) -> tuple[int, int]:
+    """IN7 where the variant has it; else its highest input on port 1 (GVE124 has only
+    IN0..IN2, GVE124 §12.5.11: any Intr may serve as a stop)."""
+    bits = variant.input_bits.get("port1", ())
+    return STOP_INPUT if STOP_INPUT[1] in bits else (1, max(bits))
+
+
+def control_line(kind: str, on: bool, variant: Any) -> str:
+    """The emulator control request for a scenario action (``stop`` only)."""
+    port, bit = stop_input(variant)
+    return f"{'press' if on else 'release'} {port}.{bit}"
+
+
 def job_length(scn: Scenario, variant: Any) -> int:
     return variant.queue + scn.over_queue if scn.over_queue is not None else scn.vectors
 
@@ -84,10 +97,10 @@ def job_vectors(lines: list[str]) -> list[tuple[str, tuple[int, ...]]]:
 
 def prepare_unit(unit: Any, scn: Scenario, t: float) -> None:
     """The machine's own setup before the program starts: with a stop scenario the stop
-    input is enabled as an interrupt (ST0 bit 7, GVE64 §13.5.12), as a Gravos machine's
-    setup leaves it; a program that writes ST0 itself overrides this."""
+    input is enabled as an interrupt (ST0, GVE64 §13.5.12), as a Gravos machine's setup
+    leaves it; a program that writes ST0 itself overrides this."""
     if "stop" in scn.tags:
-        unit.handlers["SW"]((0, 1 << STOP_INPUT[1]), t)
+        unit.handlers["SW"]((0, 1 << stop_input(unit.variant)[1]), t)
 
 
 def make_unit(variant: Any, dialect: Any, t0: float) -> Any:

@@ -57,6 +57,7 @@ class Session:
     """Everything the rules look at for one scenario."""
 
     scenario: Scenario
+    family: Family
     variant: Any
     command: list[str]
     directory: Path
@@ -120,7 +121,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     lines = job_lines if job_lines is not None else family.job(scn, variant)
     job_path = directory / "job.txt"
     job_path.write_text("\n".join(lines) + "\n", encoding="ascii")
-    s = Session(scn, variant, list(command), directory, directory / "session.mcap", lines,
+    s = Session(scn, family, variant, list(command), directory, directory / "session.mcap", lines,
                 family.vectors(lines), timeout=timeout if timeout is not None else scn.timeout)
     t0 = time.monotonic()
     unit = family.make_unit(variant, dialect, t0)
@@ -221,7 +222,9 @@ def _act(s: Session, kind: str, on: bool, now: float, control: _Control,
          faults: ScriptedFaults, proxy: ProxyCapture, hold: float) -> None:
     t = round(now - s.events[0]["t_abs"], 6) if s.events else 0.0
     if kind == "stop":
-        reply = control.ask("press stop" if on else "release stop")
+        reply = control.ask(s.family.control_line(kind, on, s.variant))
+        if not reply.startswith("ok") and not s.error:
+            s.error = f"the scenario's input could not be set: {reply}"
         what = "stop input pressed" if on else "stop input released"
     else:
         if on:

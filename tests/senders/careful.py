@@ -6,7 +6,7 @@ garbled or lost answer it asks `>` and `@` before doing anything (GVE64 §13.5.1
 It reads `@` before every vector, so after an uncertain answer an unchanged index means the
 vector never arrived (send it again) and a changed one means it did (the `>` answer, asked
 first, is its answer). Queue full (1): wait 20 ms and send it again. An answer with INTA: stop
-sending vectors, wait until the stop input is released (I1 bit 7 back high), then `G`.
+sending vectors, wait until the input that caused it (SR4) is released, then `G`.
 Exit 0 when every job line was acknowledged, 1 otherwise.
 """
 
@@ -168,10 +168,13 @@ def recover(link: Link, body: str, before: str | None):
 
 
 def resume(link: Link) -> None:
-    """Interrupted (INTA): wait for the stop input to be released, then G."""
-    while True:
-        code, fields = link.ask("I1")
-        if fields and int(fields[0], 16) & 0x80:
+    """Interrupted (INTA): SR4 says which input did it; wait until that input is released
+    (back high: active low after reset), then G."""
+    _code, fields = link.ask("SR4")
+    cause = int(fields[0], 16) if fields else 0
+    while cause:
+        _code, fields = link.ask("I1")
+        if fields and int(fields[0], 16) & cause == cause:
             break
         time.sleep(0.05)
     while True:
