@@ -144,3 +144,13 @@ def test_full_matrix(tmp_path):
     assert gb[("slow-unit", "queue-full-paced")] == WARN  # hammering
     assert gb[("stop", "interrupt-stops")] == FAIL  # it kept streaming after INTA
     assert gb[("noisy", "checksums-on-noise")] == WARN
+
+
+def test_stop_scenario_on_a_gve124_uses_its_own_inputs(tmp_path):
+    r = _run(tmp_path, "careful", ["stop"], variant="gve124")
+    g = _grades(r)
+    s = r.scenarios[0].session
+    assert all(e["reply"].startswith("ok") for e in s.events)  # IN2: a GVE124 has no IN7
+    assert g[("stop", "interrupt-stops")] == PASS and g[("stop", "interrupt-resolved")] == PASS
+    assert r.exit_code == 0
+    assert all(len(v) == 3 for _k, v in s.job)  # 3-axis vectors for a 3-axis unit
