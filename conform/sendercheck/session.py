@@ -75,6 +75,7 @@ class Session:
     comparison: Comparison | None = None
     faults: dict[str, int] = field(default_factory=dict)
     error: str = ""  # the harness failed (not the program)
+    started: float = 0.0  # monotonic time the program was started
 
     @property
     def findings(self) -> list[Any]:
@@ -184,7 +185,7 @@ def _run_program(s: Session, proxy: ProxyCapture, control: _Control, faults: Scr
     n_job = max(1, len(s.job))
     pending = sorted(scn.actions, key=lambda a: a.at)
     undo: list[tuple[float, str]] = []
-    start = time.monotonic()
+    start = s.started = time.monotonic()
     with open(s.directory / "program.out", "wb") as out, \
             open(s.directory / "program.err", "wb") as err:
         try:
@@ -220,7 +221,7 @@ def _run_program(s: Session, proxy: ProxyCapture, control: _Control, faults: Scr
 
 def _act(s: Session, kind: str, on: bool, now: float, control: _Control,
          faults: ScriptedFaults, proxy: ProxyCapture, hold: float) -> None:
-    t = round(now - s.events[0]["t_abs"], 6) if s.events else 0.0
+    t = round(now - s.started, 6)
     if kind == "stop":
         reply = control.ask(s.family.control_line(kind, on, s.variant))
         if not reply.startswith("ok") and not s.error:
