@@ -154,3 +154,19 @@ def test_stop_scenario_on_a_gve124_uses_its_own_inputs(tmp_path):
     assert g[("stop", "interrupt-stops")] == PASS and g[("stop", "interrupt-resolved")] == PASS
     assert r.exit_code == 0
     assert all(len(v) == 3 for _k, v in s.job)  # 3-axis vectors for a 3-axis unit
+
+
+def test_reference_sender_stops_on_an_interrupt(tmp_path):
+    """`conform send` itself, judged: after INTA it sends no vector, waits for the brake,
+    deletes the queue with D and exits 1 with a clear message."""
+    cmd = [sys.executable, "-m", "conform", "send", "{job}", "--target", "{port}",
+           "--allow-motion", "--checksums"]
+    r = check(cmd, names=["stop"], directory=tmp_path / "send")
+    g = _grades(r)
+    s = r.scenarios[0].session
+    assert g[("stop", "interrupt-stops")] == PASS
+    assert g[("stop", "interrupt-resolved")] == PASS
+    assert g[("stop", "interrupt-krd-idle")] == PASS
+    assert s.exit_code == 1 and r.exit_code == 0
+    assert "stopped by the unit" in (s.directory / "program.err").read_text()
+    assert [e["command"] for e in s.truth["events"]] == ["D"]

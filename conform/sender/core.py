@@ -49,6 +49,7 @@ from conform.spec.model import Variant
 
 POLICIES = ("careful", "blind", "move-on", "careless")
 RUN_BIT = 0x40
+STOP_BIT = 0x01  # ST6 bit 0: braking after a stop request (GVE64 §13.5.12)
 
 
 @dataclass
@@ -123,6 +124,7 @@ class Sender:
         self._before = b""  # the line sent just before the current job unit
         self._repeat_ans: Answer | None = None
         self._recoveries = 0
+        self.interrupted = False  # an answer carried INTA: the unit was stopped (§13.7)
         self.last_position: tuple[int, ...] | None = None
 
     # ------------------------------------------------------------------ job shaping
@@ -231,6 +233,13 @@ class Sender:
 
     def _next(self, t: float) -> bytes:
         ph = self._phase
+        if self.interrupted and ph in ("job", "drain"):
+            # a stop input or H: no more vectors; wait for the brake, then D (GVE64 §13.5.9)
+            ph = self._phase = "stop-wait"
+        if ph == "stop-wait":
+            return self._send(self.line(b"F"), "stopwait", t)
+        if ph == "stop-delete":
+            return self._send(self.line(b"D"), "stopdelete", t)
         if ph == "checksum":
             return self._send(self.line(b"%+", checksum=False), "checksum", t)
         if ph == "sync":
@@ -292,6 +301,8 @@ class Sender:
         bad = not isinstance(ans, Answer) or ans.checksum_ok is False
         if bad:
             self.stats.garbled += 1
+        elif ans.inta and what not in ("stopwait", "stopdelete"):  # type: ignore[union-attr]
+            self.interrupted = True
         handler = getattr(self, "_after_" + what)
         handler(ans if not bad else None, t)
 
@@ -461,6 +472,31 @@ class Sender:
         else:
             self._fail(f"index {now} is neither {self.index} (`{name}` not arrived) nor "
                        f"{(self.index + counted) & 0xFF} (arrived): cannot tell, stopping")
+
+    def _after_stopwait(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        braking = True
+        if ans is not None and ans.fields:
+            try:
+                braking = bool(int(ans.fields[0], 16) & STOP_BIT)
+            except ValueError:
+                braking = True
+        if braking:
+            self._wake = t + min(self.poll_interval, 0.05)
+            return
+        self._phase = "stop-delete"
+        self._wake = t
+
+    def _after_stopdelete(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
+        if ans is None or ans.code == 7:  # lost, or still running: ask again
+            self._wake = t + self.queue_wait
+            return
+        done, total = self.progress
+        if ans.code == 0:
+            self._fail(f"stopped by the unit (INTA: a stop input or H) after {done} of {total} "
+                       "job lines; the rest of its queue was deleted with D, the position kept")
+        else:
+            self._fail(f"stopped by the unit (INTA) after {done} of {total} job lines; D was "
+                       f"answered {ans.raw.decode('ascii', 'replace')}: the queue may remain")
 
     def _after_drain(self, ans: Answer | None, t: float, timed_out: bool = False) -> None:
         busy = True
