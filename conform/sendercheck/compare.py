@@ -3,7 +3,8 @@
 Vectors are relative (GVE64 §13.5.2): the machine ends where the job says only if the unit
 accepted every job vector exactly once, in order. The accepted list comes from the
 emulator's ground truth, so nothing here is inferred from the wire. The two sequences are
-aligned (difflib, no junk heuristics); what the unit took beyond the job is an extra vector
+aligned by the cheapest edit script (dynamic programming in a band around the diagonal);
+what the unit took beyond the job is an extra vector
 (a double move when it repeats a job vector next to it), what it never took is a lost
 vector, and a job vector replaced by a different one was altered on the way (a damaged line
 the unit could not recognise as damaged: no checksums).
@@ -14,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 Vec = tuple[str, tuple[int, ...]]
-LOOKAHEAD = 3
 
 
 @dataclass
@@ -44,69 +44,90 @@ def _fmt(v: Vec) -> str:
     return v[0] + ",".join(str(x) for x in v[1])
 
 
-def _resyncs(job: list[Vec], i: int, acc: list[Vec], j: int, k: int = LOOKAHEAD) -> bool:
-    a, b = job[i:i + k], acc[j:j + k]
-    n = min(len(a), len(b))
-    return a[:n] == b[:n] and (n == k or len(job) - i == len(acc) - j)
+def _align(job: list[Vec], acc: list[Vec], band: int) -> list[tuple[str, int, int]]:
+    """The cheapest edit script from ``job`` to ``acc`` (match 0; extra, lost or altered 1),
+    computed in a band of ``band`` cells either side of the diagonal: a list of
+    ("=" | "+" | "-" | "~", job index, accepted index)."""
+    n, m = len(job), len(acc)
+    big = n + m + 1
+    lo = [max(0, (i * m) // max(n, 1) - band - max(0, m - n)) for i in range(n + 1)]
+    hi = [min(m, (i * m) // max(n, 1) + band + max(0, m - n)) for i in range(n + 1)]
+    cost: list[list[int]] = []
+    step: list[bytearray] = []
+    for i in range(n + 1):
+        row = [big] * (hi[i] - lo[i] + 1)
+        how = bytearray(len(row))
+        for j in range(lo[i], hi[i] + 1):
+            k = j - lo[i]
+            if i == 0 and j == 0:
+                row[k] = 0
+                continue
+            best, b = big, 0
+            if i and lo[i - 1] <= j <= hi[i - 1]:
+                # a lost vector first: on a tie the accepted ones align with the job's start
+                best, b = cost[i - 1][j - lo[i - 1]] + 1, 3
+                if j and j - 1 >= lo[i - 1] and job[i - 1] == acc[j - 1]:
+                    d = cost[i - 1][j - 1 - lo[i - 1]]
+                    if d < best:
+                        best, b = d, 1  # match
+            if j and j - 1 >= lo[i] and row[k - 1] + 1 < best:
+                best, b = row[k - 1] + 1, 2  # extra
+            if i and j and lo[i - 1] <= j - 1 <= hi[i - 1] and job[i - 1] != acc[j - 1]:
+                d = cost[i - 1][j - 1 - lo[i - 1]] + 1
+                if d < best:
+                    best, b = d, 4  # altered
+            row[k], how[k] = best, b
+        cost.append(row)
+        step.append(how)
+    if not lo[n] <= m <= hi[n] or cost[n][m - lo[n]] >= big:
+        raise ValueError("outside the band")
+    out = []
+    i, j = n, m
+    while i or j:
+        b = step[i][j - lo[i]]
+        if b == 1:
+            i, j = i - 1, j - 1
+            out.append(("=", i, j))
+        elif b == 2:
+            j -= 1
+            out.append(("+", i, j))
+        elif b == 3:
+            i -= 1
+            out.append(("-", i, j))
+        else:
+            i, j = i - 1, j - 1
+            out.append(("~", i, j))
+    out.reverse()
+    return out
 
 
-def compare(job: list[Vec], accepted: list[Vec], *, tail_may_be_missing: bool = False
-            ) -> Comparison:
-    """Walk ``job`` and ``accepted`` side by side; at a difference, the explanation that
-    brings the two back in step for the next few vectors wins: an extra accepted vector
-    (a double move when it repeats its neighbour), a job vector never accepted (lost), or
-    one replaced by another (altered). ``tail_may_be_missing``: the run was ended on purpose
+def compare(job: list[Vec], accepted: list[Vec], *, tail_may_be_missing: bool = False,
+            band: int = 64) -> Comparison:
+    """Align ``accepted`` with ``job`` (the fewest extra, lost and altered vectors that
+    explain the difference); an accepted vector beyond the job is a double move when it
+    repeats the job vector next to it. ``tail_may_be_missing``: the run was ended on purpose
     (an interrupt answered with D), so job vectors after the last accepted one are not lost.
     """
     c = Comparison(len(job), len(accepted))
-    i = j = 0
-    while i < len(job) or j < len(accepted):
-        if i < len(job) and j < len(accepted) and job[i] == accepted[j]:
-            i += 1
-            j += 1
-            continue
-        if i >= len(job):
-            extra = True
-        elif j >= len(accepted):
-            extra = False
-        else:
-            repeat = accepted[j] == accepted[j - 1] if j else False
-            extra_ok = _resyncs(job, i, accepted, j + 1)
-            lost_ok = _resyncs(job, i + 1, accepted, j)
-            if extra_ok and (repeat or not lost_ok):
-                extra = True
-            elif lost_ok:
-                extra = False
-            else:
-                c.altered.append({"job_index": i, "job": _fmt(job[i]), "accepted_index": j,
-                                  "accepted": _fmt(accepted[j])})
-                i += 1
-                j += 1
-                continue
-        if extra:
-            near = accepted[j] in job[max(0, i - 1):i + 1] or (j and accepted[j] == accepted[j - 1])
-            (c.doubles if near else c.extras).append(
-                {"accepted_index": j, "vector": _fmt(accepted[j]), "after_job_index": i - 1})
-            j += 1
-        else:
-            c.lost.append({"job_index": i, "vector": _fmt(job[i])})
-            i += 1
     c.prefix = accepted == job[: len(accepted)]
-    if tail_may_be_missing and c.lost:
-        last = max((x["after_job_index"] for x in c.doubles + c.extras), default=-1)
-        matched_upto = _last_matched(job, accepted)
-        c.lost = [x for x in c.lost if x["job_index"] < max(last, matched_upto)]
+    if job == accepted:
+        return c
+    script = None
+    while script is None:
+        try:
+            script = _align(job, accepted, band)
+        except ValueError:
+            band *= 4
+    reach = max((i + 1 for op, i, _j in script if op in ("=", "~")), default=0)
+    for op, i, j in script:
+        if op == "+":
+            near = {job[k] for k in (i - 1, i) if 0 <= k < len(job)}
+            item = {"accepted_index": j, "vector": _fmt(accepted[j]), "after_job_index": i - 1}
+            (c.doubles if accepted[j] in near else c.extras).append(item)
+        elif op == "-":
+            if not (tail_may_be_missing and i >= reach):
+                c.lost.append({"job_index": i, "vector": _fmt(job[i])})
+        elif op == "~":
+            c.altered.append({"job_index": i, "job": _fmt(job[i]), "accepted_index": j,
+                              "accepted": _fmt(accepted[j])})
     return c
-
-
-def _last_matched(job: list[Vec], accepted: list[Vec]) -> int:
-    """How far into the job the accepted vectors reach (for an aborted run)."""
-    reach = 0
-    i = 0
-    for v in accepted:
-        while i < len(job) and job[i] != v:
-            i += 1
-        if i < len(job):
-            i += 1
-            reach = i
-    return reach

@@ -84,6 +84,11 @@ def _uncertain_motion(s: Any) -> int:
                + (ex["uncertain"].to_numpy() & (ex["name"].to_numpy() == "*E")).sum())
 
 
+def _paired_fifo(s: Any) -> str:
+    return (" (the sender broke the simplex rule, so answers were paired first in, first out)"
+            if s.count("simplex-violation") else "")
+
+
 def recovery_asks(s: Any) -> Result:
     if (r := _no_analysis(s)) is not None:
         return r
@@ -94,7 +99,8 @@ def recovery_asks(s: Any) -> Result:
     blind = s.of_kind("blind-resend")
     if moved or blind:
         return FAIL, (f"{unc} vector(s) got a garbled answer or none; {len(blind)} resent and "
-                      f"{len(moved)} passed over without asking `>` or `@`"), _msgs(blind + moved)
+                      f"{len(moved)} passed over without asking `>` or `@`{_paired_fifo(s)}"), \
+            _msgs(blind + moved)
     misused = _index_before_repeat(s)
     if misused:
         return FAIL, ("`@` asked before `>` after an uncertain vector: `>` then repeats the "
@@ -126,7 +132,8 @@ def no_blind_resend(s: Any) -> Result:
     n = s.count("blind-resend")
     if n:
         return FAIL, f"{n} vector(s) sent again after a garbled answer or none, without " \
-                     "asking `>`/`@` whether the first copy arrived", _msgs(s.of_kind("blind-resend"))
+                     f"asking `>`/`@` whether the first copy arrived{_paired_fifo(s)}", \
+            _msgs(s.of_kind("blind-resend"))
     return PASS, "no vector sent again blindly", []
 
 
