@@ -24,6 +24,7 @@ SENDERS = Path(__file__).resolve().parent / "senders"
 
 def _run(tmp_path: Path, sender: str, names: list[str], **kw) -> object:
     cmd = [sys.executable, str(SENDERS / f"{sender}.py"), "{port}", "{job}"]
+    kw.setdefault("timeout", 120)  # generous: a loaded machine must not fail `terminates`
     return check(cmd, names=names, directory=tmp_path / sender, **kw)
 
 
@@ -138,8 +139,8 @@ def test_full_matrix(tmp_path):
     assert g[("stop", "interrupt-resolved")] == PASS
     assert g[("link-loss", "vectors-exact")] == PASS
     assert g[("slow-unit", "queue-full-paced")] == PASS
-    assert r.scenarios[3].session.count("queue-full-polling") > 0  # queue full did happen
     b = _run(tmp_path, "blind", ["slow-unit", "stop", "noisy"])
+    assert b.scenarios[0].session.count("queue-full-polling") > 0  # queue full did happen
     gb = _grades(b)
     assert gb[("slow-unit", "queue-full-paced")] == WARN  # hammering
     assert gb[("stop", "interrupt-stops")] == FAIL  # it kept streaming after INTA
@@ -161,7 +162,7 @@ def test_reference_sender_stops_on_an_interrupt(tmp_path):
     deletes the queue with D and exits 1 with a clear message."""
     cmd = [sys.executable, "-m", "conform", "send", "{job}", "--target", "{port}",
            "--allow-motion", "--checksums"]
-    r = check(cmd, names=["stop"], directory=tmp_path / "send")
+    r = check(cmd, names=["stop"], directory=tmp_path / "send", timeout=120)
     g = _grades(r)
     s = r.scenarios[0].session
     assert g[("stop", "interrupt-stops")] == PASS

@@ -9,7 +9,7 @@ vector look alike) and changes one thing:
 | clean | nothing | the baseline: simplex, checksums, queue kept fed |
 | noisy | bits flipped both ways, answers garbled | checksums, `>`/`@` recovery |
 | lost-answers | 5 % of the answers never arrive | recovery after silence, no blind resend |
-| slow-unit | a long first vector, then more vectors than the queue holds | queue full (code 1) handled, paced |
+| slow-unit | a 6 s first vector, then 40 more vectors than the queue holds | queue full (code 1) handled, paced |
 | usb-latency | 1–16 ms converter latency each way | whether the queue still stays fed |
 | stop | the stop input pressed a third into the job, released 0.3 s later | INTA, K/R/G/D |
 | link-loss | the line dead for 1 s a third into the job | recovery after a dead line |
@@ -28,7 +28,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario("lost-answers", "lost answers: 5 % of the answers never arrive", lose=0.05,
              vectors=80),
     Scenario("slow-unit", "slow unit: a job longer than the queue (queue full, code 1)",
-             over_queue=60, head=80000, pulses=100, speed=20000,
+             over_queue=40, head=120000, pulses=100, speed=20000,
              tags=frozenset({"full", "fed"})),
     Scenario("usb-latency", "USB-converter latency 1-16 ms each way", faults="latency=1-16",
              vectors=80, tags=frozenset({"fed"})),
