@@ -49,3 +49,11 @@ def test_refused_vectors_are_not_accepted(spec):
     for k in range(spec.variant("gve64-v19").queue + 5):
         u.receive(b"!0C1000,0,0,0\r", k * 1e-6)
     assert len(g.accepted) == spec.variant("gve64-v19").queue  # the rest answered 1
+
+
+def test_unit_answers_5_to_numbers_of_thousands_of_digits(spec):
+    """A sender's garbage never kills the emulator (Python refuses int() of 4300+ digits)."""
+    u, g = _unit(spec)
+    for line in (b"!0C" + b"1" * 5000 + b",0,0\r", b"!0V" + b"9" * 5000 + b"\r"):
+        assert u.exchange(line, 0.0)[1] == b"5\r"
+    assert g.accepted == []
