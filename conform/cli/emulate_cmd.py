@@ -8,10 +8,8 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
-import tempfile
 import time
 from typing import Any
 
@@ -113,13 +111,15 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
 
     endpoint, reopen = _open_endpoint(tcp_port, link_path)
 
-    control_path = control_path or os.path.join(
-        tempfile.gettempdir(), f"conform-emu-{os.getpid()}-{id(unit) & 0xFFFF:04x}.sock")
     try:
         control = ControlServer(control_path)
-    except OSError as exc:
+    except (OSError, UserError) as exc:
         endpoint.close()
-        raise UserError(f"--control {control_path}: cannot listen: {exc.strerror or exc}") from None
+        if isinstance(exc, UserError):
+            raise
+        where = control_path or "a private directory"
+        raise UserError(f"--control {where}: cannot listen: {exc.strerror or exc}") from None
+    control_path = control.path
     recorder = None
     if record_path:
         from conform.capture import Recorder

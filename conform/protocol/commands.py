@@ -13,6 +13,11 @@ from conform.spec.model import CommandSpec, Dialect, ParamSpec, Variant
 
 CR = b"\r"
 
+MAX_DIGITS = 40
+"""A numeral with more significant digits than this is out of every range in the tables (the
+widest field is 32 bits); it is answered as out of range without converting it, so that no
+length of a number (Python refuses int() of more than 4 300 digits) can raise."""
+
 # error codes (specs/errors.toml)
 OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = range(8)
 
@@ -86,20 +91,32 @@ def encode_command(
 
 # --- parsing ----------------------------------------------------------------------------------
 
+# Possessive quantifiers: a token never gives back what it matched (a token holds no ',' and is
+# followed by ',' or the end), so a line of spaces or digits cannot make the match backtrack.
 _TOKENS_STRICT = {
-    "int": r"(-?[0-9]+)",
-    "uint": r"([0-9]+)",
-    "hex": r"([0-9A-Fa-f]+)",
-    "float": r"(-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?)",
+    "int": r"(-?[0-9]++)",
+    "uint": r"([0-9]++)",
+    "hex": r"([0-9A-Fa-f]++)",
+    "float": r"(-?[0-9]++(?:\.[0-9]*+)?+(?:[eE][-+]?[0-9]++)?+)",
     "axis": r"([A-Za-z])",
 }
 _TOKENS_LENIENT = {
-    "int": r"( *[-+]? *[0-9]* *)",
-    "uint": r"( *\+? *[0-9]* *)",
-    "hex": r"( *[0-9A-Fa-f]* *)",
-    "float": r"( *[-+]? *[0-9]*(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? *)",
-    "axis": r"( *[A-Za-z] *)",
+    "int": r"( *+[-+]?+ *+[0-9]*+ *+)",
+    "uint": r"( *+\+?+ *+[0-9]*+ *+)",
+    "hex": r"( *+[0-9A-Fa-f]*+ *+)",
+    "float": r"( *+[-+]?+ *+[0-9]*+(?:\.[0-9]*+)?+(?:[eE][-+]?[0-9]++)?+ *+)",
+    "axis": r"( *+[A-Za-z] *+)",
 }
+
+
+_NUMERIC = frozenset(("int", "uint", "hex"))
+
+
+def _significant(raw: str) -> str | None:
+    """``raw`` without leading zeros (its sign kept); None for more digits than any field."""
+    sign = "-" if raw[:1] == "-" else ""
+    digits = raw.lstrip("+-").lstrip("0") or "0"
+    return None if len(digits) > MAX_DIGITS else sign + digits
 
 
 class _Form:
@@ -157,12 +174,16 @@ class _Form:
                     if kind == "axis":
                         return None, f"{self.spec.id}: empty {param.name}", SYNTAX
                     raw = "0"
-            if kind == "int" or kind == "uint":
-                value: Any = int(raw)
-            elif kind == "hex":
-                value = int(raw, 16)
+            if kind in _NUMERIC:
+                digits = _significant(raw)
+                if digits is None:
+                    return None, f"{self.spec.id}: {param.name} has more than {MAX_DIGITS} digits", RANGE
+                value: Any = int(digits, 16 if kind == "hex" else 10)
             elif kind == "float":
-                value = float(raw)
+                try:
+                    value = float(raw)
+                except ValueError:  # lenient forms without digits: ".", "E5"
+                    return None, f"{self.spec.id}: {param.name} {raw!r} is not a number", SYNTAX
             elif kind == "axis":
                 value = raw.upper()
                 if value not in self.axis_letters:
@@ -188,6 +209,9 @@ class CommandParser:
         self.dialect = dialect
         self.lenient = dialect["A22"] == "lenient"
         self.any_case = dialect["A21"] == "any-case"
+        self._other_address_code = 3 if dialect["A23"] == "error-3" else None
+        self._a11 = dialect["A11"]
+        self._checksum_code = 2 if self._a11 == "watchdog-2" else SYNTAX
         universe = all_commands if all_commands is not None else load_spec().commands
         self.addresses = set(variant.addresses.values())
         if dialect["A19"] == "none" and variant.manual == "GVE124":
@@ -221,20 +245,19 @@ class CommandParser:
             return Rejection("garbage", None, "not a command line (expected '!' and an address digit)", line)
         address = line[1] - 0x30
         if address not in self.addresses:
-            code = 3 if self.dialect["A23"] == "error-3" else None
-            return Rejection("address", code, f"address {address} is not this unit's", line, address=address)
+            return Rejection("address", self._other_address_code,
+                             f"address {address} is not this unit's", line, address=address)
         body = line
         with_sum = False
         if checksum_on:
             body, value = split_checksum(line)
             if value is None:
-                if self.dialect["A11"] != "lenient":
-                    code = 2 if self.dialect["A11"] == "watchdog-2" else SYNTAX
-                    return Rejection("checksum", code, "checksums are on but the line has none", line,
+                if self._a11 != "lenient":
+                    return Rejection("checksum", self._checksum_code,
+                                     "checksums are on but the line has none", line,
                                      address=address)
             elif checksum(body + b",") != value:
-                code = 2 if self.dialect["A11"] == "watchdog-2" else SYNTAX
-                return Rejection("checksum", code,
+                return Rejection("checksum", self._checksum_code,
                                  f"checksum {value:02X} does not match {checksum(body + b','):02X}",
                                  line, address=address)
             else:
