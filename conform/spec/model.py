@@ -263,7 +263,7 @@ class Spec:
         ranges = {}
         for q in self.questions.values():
             lo, _, hi = values[q.id].partition("-")
-            if q.range and lo.isdigit() and hi.isdigit():
+            if q.range and lo.isascii() and hi.isascii() and lo.isdigit() and hi.isdigit():
                 ranges[q.range] = (int(lo), int(hi))
         return Dialect(MappingProxyType(values), MappingProxyType(defaults), MappingProxyType(ranges))
 
