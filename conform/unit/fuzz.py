@@ -141,6 +141,19 @@ def line_pool(spec: Spec, variant: Variant, dialect: Dialect, rng: random.Random
     return out
 
 
+def recovery_frames(variant: Variant, dialect: Dialect) -> list[bytes]:
+    """What a host sends to a unit in an unknown state, in order: a terminator (ends a cut
+    line; the host then waits for whatever answer is still due), ``*E0`` to close a packet and
+    ``J`` to reset, each with and without a checksum. Once the deaf time after ``J``
+    (``ready_after_s`` of the reset table) has passed, the unit is in its reset state."""
+    term = b"\r\n" if dialect["A1"] == "crlf" else b"\r"
+    addr = b"!%d" % variant.interpolator_address
+    out = [term]
+    for body in (addr + b"*E0", addr + b"J"):
+        out += [body + term, append_checksum(body) + term]
+    return out
+
+
 # lines after which the harness no longer knows the state when it cannot tell their answers apart
 _STATEFUL = frozenset(("%", "*S", "*E", "J", "H", "W"))
 _MAY_BE_STATEFUL = re.compile(rb"[%*JjHhWw]")
@@ -453,9 +466,7 @@ class _Run:
         """Regain a known state as a host would: end the line, close a packet, reset, wait;
         then the unit must answer ``?``."""
         self.fig.resyncs += 1
-        for frame in (self.term, self.addr + b"*E0" + self.term,
-                      append_checksum(self.addr + b"*E0") + self.term,
-                      self.addr + b"J" + self.term, append_checksum(self.addr + b"J") + self.term):
+        for frame in recovery_frames(self.variant, self.dialect):
             out = self._exchange(frame)
             if out is not None:
                 problem = self.grammar.check(out, None, None)
