@@ -14,6 +14,7 @@ import time
 import tty
 
 import pytest
+from conftest import stop_emulator
 
 from conform.errors import UserError
 from conform.protocol import CommandParser
@@ -189,24 +190,6 @@ def test_emulator_drops_what_the_host_does_not_read(spec):
 
 # ---------------------------------------------------------------- over a real pty
 
-def _start(*args: str) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, "-m", "conform", "emulate", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    path = proc.stdout.readline().strip()
-    assert path, proc.stderr.read()
-    return proc, path
-
-
-def _stop(proc: subprocess.Popen) -> tuple[int, str]:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    return proc.returncode, proc.stderr.read()
-
-
 def _open(path: str) -> int:
     fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     tty.setraw(fd)
@@ -242,8 +225,8 @@ def _write_all(fd: int, data: bytes) -> None:
 
 
 @pytest.mark.slow
-def test_live_emulator_survives_hostile_lines_and_a_host_that_stops_reading():
-    proc, path = _start("gve64-v19", "--dialect", "A22=lenient")
+def test_live_emulator_survives_hostile_lines_and_a_host_that_stops_reading(emulate):
+    proc, path = emulate("gve64-v19", "--dialect", "A22=lenient")
     fd = _open(path)
     try:
         for line, answer in ((b"!0C1,1," + HUGE + b"\r", b"5\r"), (b"!0V" + HUGE + b"\r", b"5\r"),
@@ -260,6 +243,6 @@ def test_live_emulator_survives_hostile_lines_and_a_host_that_stops_reading():
         assert _read_until(fd, 1).endswith(b"0,25020304\r")
     finally:
         os.close(fd)
-        code, err = _stop(proc)
-    assert code == 0 and "Traceback" not in err, err
-    assert "does not read" in err
+        stop_emulator(proc, signal.SIGTERM)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr_text, proc.stderr_text
+    assert "does not read" in proc.stderr_text

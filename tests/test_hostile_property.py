@@ -8,12 +8,11 @@ from __future__ import annotations
 import os
 import select
 import signal
-import subprocess
-import sys
 import time
 import tty
 
 import pytest
+from conftest import stop_emulator
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -95,22 +94,14 @@ class _Pty:
         return out
 
 
-@pytest.fixture(scope="module")
-def live():
-    proc = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "gve64-v19", "--baud",
-                             "115200"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    path = proc.stdout.readline().strip()
-    assert path, proc.stderr.read()
+@pytest.fixture
+def live(emulate):
+    proc, path = emulate("gve64-v19", "--baud", "115200")
     port = _Pty(path)
     yield proc, port
     os.close(port.fd)
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    assert proc.returncode == 0 and "Traceback" not in proc.stderr.read()
+    stop_emulator(proc, signal.SIGTERM)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr_text
 
 
 @pytest.mark.slow
