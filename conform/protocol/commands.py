@@ -175,7 +175,7 @@ class _Form:
                         return None, f"{self.spec.id}: empty {param.name}", SYNTAX
                     raw = "0"
             if kind in _NUMERIC:
-                digits = _significant(raw)
+                digits = raw if len(raw) <= MAX_DIGITS else _significant(raw)
                 if digits is None:
                     return None, f"{self.spec.id}: {param.name} has more than {MAX_DIGITS} digits", RANGE
                 value: Any = int(digits, 16 if kind == "hex" else 10)

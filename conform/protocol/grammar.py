@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 
-from conform.protocol.answers import answer_digit
+from conform.protocol.answers import answer_digit, encode_answer
 from conform.protocol.checksum import checksum
 from conform.protocol.commands import Command, Rejection
 from conform.spec.model import AnswerField, Dialect, Spec, Variant
@@ -25,6 +25,7 @@ _COUNT = re.compile(rb"(?:,[0-9]+)?\Z")
 _NONE = re.compile(rb"\Z")
 _ECHO = re.compile(rb"![0-9][^\r]*\Z")
 _TAIL = re.compile(rb",([0-9A-F]{2})\Z")
+_SPECIAL = frozenset((">", "*S", "J", "%", "*E"))
 
 # Code 7 ("not while running") beyond the rows the errors table names and the rows with
 # while_running = false: vectors under MPG (A14), W and Y during a job (A27), W while INTA is set
@@ -54,10 +55,12 @@ class AnswerGrammar:
         self.j_answers = dialect["A17"] == "answer-then-deaf"
         self.fields: dict[str, re.Pattern[bytes]] = {}
         self.codes: dict[str, frozenset[int]] = {}
+        self._exact: dict[tuple[object, bool], frozenset[bytes]] = {}
         everyone = {e.code for e in spec.errors.values() if "*" in e.raised_by}
         for cid, cmd in variant.commands.items():
             body = b"".join(b"," + _field(f, dialect, cid) for f in cmd.answer)
-            self.fields[cid] = _COUNT if cid == "*E" else re.compile(body + rb"\Z")
+            self.fields[cid] = (_COUNT if cid == "*E" else
+                                re.compile(body + rb"\Z") if body else _NONE)
             codes = set(everyone)
             codes.update(e.code for e in spec.errors.values() if cid in e.raised_by)
             if not cmd.while_running or cid in _RUNNING_TOO:
@@ -114,6 +117,13 @@ class AnswerGrammar:
         ``verdict``: the line as the tables read it (None: not known, every line is judged on
         its own); ``silent``: the line must get no answer (deaf after J, inside a packet).
         """
+        if verdict is not None and not silent and cs is not None:
+            key = verdict.name if verdict.__class__ is Command else verdict.code
+            exact = self._exact.get((key, cs))
+            if exact is None:
+                exact = self._exact[(key, cs)] = self._exact_answers(verdict, cs)
+            if out in exact:
+                return None
         if out and not out.endswith(b"\r"):
             return f"{out[-20:]!r}: the answer does not end in CR"
         lines = out.split(b"\r")[:-1]
@@ -149,6 +159,27 @@ class AnswerGrammar:
         if name == "%":  # the answer goes out under the state the command set
             cs = None
         return self.check_line(lines[0], cs, name)
+
+    def _exact_answers(self, verdict: Command | Rejection, cs: bool) -> frozenset[bytes]:
+        """Every complete answer without fields that :meth:`check` accepts for this verdict (a
+        shortcut for the common answers; anything else takes the full path)."""
+        if verdict.__class__ is Rejection:
+            if verdict.code is None:
+                return frozenset((b"",))
+            codes: frozenset[int] = frozenset((verdict.code,))
+        elif verdict.name in _SPECIAL:
+            return frozenset()
+        else:
+            codes = self.codes[verdict.name]
+        out = set()
+        for code in codes:
+            if code == 0 and self.fields[verdict.name] is not _NONE and verdict.__class__ is Command:
+                continue  # its fields take the full path
+            for inta in (False, True):
+                if inta and code and not self.inta_any_code:
+                    continue
+                out.add(encode_answer(code, inta, checksum_on=cs))
+        return frozenset(out)
 
     def _free(self, lines: list[bytes], cs: bool | None) -> str | None:
         """Answers to bytes that were not one known line: each line well-formed on its own,

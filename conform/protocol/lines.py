@@ -37,8 +37,11 @@ class LineSplitter:
         return dropped
 
     def feed(self, data: bytes) -> list[bytes]:
-        self._buf += data
-        text = bytes(self._buf)
+        if self._buf:
+            self._buf += data
+            text = bytes(self._buf)
+        else:
+            text = bytes(data)
         if self.mode == "cr-or-lf":
             text = text.replace(b"\n", b"\r")
         parts = text.split(b"\r\n" if self.mode == "crlf" else b"\r")

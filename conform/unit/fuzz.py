@@ -203,6 +203,9 @@ class Campaign:
             fig.configs += 1
             _Run(self, self.spec.variant(vid), self.spec.dialect(choices), fig).go(
                 min(per, frames - fig.frames))
+            if len(self._parsers) > 8:  # a campaign visits each dialect about once: keep few
+                self._parsers.clear()
+                self._verdicts.clear()
         fig.seconds = time.perf_counter() - start
         fig.cpu_seconds = time.process_time() - cpu
         return fig
