@@ -108,7 +108,7 @@ def live(emulate):
 @given(sent=st.lists(st.one_of(st.binary(max_size=64),
                                st.sampled_from([x for x in LINES if b"W" not in x])),
                      min_size=1, max_size=8))
-@settings(max_examples=4, deadline=None, database=None,
+@settings(max_examples=3, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 def test_over_a_pty_any_bytes_then_J_bring_conform_emulate_back(live, sent):
     proc, port = live

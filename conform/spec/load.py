@@ -523,10 +523,19 @@ def _questions(path: Path, text: str, data: dict) -> dict[str, Question]:
     return out
 
 
+GIVEN = re.compile(r"(checksum-on|inta|queue-full|st[0-6]=[0-9A-Fa-f]{1,2}"
+                   r"|position=-?[0-9]{1,10}(,-?[0-9]{1,10}){0,7})\Z")
+"""The unit states an example may name (conform/unit/given.py)."""
+
+
 def _examples(path: Path, text: str, data: dict) -> tuple[Example, ...]:
     out = []
     for row in each(data.get("example"), path, text, "example", _label):
         row.check_keys({"id", "clause", "kind", "given", "send", "expect", "body", "line"})
+        for item in row.str_list("given", ()):
+            if GIVEN.match(item) is None:
+                row.fail("given", f"{item!r:.60} is not one of checksum-on, inta, queue-full, "
+                                  "st<n>=<hex>, position=<x,y,...>")
         out.append(Example(
             id=row.get("id", str), clauses=row.clauses(),
             kind=row.choice("kind", ("checksum", "exchange", "packet")),
