@@ -297,7 +297,8 @@ def test_profile_corpus(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("pair", ["A1", "=x", "A1=", "A1=sometimes", "A99=x", f"A{BIG}=x",
-                                  f"A1={BIG}", "A1=cr\x00", "A1=cr=lf", " = "])
+                                  f"A1={BIG}", "A1=cr\x00", "A1=cr=lf", " = "],
+                         ids=lambda pair: repr(pair[:12]))
 def test_dialect_options(capsys, pair):
     code, _, err = run_cli(["emulate", "gve64-v19", "--dialect", pair], capsys)
     assert_one_line(code, err, pair)
