@@ -30,6 +30,7 @@ from conform.protocol.lines import MAX_LINE, LineSplitter
 from conform.spec.model import CommandSpec, Dialect, Spec, Variant
 from conform.unit.model import Unit
 
+_STEPS = (0.0, 0.0005, 0.002, 0.02, 0.3)  # seconds between frames
 ALPHABET = b"!0123456789,.-+ \r\n*%@>?$&CLVABTNPWYKRHDGEFUOISJXZQabcxyz\x00\xff"
 _TO_ALPHABET = bytes(ALPHABET[i % len(ALPHABET)] for i in range(256))
 _IN_LINE = ALPHABET.replace(b"\r", b"").replace(b"\n", b"")
@@ -286,7 +287,7 @@ class _Run:
         if r < 0.82:
             on = self.cs if self.cs is not None else r < 0.4
             framed = self.framed[1 if on and rng.random() < 0.92 else 0]
-            frame = framed[rng.randrange(len(framed))]
+            frame = framed[int(rng.random() * len(framed))]
             return frame if r < 0.58 else self._mutate(frame)
         if r < 0.92:
             return _noise(rng, rng.randrange(24))
@@ -319,7 +320,7 @@ class _Run:
                     continue
                 self.unknown_left -= 1
             self.send(self._frame())
-            self.t += rng.choice((0.0, 0.0005, 0.002, 0.02, 0.3))
+            self.t += _STEPS[int(rng.random() * 5)]
 
     def _exchange(self, frame: bytes) -> bytes | None:
         fig = self.fig
