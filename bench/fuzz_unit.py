@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=200_000)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--hang", type=float, default=0.5,
-                    help="a frame taking longer than this (wall seconds) counts as a hang")
+                    help="a frame taking longer than this (CPU seconds) counts as a hang")
     args = ap.parse_args(argv)
     if args.frames <= 0:
         ap.error("--frames must be positive")
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
           f"(ratio to {TARGET_RATE:,}: {fig.rate / TARGET_RATE:.2f})")
     print(f"cpu               {fig.cpu_seconds:.1f} s  -> {cpu_rate:,.0f} frames/s "
           f"(ratio {cpu_rate / TARGET_RATE:.2f})")
-    print(f"slowest frame     {fig.max_frame_s * 1000:.1f} ms (hang bound {args.hang:g} s)")
+    print(f"slowest frame     {fig.max_frame_s * 1000:.1f} ms of CPU (hang bound {args.hang:g} s)")
     print(f"failures          {fig.failures} (exceptions {fig.exceptions}, hangs {fig.hangs}, "
           f"malformed answers {fig.malformed})")
     print(f"max RSS           {rss_mb:.0f} MB")

@@ -209,6 +209,6 @@ def test_campaign_short():
 @pytest.mark.slow
 def test_campaign_200k_frames():
     """The CI campaign: 200 000 frames over every variant and dialect (bench/fuzz_unit.py)."""
-    fig = Campaign(SPEC, seed=1, hang_s=5.0).run(200_000)  # wall time: a loaded CI machine
+    fig = Campaign(SPEC, seed=1).run(200_000)
     assert fig.frames == 200_000 and fig.configs >= len(SPEC.variants) * 30
     assert fig.failures == 0, fig.examples

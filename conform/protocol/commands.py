@@ -239,6 +239,10 @@ class CommandParser:
                 forms.sort(key=lambda f: len(f.spec.params))
             self.table[address] = by_mnemonic
         self.max_len = max(len(m) for t in self.table.values() for m in t)
+        self._heads = {
+            address: re.compile("|".join(re.escape(m) for m in sorted(t, key=len, reverse=True)),
+                                re.IGNORECASE if self.any_case else 0)
+            for address, t in self.table.items()}
 
     def parse(self, line: bytes, checksum_on: bool) -> Command | Rejection:
         if len(line) < 2 or line[0] != 0x21 or not 0x30 <= line[1] <= 0x39:
@@ -267,13 +271,11 @@ class CommandParser:
         except UnicodeDecodeError as exc:
             return Rejection("syntax", SYNTAX, f"non-ASCII byte at offset {exc.start + 2}", line,
                              address=address)
-        table = self.table[address]
-        for n in range(min(self.max_len, len(text)), 0, -1):
-            head = text[:n]
-            forms = table.get(head.upper() if self.any_case else head)
-            if forms is None:
-                continue
-            rest = text[n:]
+        m = self._heads[address].match(text)  # the longest mnemonic the line starts with
+        if m is not None:
+            head = m.group()
+            forms = self.table[address][head.upper() if self.any_case else head]
+            rest = text[len(head):]
             form = forms[0] if len(forms) == 1 else (forms[0] if not rest else forms[-1])
             if form.absent:
                 return Rejection("absent", UNKNOWN, f"{form.spec.id} is not in {self.variant.id}",

@@ -30,6 +30,11 @@ class LineSplitter:
         """Bytes of an unfinished line."""
         return bytes(self._buf)
 
+    @property
+    def unfinished(self) -> bytearray:
+        """The unfinished line itself, without a copy (read it, do not change it)."""
+        return self._buf
+
     def clear(self) -> bytes:
         """Drop the unfinished line (watchdog, reset) and return what was dropped."""
         dropped = bytes(self._buf)
@@ -46,13 +51,13 @@ class LineSplitter:
             text = text.replace(b"\n", b"\r")
         parts = text.split(b"\r\n" if self.mode == "crlf" else b"\r")
         self._buf[:] = parts.pop()
-        if self.mode == "cr":  # the LF of a CR LF starts the next line: it is not part of it
+        if self.mode == "cr" and b"\n" in text:  # the LF of a CR LF starts the next line
             self._buf[:] = self._buf.lstrip(b"\n")
             parts = [p.lstrip(b"\n") for p in parts]
         elif self.mode == "cr-or-lf":
             parts = [p for p in parts if p]
         limit = self.max_line
-        if limit is not None:
+        if limit is not None and len(text) > limit:
             if len(self._buf) > limit:
                 # crlf: a CR at the cut may be the first half of the terminator: keep it
                 keep_cr = self.mode == "crlf" and self._buf.endswith(b"\r")

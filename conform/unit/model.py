@@ -510,7 +510,7 @@ class Unit:
         self._start_watchdog(t)
 
     def _start_watchdog(self, t: float) -> None:
-        pending = self._splitter.pending
+        pending = self._splitter.unfinished
         self._partial = bool(pending)
         if not pending:
             self._wd = _INF
