@@ -427,7 +427,8 @@ class _Run:
         self.fig.judged += 1
         verdict = self._verdict(line)
         name = verdict.name
-        if name in ("EFW", "EUW") and self.hex_floats:
+        if (name in ("EFW", "EUW") and self.hex_floats
+                and (verdict.__class__ is Command or verdict.kind in ("syntax", "range"))):
             verdict = Command(0, name, (), False, line)  # the unit reads these itself (A18)
         if self.packet:
             return self._in_packet(verdict, out, t)
