@@ -246,3 +246,22 @@ def test_live_emulator_survives_hostile_lines_and_a_host_that_stops_reading(emul
         stop_emulator(proc, signal.SIGTERM)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr_text, proc.stderr_text
     assert "does not read" in proc.stderr_text
+
+
+def test_tcp_write_some_never_waits_for_a_client_that_does_not_read():
+    from conform.link.tcp import TcpServerEndpoint
+
+    ep = TcpServerEndpoint("127.0.0.1", 0)
+    client = socket.create_connection(("127.0.0.1", ep.port))
+    try:
+        client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        assert ep.wait_client(5)
+        chunk = b"0,IP64MPG v19 10.9.2010\r" * 2000
+        start = time.monotonic()
+        taken = len(chunk)
+        while taken == len(chunk) and time.monotonic() - start < 10:
+            taken = ep.write_some(chunk)   # the client reads nothing
+        assert taken < len(chunk) and time.monotonic() - start < 10
+    finally:
+        client.close()
+        ep.close()
