@@ -1,6 +1,8 @@
 """User-facing errors: one line, a non-zero exit, never a traceback."""
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 
 class UserError(Exception):
@@ -30,6 +32,32 @@ def read_user_text(path: str | Path) -> str:
         raise UserError(f"{p}: not UTF-8 text (byte offset {exc.start})") from None
     except OSError as exc:
         raise UserError(f"{p}: cannot read: {exc.strerror or exc}") from None
+
+
+def _value_error(exc: ValueError) -> str:
+    return str(exc).split("; use sys")[0]  # the int-digits limit names an interpreter knob
+
+
+def load_user_file(path: str | Path, parse: Callable[[str], Any], *, max_bytes: int, what: str,
+                   describe: Callable[[ValueError], str] = _value_error) -> Any:
+    """``parse`` the text of a file the user named; a file larger than ``max_bytes`` (refused
+    before it is read), nested past the interpreter's depth or that ``parse`` rejects with a
+    ``ValueError`` (JSON and TOML decode errors are ones; so is an integer of more than
+    4 300 digits) is one ``UserError`` line described by ``describe``."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size if p.is_file() else 0
+    except OSError:
+        size = 0
+    if size > max_bytes:
+        raise UserError(f"{p}: {size:,} bytes; larger than any {what} ({max_bytes:,})")
+    text = read_user_text(p)
+    try:
+        return parse(text)
+    except RecursionError:
+        raise UserError(f"{p}: nested too deeply") from None
+    except ValueError as exc:
+        raise UserError(f"{p}: {describe(exc)}") from None
 
 
 class LinkError(UserError):

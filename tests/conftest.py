@@ -6,3 +6,41 @@ from conform.spec import load_spec
 @pytest.fixture(scope="session")
 def spec():
     return load_spec()
+
+
+@pytest.fixture
+def emulate():
+    """Start ``conform emulate ARGS...``; returns (process, device path). Stopped with SIGTERM at
+    the end of the test (killed if it does not stop); its exit code and stderr are then in
+    ``process.returncode`` and ``process.stderr_text``."""
+    import signal
+    import subprocess
+    import sys
+
+    procs = []
+
+    def start(*args: str):
+        proc = subprocess.Popen([sys.executable, "-m", "conform", "emulate", *args],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        procs.append(proc)
+        path = proc.stdout.readline().strip()
+        assert path, proc.stderr.read()
+        return proc, path
+
+    yield start
+    for proc in procs:
+        stop_emulator(proc, signal.SIGTERM)
+
+
+def stop_emulator(proc, sig) -> None:
+    import subprocess
+
+    if proc.returncode is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    if not hasattr(proc, "stderr_text"):
+        proc.stderr_text = proc.stderr.read()

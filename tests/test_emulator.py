@@ -11,6 +11,7 @@ import sys
 import time
 
 import pytest
+from conftest import stop_emulator
 
 from conform.errors import UserError
 from conform.link.faults import FaultConfig, FaultInjector, FaultyEndpoint
@@ -230,14 +231,9 @@ def start(*args):
 
 
 def stop(proc, sig=signal.SIGTERM):
-    proc.send_signal(sig)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-        raise AssertionError("the emulator did not stop on a signal") from None
-    return proc.returncode, proc.stderr.read()
+    stop_emulator(proc, sig)
+    assert proc.returncode in (0, 1, 2), "the emulator did not stop on a signal"
+    return proc.returncode, proc.stderr_text
 
 
 CLIENT = r"""

@@ -3,6 +3,7 @@ allows (or the silence it prescribes)."""
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -153,3 +154,61 @@ def test_fast_path_equals_parser(steps, variant):
         assert fast.exchange(line, t) == slow.exchange(line, t)
         assert fast.position == slow.position
         assert fast.queue_len == slow.queue_len and fast.index == slow.index
+
+
+# ---------------------------------------------------------------- the fuzz campaign
+
+from conform.protocol.grammar import AnswerGrammar  # noqa: E402
+from conform.unit.fuzz import Campaign  # noqa: E402
+
+
+def test_answer_grammar_rejects_what_the_tables_do_not_allow():
+    v = SPEC.variant("gve64-v19")
+    d = SPEC.dialect()
+    g = AnswerGrammar(SPEC, v, d)
+    p = CommandParser(v, d)
+    V, Q, ER = p.parse(b"!0V100", False), p.parse(b"!0?", False), p.parse(b"!0ER1F", False)
+    assert g.check(b"0\r", False, V) is None and g.check(b"8\r", False, V) is None
+    assert g.check(b"0,12\r", False, V)                       # V answers no field
+    assert g.check(b"6\r", False, V)                          # 6 is G's alone (errors.toml)
+    assert g.check(b"0\r", False, Q)                          # ? answers its version
+    assert g.check(b"0,ab\r", False, ER) and g.check(b"0,1FF\r", False, ER)
+    assert g.check(b"0,FF\r", False, ER) is None
+    assert g.check(b"0,5C\r", True, V) is None and g.check(b"0,5D\r", True, V)
+    assert g.check(b"0", False, V)                            # no CR
+    assert g.check(b"0\r0\r", False, V)                       # two answers to one line
+    assert g.check(b"4\r", False, p.parse(b"!0Vx", False)) is None
+    assert g.check(b"5\r", False, p.parse(b"!0Vx", False))    # the tables say 4
+    assert g.check(b"0\r", False, p.parse(b"garbage", False))  # ignored lines get silence
+    rep = p.parse(b"!0>", False)
+    assert g.check(b"!0V1\r0\r", False, rep) is None
+    assert g.check(b"!0V1\r2\r0\r", False, rep)               # a cut echo: item 11's symptom
+    assert g.check(b"0\r", False, None, silent=True)
+
+
+class _Deviant(Unit):
+    """Answers F with one hex digit too many: the campaign must notice."""
+
+    def _cmd_F(self, args, t):
+        code, fields = super()._cmd_F(args, t)
+        return code, (fields[0] + "0",)
+
+
+def test_campaign_finds_a_malformed_answer():
+    fig = Campaign(SPEC, seed=5, unit_class=_Deviant, mixes=0).run(4000, per_config=2000)
+    assert fig.malformed > 0 and fig.exceptions == 0
+    assert any("F" in e for e in fig.examples)
+
+
+def test_campaign_short():
+    fig = Campaign(SPEC, seed=11, mixes=2).run(20_000, per_config=300)
+    assert fig.frames == 20_000 and fig.judged > 10_000
+    assert fig.failures == 0, fig.examples
+
+
+@pytest.mark.slow
+def test_campaign_200k_frames():
+    """The CI campaign: 200 000 frames over every variant and dialect (bench/fuzz_unit.py)."""
+    fig = Campaign(SPEC, seed=1).run(200_000)
+    assert fig.frames == 200_000 and fig.configs >= len(SPEC.variants) * 30
+    assert fig.failures == 0, fig.examples

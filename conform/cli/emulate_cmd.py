@@ -8,10 +8,8 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
-import tempfile
 import time
 from typing import Any
 
@@ -42,7 +40,7 @@ def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, s
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key or not value:
-            raise UserError(f"--dialect {pair!r}: expected A<n>=<alternative>")
+            raise UserError(f"--dialect {pair!r:.40}: expected A<n>=<alternative>")
         choices[key.strip().upper()] = value.strip()
     return choices
 
@@ -51,12 +49,10 @@ def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
     out = {}
     for pair in pairs:
         axis, sep, value = pair.partition("=")
-        try:
-            out[axis.strip().upper()] = int(value)
-        except ValueError:
-            raise UserError(f"--switch {pair!r}: expected AXIS=PULSES (e.g. X=3000)") from None
-        if not sep:
-            raise UserError(f"--switch {pair!r}: expected AXIS=PULSES (e.g. X=3000)")
+        value = value.strip()
+        if not sep or not value.lstrip("-").isdigit() or len(value) > 11:
+            raise UserError(f"--switch {pair!r:.40}: expected AXIS=PULSES (e.g. X=3000)")
+        out[axis.strip().upper()] = int(value)
     return out
 
 
@@ -101,8 +97,8 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
     dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
     if baud is not None and baud <= 0:
         raise UserError(f"--baud {baud}: must be positive")
-    if answer_delay < 0:
-        raise UserError("--answer-delay: must not be negative")
+    if not 0 <= answer_delay <= 60:  # nan fails this too
+        raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
     t_start = time.monotonic()  # the unit runs on the monotonic wall clock
     try:
         unit = Unit(v, dialect, t0=t_start, switches=_switches(switch_pairs),
@@ -121,13 +117,15 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
 
     endpoint, reopen = _open_endpoint(tcp_port, link_path)
 
-    control_path = control_path or os.path.join(
-        tempfile.gettempdir(), f"conform-emu-{os.getpid()}-{id(unit) & 0xFFFF:04x}.sock")
     try:
         control = ControlServer(control_path)
-    except OSError as exc:
+    except (OSError, UserError) as exc:
         endpoint.close()
-        raise UserError(f"--control {control_path}: cannot listen: {exc.strerror or exc}") from None
+        if isinstance(exc, UserError):
+            raise
+        where = control_path or "a private directory"
+        raise UserError(f"--control {where}: cannot listen: {exc.strerror or exc}") from None
+    control_path = control.path
     recorder = None
     if record_path:
         from conform.capture import Recorder

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.errors import UserError, read_user_text
+from conform.errors import UserError, load_user_file
 
 
 @dataclass
@@ -57,7 +57,8 @@ def dumps(profile: Profile) -> str:
 
 def _qkey(item: tuple[str, Any]) -> tuple[int, str]:
     k = item[0]
-    return (int(k[1:]) if k[1:].isdigit() else 999, k)
+    n = k[1:]
+    return (int(n) if n.isascii() and n.isdigit() and len(n) < 10 else 1 << 31, k)
 
 
 def write_profile(profile: Profile, path: str | Path) -> None:
@@ -67,18 +68,22 @@ def write_profile(profile: Profile, path: str | Path) -> None:
         raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
 
 
+MAX_PROFILE_BYTES = 4 << 20
+"""A profile is a few kB; a file past this is refused before it is read."""
+
+
 def load_profile(path: str | Path) -> Profile:
     p = Path(path)
-    try:
-        data = tomllib.loads(read_user_text(p))
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{p}: {exc}") from None
+    data = load_user_file(p, tomllib.loads, max_bytes=MAX_PROFILE_BYTES, what="profile")
     dialect = data.get("dialect")
     if not isinstance(dialect, dict):
         raise UserError(f"{p}: no [dialect] table")
     for k, v in dialect.items():
         if not isinstance(v, str):
             raise UserError(f"{p}: [dialect] {k} must be a string, not {type(v).__name__}")
+    for table in ("meta", "evidence"):
+        if not isinstance(data.get(table, {}), dict):
+            raise UserError(f"{p}: [{table}] must be a table, not {type(data[table]).__name__}")
     return Profile(dict(dialect), dict(data.get("meta", {})), dict(data.get("evidence", {})))
 
 

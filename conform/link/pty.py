@@ -106,6 +106,19 @@ class PtyEndpoint:
             except (OSError, ValueError):
                 raise PortGone(f"{self.path}: pty closed") from None
 
+    def write_some(self, data: bytes) -> int:
+        """Write what the pty takes now, never wait; return how many bytes it took.
+
+        For a device without flow control (a UART): what the peer does not read is lost.
+        """
+        fd = self.fileno()
+        try:
+            return os.write(fd, data)
+        except BlockingIOError:
+            return 0
+        except OSError as exc:
+            raise PortGone(f"{self.path}: write failed: {exc.strerror}") from None
+
     def close(self) -> None:
         """Close both sides (the peer then sees EIO: an unplugged port) and drop the link."""
         for attr in ("_master", "_slave"):

@@ -153,6 +153,21 @@ class TcpServerEndpoint:
                 raise WriteTimeout(f"{self.path}: client did not read in time")
             select.select([], [conn], [], left)
 
+    def write_some(self, data: bytes) -> int:
+        """Send what the socket takes now, never wait; return how many bytes were taken (all of
+        them when no client is connected: they go nowhere, as on an unplugged cable)."""
+        self._check_open()
+        conn = self._client
+        if conn is None:
+            return len(data)
+        try:
+            return conn.send(data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError as exc:
+            self._drop(f"failed: {exc.strerror or exc}")
+            return len(data)
+
     def close(self) -> None:
         if self._closed:
             return

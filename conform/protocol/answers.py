@@ -46,16 +46,21 @@ def encode_answer(code: int, inta: bool = False, fields: Sequence[object] = (), 
     return body + terminator
 
 
+def answer_digit(byte: int) -> int | None:
+    """The value of an answer's first byte (an upper-case hex digit), None if it is not one."""
+    if 0x30 <= byte <= 0x39:
+        return byte - 0x30
+    if 0x41 <= byte <= 0x46:
+        return byte - 0x37
+    return None
+
+
 def parse_answer(line: bytes, checksum_on: bool) -> Answer | Garbled:
     """Parse one answer line (without its CR)."""
     if not line:
         return Garbled(line, "empty line")
-    d = line[0]
-    if 0x30 <= d <= 0x39:
-        digit = d - 0x30
-    elif 0x41 <= d <= 0x46:
-        digit = d - 0x37
-    else:
+    digit = answer_digit(line[0])
+    if digit is None:
         return Garbled(line, f"first byte {line[:1]!r} is not a hex digit")
     if len(line) > 1 and line[1] != 0x2C:
         return Garbled(line, f"byte 1 {line[1:2]!r} is not ','")

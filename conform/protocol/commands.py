@@ -13,10 +13,13 @@ from conform.spec.model import CommandSpec, Dialect, ParamSpec, Variant
 
 CR = b"\r"
 
+MAX_DIGITS = 40
+"""A numeral with more significant digits than this is out of every range in the tables (the
+widest field is 32 bits); it is answered as out of range without converting it, so that no
+length of a number (Python refuses int() of more than 4 300 digits) can raise."""
+
 # error codes (specs/errors.toml)
 OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = range(8)
-
-MAX_DIGITS = 40  # no parameter of any command needs more characters than this
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,20 +91,32 @@ def encode_command(
 
 # --- parsing ----------------------------------------------------------------------------------
 
+# Possessive quantifiers: a token never gives back what it matched (a token holds no ',' and is
+# followed by ',' or the end), so a line of spaces or digits cannot make the match backtrack.
 _TOKENS_STRICT = {
-    "int": r"(-?[0-9]+)",
-    "uint": r"([0-9]+)",
-    "hex": r"([0-9A-Fa-f]+)",
-    "float": r"(-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?)",
+    "int": r"(-?[0-9]++)",
+    "uint": r"([0-9]++)",
+    "hex": r"([0-9A-Fa-f]++)",
+    "float": r"(-?[0-9]++(?:\.[0-9]*+)?+(?:[eE][-+]?[0-9]++)?+)",
     "axis": r"([A-Za-z])",
 }
 _TOKENS_LENIENT = {
-    "int": r"( *[-+]? *[0-9]* *)",
-    "uint": r"( *\+? *[0-9]* *)",
-    "hex": r"( *[0-9A-Fa-f]* *)",
-    "float": r"( *[-+]? *[0-9]*(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? *)",
-    "axis": r"( *[A-Za-z] *)",
+    "int": r"( *+[-+]?+ *+[0-9]*+ *+)",
+    "uint": r"( *+\+?+ *+[0-9]*+ *+)",
+    "hex": r"( *+[0-9A-Fa-f]*+ *+)",
+    "float": r"( *+[-+]?+ *+[0-9]*+(?:\.[0-9]*+)?+(?:[eE][-+]?[0-9]++)?+ *+)",
+    "axis": r"( *+[A-Za-z] *+)",
 }
+
+
+_NUMERIC = frozenset(("int", "uint", "hex"))
+
+
+def _significant(raw: str) -> str | None:
+    """``raw`` without leading zeros (its sign kept); None for more digits than any field."""
+    sign = "-" if raw[:1] == "-" else ""
+    digits = raw.lstrip("+-").lstrip("0") or "0"
+    return None if len(digits) > MAX_DIGITS else sign + digits
 
 
 class _Form:
@@ -159,15 +174,16 @@ class _Form:
                     if kind == "axis":
                         return None, f"{self.spec.id}: empty {param.name}", SYNTAX
                     raw = "0"
-            if len(raw) > MAX_DIGITS and kind in ("int", "uint", "hex"):
-                # far outside every range (and past Python's int-from-text limit)
-                return None, f"{self.spec.id}: {param.name} has {len(raw)} digits", RANGE
-            if kind == "int" or kind == "uint":
-                value: Any = int(raw)
-            elif kind == "hex":
-                value = int(raw, 16)
+            if kind in _NUMERIC:
+                digits = raw if len(raw) <= MAX_DIGITS else _significant(raw)
+                if digits is None:
+                    return None, f"{self.spec.id}: {param.name} has more than {MAX_DIGITS} digits", RANGE
+                value: Any = int(digits, 16 if kind == "hex" else 10)
             elif kind == "float":
-                value = float(raw)
+                try:
+                    value = float(raw)
+                except ValueError:  # lenient forms without digits: ".", "E5"
+                    return None, f"{self.spec.id}: {param.name} {raw!r} is not a number", SYNTAX
             elif kind == "axis":
                 value = raw.upper()
                 if value not in self.axis_letters:
@@ -193,6 +209,9 @@ class CommandParser:
         self.dialect = dialect
         self.lenient = dialect["A22"] == "lenient"
         self.any_case = dialect["A21"] == "any-case"
+        self._other_address_code = 3 if dialect["A23"] == "error-3" else None
+        self._a11 = dialect["A11"]
+        self._checksum_code = 2 if self._a11 == "watchdog-2" else SYNTAX
         universe = all_commands if all_commands is not None else load_spec().commands
         self.addresses = set(variant.addresses.values())
         if dialect["A19"] == "none" and variant.manual == "GVE124":
@@ -220,26 +239,29 @@ class CommandParser:
                 forms.sort(key=lambda f: len(f.spec.params))
             self.table[address] = by_mnemonic
         self.max_len = max(len(m) for t in self.table.values() for m in t)
+        self._heads = {
+            address: re.compile("|".join(re.escape(m) for m in sorted(t, key=len, reverse=True)),
+                                re.IGNORECASE if self.any_case else 0)
+            for address, t in self.table.items()}
 
     def parse(self, line: bytes, checksum_on: bool) -> Command | Rejection:
         if len(line) < 2 or line[0] != 0x21 or not 0x30 <= line[1] <= 0x39:
             return Rejection("garbage", None, "not a command line (expected '!' and an address digit)", line)
         address = line[1] - 0x30
         if address not in self.addresses:
-            code = 3 if self.dialect["A23"] == "error-3" else None
-            return Rejection("address", code, f"address {address} is not this unit's", line, address=address)
+            return Rejection("address", self._other_address_code,
+                             f"address {address} is not this unit's", line, address=address)
         body = line
         with_sum = False
         if checksum_on:
             body, value = split_checksum(line)
             if value is None:
-                if self.dialect["A11"] != "lenient":
-                    code = 2 if self.dialect["A11"] == "watchdog-2" else SYNTAX
-                    return Rejection("checksum", code, "checksums are on but the line has none", line,
+                if self._a11 != "lenient":
+                    return Rejection("checksum", self._checksum_code,
+                                     "checksums are on but the line has none", line,
                                      address=address)
             elif checksum(body + b",") != value:
-                code = 2 if self.dialect["A11"] == "watchdog-2" else SYNTAX
-                return Rejection("checksum", code,
+                return Rejection("checksum", self._checksum_code,
                                  f"checksum {value:02X} does not match {checksum(body + b','):02X}",
                                  line, address=address)
             else:
@@ -249,13 +271,11 @@ class CommandParser:
         except UnicodeDecodeError as exc:
             return Rejection("syntax", SYNTAX, f"non-ASCII byte at offset {exc.start + 2}", line,
                              address=address)
-        table = self.table[address]
-        for n in range(min(self.max_len, len(text)), 0, -1):
-            head = text[:n]
-            forms = table.get(head.upper() if self.any_case else head)
-            if forms is None:
-                continue
-            rest = text[n:]
+        m = self._heads[address].match(text)  # the longest mnemonic the line starts with
+        if m is not None:
+            head = m.group()
+            forms = self.table[address][head.upper() if self.any_case else head]
+            rest = text[len(head):]
             form = forms[0] if len(forms) == 1 else (forms[0] if not rest else forms[-1])
             if form.absent:
                 return Rejection("absent", UNKNOWN, f"{form.spec.id} is not in {self.variant.id}",

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
 import os
+import re
 import tomllib
 from functools import lru_cache
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from conform.errors import UserError, read_user_text
 from conform.spec.model import (
     ANSWER_RADIXES,
     PARAM_KINDS,
@@ -48,25 +51,49 @@ def load_spec(root: str | Path | None = None) -> Spec:
     return _load(Path(root) if root is not None else default_root())
 
 
+MAX_TABLE_BYTES = 2 << 20
+"""The tables are a few dozen kB; a file past 2 MB is refused before it is read."""
+
+
+def _read_table(path: Path) -> tuple[Path, str, dict[str, Any]]:
+    """(path, text, data) of one table file; every way it can fail is one SpecError line."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise SpecError(f"{path}: missing table file") from None
+    except OSError as exc:
+        raise SpecError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if path.is_file() and size > MAX_TABLE_BYTES:
+        raise SpecError(f"{path.name}: {size:,} bytes; a table file is at most {MAX_TABLE_BYTES:,}")
+    try:
+        text = read_user_text(path)
+    except UserError as exc:
+        raise SpecError(str(exc)) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path.name}: {exc}") from None
+    except RecursionError:
+        line = _first_line(text, re.compile(r"[\[{]{50}"))
+        raise SpecError(f"{path.name}:{line}: nested too deeply" if line else
+                        f"{path.name}: nested too deeply") from None
+    except ValueError as exc:  # an integer of more than 4 300 digits
+        line = _first_line(text, re.compile(r"[0-9_]{4000}"))
+        raise SpecError(f"{path.name}:{line}: {exc}".split("; use sys")[0] if line else
+                        f"{path.name}: {exc}") from None
+    return path, text, data
+
+
+def _first_line(text: str, pattern: re.Pattern[str]) -> int | None:
+    m = pattern.search(text)
+    return text.count("\n", 0, m.start()) + 1 if m else None
+
+
 @lru_cache(maxsize=8)
 def _load(root: Path) -> Spec:
     if not root.is_dir():
         raise SpecError(f"spec folder not found: {root}")
-    docs: dict[str, tuple[Path, str, dict[str, Any]]] = {}
-    for name in FILES:
-        path = root / f"{name}.toml"
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise SpecError(f"{path}: missing table file") from None
-        except UnicodeDecodeError as exc:
-            raise SpecError(f"{path.name}: not UTF-8 text (byte offset {exc.start})") from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise SpecError(f"{path.name}: {exc}") from None
-        docs[name] = (path, text, data)
-
+    docs = {name: _read_table(root / f"{name}.toml") for name in FILES}
     questions = _questions(*docs["questions"])
     commands = _commands(*docs["commands"], questions)
     errors, inta_bit = _errors(*docs["errors"], commands)
@@ -85,6 +112,41 @@ def _load(root: Path) -> Spec:
         questions=MappingProxyType(questions),
         examples=examples,
     )
+
+
+INT_LO, INT_HI = -(1 << 31), (1 << 32) - 1
+"""Integer bounds fit the protocol's widest fields (32 bits, signed or unsigned)."""
+FLOAT_MAX = 3.4028234663852886e38
+"""Float bounds fit a float32 (the EEPROM's floats, GVE64 §13.5.11)."""
+INTEGER_KINDS = ("int", "uint", "hex")
+
+
+def _bounds(row: Row, field_name: str, rng: Any, kind: str | None = None) -> tuple[Any, Any]:
+    """A ``[lo, hi]`` range: finite numbers that fit the protocol's fields, lo <= hi; integers
+    for an integer parameter (``kind``), not negative for an unsigned one."""
+    if (not isinstance(rng, list) or len(rng) != 2
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in rng)):
+        row.fail(field_name, f"expected [lo, hi], got {rng!r}")
+    for v in rng:
+        if isinstance(v, float) and not math.isfinite(v):
+            row.fail(field_name, f"{v!r} is not a finite number")
+        if isinstance(v, int) and not INT_LO <= v <= INT_HI:
+            row.fail(field_name, f"{v} does not fit a 32-bit field ({INT_LO}..{INT_HI})")
+        if isinstance(v, float) and abs(v) > FLOAT_MAX:
+            row.fail(field_name, f"{v!r} does not fit a float32")
+    lo, hi = rng
+    if lo > hi:
+        row.fail(field_name, f"expected [lo, hi] with lo <= hi, got {rng!r}")
+    if kind in INTEGER_KINDS and not all(isinstance(v, int) for v in rng):
+        row.fail(field_name, f"a {kind} parameter needs integer bounds, got {rng!r}")
+    if kind in ("uint", "hex") and lo < 0:
+        row.fail(field_name, f"a {kind} parameter cannot go below 0, got {rng!r}")
+    return lo, hi
+
+
+def _int_in(row: Row, field_name: str, value: Any, lo: int, hi: int, why: str) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or not lo <= value <= hi:
+        row.fail(field_name, f"expected an integer {lo}..{hi} ({why}), got {value!r}")
 
 
 def _label(data: dict) -> str:
@@ -125,9 +187,7 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
             if isinstance(rng, str):
                 range_name = rng
             elif isinstance(rng, list):
-                if len(rng) != 2 or not all(isinstance(v, int | float) for v in rng) or rng[0] > rng[1]:
-                    prow.fail("range", f"expected [lo, hi] with lo <= hi, got {rng!r}")
-                lo, hi = rng
+                lo, hi = _bounds(prow, "range", rng, kind)
             choices = prow.str_list("choices", ())
             if kind == "sign" and not choices:
                 prow.fail("choices", "a sign parameter needs its choices")
@@ -137,6 +197,8 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
             min_count = prow.get("min_count", int, None)
             if min_count is not None and not per_axis:
                 prow.fail("min_count", "only per_axis parameters take min_count")
+            if min_count is not None and min_count < 1:
+                prow.fail("min_count", f"must be at least 1, got {min_count}")
             params.append(ParamSpec(
                 name=prow.get("name", str), kind=kind, range_name=range_name, lo=lo, hi=hi,
                 choices=choices, sep=prow.get("sep", str, "" if i == 0 else ","),
@@ -146,8 +208,11 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
         for i, raw in enumerate(row.get("answer", list, [])):
             arow = row.sub(raw, f"answer[{i}]")
             arow.check_keys(ANSWER_KEYS)
+            width = arow.get("width", int, None)
+            if width is not None:
+                _int_in(arow, "width", width, 1, 64, "characters of one answer field")
             answer.append(AnswerField(arow.get("name", str), arow.choice("radix", ANSWER_RADIXES),
-                                      arow.get("width", int, None)))
+                                      width))
         qs = row.str_list("questions", ())
         for q in qs:
             if q not in questions:
@@ -166,6 +231,7 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
 def _errors(path: Path, text: str, data: dict, commands: dict[str, CommandSpec]) -> tuple[dict[int, ErrorCode], int]:
     top = Row(data, path, "top level", None)
     inta_bit = top.get("inta_bit", int)
+    _int_in(top, "inta_bit", inta_bit, 0, 3, "a bit of the answer digit")
     out: dict[int, ErrorCode] = {}
     for row in each(data.get("error"), path, text, "error", _label):
         row.check_keys({"code", "name", "meaning", "clause", "raised_by"})
@@ -191,6 +257,7 @@ def _status(path: Path, text: str, data: dict) -> StatusTable:
     for row in each(data.get("word"), path, text, "word", _label):
         row.check_keys({"index", "name", "role", "inputs", "meaning", "clause"})
         idx = row.get("index", int)
+        _int_in(row, "index", idx, 0, 6, "ST0..ST6")
         words[idx] = StatusWord(idx, row.get("name", str),
                                 row.choice("role", ("enable", "polarity", "cause", "system")),
                                 row.get("inputs", str), row.get("meaning", str), row.clauses())
@@ -208,8 +275,10 @@ def _status(path: Path, text: str, data: dict) -> StatusTable:
     run_inta = []
     for row in each(data.get("run_inta"), path, text, "run_inta", lambda d: f"{d.get('run')}/{d.get('inta')}"):
         run_inta.append((row.get("run", int), row.get("inta", int), row.get("meaning", str)))
-    return StatusTable(MappingProxyType(words), MappingProxyType(bits),
-                       top.get("queue_full_bit", int), tuple(run_inta))
+    queue_full_bit = top.get("queue_full_bit", int)
+    _int_in(top, "queue_full_bit", queue_full_bit, 0, 7, "a bit of F's answer")
+    return StatusTable(MappingProxyType(words), MappingProxyType(bits), queue_full_bit,
+                       tuple(run_inta))
 
 
 def _eeprom(path: Path, text: str, data: dict) -> dict[str, EepromMap]:
@@ -232,10 +301,16 @@ def _eeprom(path: Path, text: str, data: dict) -> dict[str, EepromMap]:
         default = row.get("default", (int, float))
         if ctype == "byte" and not (isinstance(default, int) and 0 <= default <= 255):
             row.fail("default", f"a byte default must be 0..255, got {default!r}")
+        if ctype == "uint32":
+            _int_in(row, "default", default, 0, (1 << 32) - 1, "a uint32")
+        if ctype == "float" and (not math.isfinite(default) or abs(default) > FLOAT_MAX):
+            row.fail("default", f"{default!r} is not a finite float32")
         values = row.get("values", str, None)
         if values is not None and values not in value_sets:
             row.fail("values", f"unknown value set {values!r}")
         rng = row.get("range", list, None)
+        if rng is not None:
+            _bounds(row, "range", rng)
         cmap = cells.setdefault(row.get("map", str), {})
         if address in cmap:
             row.fail("address", f"duplicate cell 0x{address:02X}")
@@ -276,6 +351,8 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
                 row.fail("base", f"unknown base variant {base_id!r}")
             if base_id in chain:
                 row.fail("base", f"circular base chain {' -> '.join((*chain, vid, base_id))}")
+            if len(chain) >= MAX_BASE_CHAIN:
+                row.fail("base", f"base chain deeper than {MAX_BASE_CHAIN} variants")
             merged = dict(resolve(base_id, (*chain, vid)))
             merged["commands"] = list(merged["commands"])
             if "commands" in row.data:
@@ -322,12 +399,8 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
                 row.fail(field_name, f"expected {ftype.__name__}, got {m[field_name]!r}")
         if m["manual"] not in ("GVE64", "GVE124"):
             row.fail("manual", f"{m['manual']!r} is not GVE64 or GVE124")
-        ranges = {}
-        for name, rng in m["ranges"].items():
-            if (not isinstance(rng, list) or len(rng) != 2
-                    or not all(isinstance(v, int | float) for v in rng) or rng[0] > rng[1]):
-                row.fail(f"ranges.{name}", f"expected [lo, hi] with lo <= hi, got {rng!r}")
-            ranges[name] = tuple(rng)
+        ranges = {name: _bounds(row, f"ranges.{name}", rng) for name, rng in m["ranges"].items()}
+        _check_variant_fields(row, m)
         axes = tuple(m["axes"])
         resolved = {}
         for cid in m["commands"]:
@@ -338,7 +411,8 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
                 if p.range_name is not None:
                     if p.range_name not in ranges:
                         row.fail("ranges", f"command {cid!r} needs range {p.range_name!r}")
-                    lo, hi = ranges[p.range_name]
+                    lo, hi = _bounds(row, f"ranges.{p.range_name}", list(ranges[p.range_name]),
+                                     p.kind)
                 if p.min_count is not None and p.min_count > len(axes):
                     row.fail("axes", f"command {cid!r} needs at least {p.min_count} axes")
                 params.append(ParamSpec(p.name, p.kind, p.range_name, lo, hi, p.choices, p.sep,
@@ -352,8 +426,6 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
         for w in m["status_words"]:
             if w not in status.words:
                 row.fail("status_words", f"unknown status word {w}")
-        if m["queue"] < 1:
-            row.fail("queue", "must be at least 1")
         out[vid] = Variant(
             id=vid, title=m["title"], manual=m["manual"], firmware=m["firmware"],
             processor_id=m.get("processor_id", "00000000"), base=m["base"], axes=axes,
@@ -370,6 +442,59 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
     return out
 
 
+RESET_INTS = ("A", "V", "B", "$", "T", "VL", "XM", "outputs", "status", "spindle", "index",
+              "position")
+RESET_KEYS = {*RESET_INTS, "VK", "checksum", "mpg", "ready_after_s"}
+MAX_AXES = 8
+MAX_BASE_CHAIN = 32
+MAX_QUEUE = 65535
+MAX_RATE = 10_000_000
+
+
+def _check_variant_fields(row: Row, m: dict[str, Any]) -> None:
+    """Values the emulator and the checks build on: sizes a unit can have, one letter per
+    axis, each once."""
+    axes = m["axes"]
+    if not 1 <= len(axes) <= MAX_AXES:
+        row.fail("axes", f"expected 1..{MAX_AXES} axes, got {len(axes)}")
+    for a in axes:
+        if not isinstance(a, str) or len(a) != 1 or not "A" <= a <= "Z":
+            row.fail("axes", f"{a!r} is not one upper-case letter")
+    dup = sorted({a for a in axes if axes.count(a) > 1})
+    if dup:
+        row.fail("axes", f"duplicate axis {', '.join(dup)}")
+    _int_in(row, "queue", m["queue"], 1, MAX_QUEUE, "vectors a unit holds")
+    _int_in(row, "max_rate", m["max_rate"], 1, MAX_RATE, "pulses per second")
+    if not m["bauds"]:
+        row.fail("bauds", "expected one or more baud rates")
+    for b in m["bauds"]:
+        _int_in(row, "bauds", b, 1, MAX_RATE, "bits per second")
+    if "default_baud" in m and m["default_baud"] not in m["bauds"]:
+        row.fail("default_baud", f"{m['default_baud']!r} is not one of bauds")
+    for role in ("interpolator", "spindle"):
+        if role not in m["addresses"]:
+            row.fail("addresses", f"missing {role!r}")
+    for role, a in m["addresses"].items():
+        _int_in(row, f"addresses.{role}", a, 0, 9, "one address digit")
+    for name, bits in m.get("input_bits", {}).items():
+        if not isinstance(bits, list):
+            row.fail(f"input_bits.{name}", f"expected a list of bits, got {bits!r}")
+        for b in bits:
+            _int_in(row, f"input_bits.{name}", b, 0, 7, "a bit of a byte")
+    for key, value in m["reset"].items():
+        if key not in RESET_KEYS:
+            row.fail(f"reset.{key}", f"unknown reset value (known: {', '.join(sorted(RESET_KEYS))})")
+        if key in RESET_INTS:
+            _int_in(row, f"reset.{key}", value, INT_LO, INT_HI, "a 32-bit value")
+        elif key in ("VK", "checksum") and not isinstance(value, bool):
+            row.fail(f"reset.{key}", f"expected true/false, got {value!r}")
+        elif key == "mpg" and value not in ("+", "&", "-", "none"):
+            row.fail("reset.mpg", f"expected one of + & - none, got {value!r}")
+        elif key == "ready_after_s" and (isinstance(value, bool) or not isinstance(value, int | float)
+                                         or not 0 <= value <= 60):
+            row.fail("reset.ready_after_s", f"expected seconds 0..60, got {value!r}")
+
+
 # --- open questions, examples -----------------------------------------------------------------
 
 def _questions(path: Path, text: str, data: dict) -> dict[str, Question]:
@@ -381,6 +506,14 @@ def _questions(path: Path, text: str, data: dict) -> dict[str, Question]:
         if qid in out:
             row.fail("id", f"duplicate question {qid!r}")
         alts = row.get("alternatives", dict)
+        for name, text in alts.items():
+            if not isinstance(text, str):
+                row.fail(f"alternatives.{name}", f"expected a description, got {text!r}")
+            lo, dash, hi = name.partition("-")
+            if (row.data.get("range") and dash and lo.isdecimal() and hi.isdecimal()
+                    and not (lo.isascii() and hi.isascii() and len(lo) <= 10 and len(hi) <= 10
+                             and int(lo) <= int(hi) <= INT_HI)):
+                row.fail(f"alternatives.{name}", "a range alternative is lo-hi, 0..4294967295")
         default = row.get("default", str)
         if default not in alts:
             row.fail("default", f"{default!r} is not one of the alternatives ({', '.join(alts)})")
@@ -390,10 +523,19 @@ def _questions(path: Path, text: str, data: dict) -> dict[str, Question]:
     return out
 
 
+GIVEN = re.compile(r"(checksum-on|inta|queue-full|st[0-6]=[0-9A-Fa-f]{1,2}"
+                   r"|position=-?[0-9]{1,10}(,-?[0-9]{1,10}){0,7})\Z")
+"""The unit states an example may name (conform/unit/given.py)."""
+
+
 def _examples(path: Path, text: str, data: dict) -> tuple[Example, ...]:
     out = []
     for row in each(data.get("example"), path, text, "example", _label):
         row.check_keys({"id", "clause", "kind", "given", "send", "expect", "body", "line"})
+        for item in row.str_list("given", ()):
+            if GIVEN.match(item) is None:
+                row.fail("given", f"{item!r:.60} is not one of checksum-on, inta, queue-full, "
+                                  "st<n>=<hex>, position=<x,y,...>")
         out.append(Example(
             id=row.get("id", str), clauses=row.clauses(),
             kind=row.choice("kind", ("checksum", "exchange", "packet")),

@@ -254,16 +254,17 @@ class Spec:
         for key, value in (choices or {}).items():
             question = self.questions.get(key)
             if question is None:
-                raise UserError(f"dialect: unknown open question {key!r} (known: A1..A{len(self.questions)})")
+                raise UserError(f"dialect: unknown open question {key!r:.40} "
+                                f"(known: A1..A{len(self.questions)})")
             if value not in question.alternatives:
                 alts = ", ".join(question.alternatives)
-                raise UserError(f"dialect: {key}={value!r} is not an alternative (choose: {alts})")
+                raise UserError(f"dialect: {key}={value!r:.40} is not an alternative (choose: {alts})")
             values[key] = value
         defaults = {q.id: q.default for q in self.questions.values()}
         ranges = {}
         for q in self.questions.values():
             lo, _, hi = values[q.id].partition("-")
-            if q.range and lo.isdigit() and hi.isdigit():
+            if q.range and lo.isascii() and hi.isascii() and lo.isdigit() and hi.isdigit():
                 ranges[q.range] = (int(lo), int(hi))
         return Dialect(MappingProxyType(values), MappingProxyType(defaults), MappingProxyType(ranges))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -20,13 +21,24 @@ def header_lines(text: str, table: str) -> list[int]:
     return [i + 1 for i, line in enumerate(text.splitlines()) if pattern.match(line)]
 
 
+_TABLE_HEADER = re.compile(r"^\s*\[(?!\[)([^\]]*)\]")
+
+
+@lru_cache(maxsize=16)
+def key_lines(text: str) -> dict[str, int]:
+    """1-based line of every ``[dotted.table]`` header (first one wins), keyed by the dotted
+    name without spaces: one pass, so a file of many tables is not read once per table."""
+    out: dict[str, int] = {}
+    for i, line in enumerate(text.splitlines()):
+        m = _TABLE_HEADER.match(line)
+        if m:
+            out.setdefault(".".join(part.strip() for part in m.group(1).split(".")), i + 1)
+    return out
+
+
 def key_line(text: str, dotted: str) -> int | None:
     """1-based line of a ``[dotted.table]`` header, if present."""
-    pattern = re.compile(r"^\s*\[\s*" + re.escape(dotted).replace(r"\.", r"\s*\.\s*") + r"\s*\]")
-    for i, line in enumerate(text.splitlines()):
-        if pattern.match(line):
-            return i + 1
-    return None
+    return key_lines(text).get(dotted)
 
 
 class Row:

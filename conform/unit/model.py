@@ -510,7 +510,7 @@ class Unit:
         self._start_watchdog(t)
 
     def _start_watchdog(self, t: float) -> None:
-        pending = self._splitter.pending
+        pending = self._splitter.unfinished
         self._partial = bool(pending)
         if not pending:
             self._wd = _INF
@@ -639,8 +639,9 @@ class Unit:
         spec_l = self._specs["L"].params[0]
         self._pulse_lo, self._pulse_hi = spec_l.lo, spec_l.hi
         need = spec_l.min_count or self._naxes
-        # at most 40 digits (the parser then answers 5): longer numbers cannot be int()ed
-        fields = rb"(-?[0-9]{1,40}(?:,-?[0-9]{1,40}){%d,%d})" % (need - 1, self._naxes - 1)
+        # at most 20 digits: a longer numeral goes to the parser, which answers it (5) without
+        # converting it (int() refuses more than 4 300 digits)
+        fields = rb"(-?[0-9]{1,20}(?:,-?[0-9]{1,20}){%d,%d})" % (need - 1, self._naxes - 1)
         head = b"!%d([CL])" % self.variant.interpolator_address
         self._fast_plain = re.compile(head + fields + rb"\r\Z")
         self._fast_cs = re.compile(head + fields + rb",([0-9A-Fa-f]{2})\r\Z")
@@ -1142,7 +1143,9 @@ class Unit:
         answer = self._last_answer if self._last_answer is not None else self.encode(OK)
         if self._a9 == "repeat-answer-only" or self._last_line is None:
             return answer
-        return self._last_line + b"\r" + answer
+        # the repeated line is one line of the answer: a lone CR it held (possible only under
+        # A1=crlf) would end it early and turn its tail into a bogus answer, so it is left out
+        return self._last_line.replace(b"\r", b"") + b"\r" + answer
 
     def _cmd_J(self, args: tuple, t: float) -> Reply:
         answer = self.encode(OK) if self._a17_answer else None

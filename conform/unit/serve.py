@@ -15,11 +15,14 @@ from __future__ import annotations
 import os
 import queue
 import socket
+import stat
+import tempfile
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
+from conform.errors import LinkError, UserError
 from conform.link.endpoint import PortGone
 from conform.link.faults import FaultInjector
 from conform.unit.control import run_control
@@ -32,21 +35,45 @@ class ControlServer:
     """A unix socket that accepts one-line control requests (see conform.unit.control).
 
     Requests are queued for the serving loop, which owns the unit; the connection thread
-    waits for the reply.
+    waits for the reply. The socket is made mode 0600 inside a fresh 0700 directory (whatever
+    the umask), so only its owner can press a button; with ``path`` it is then linked to that
+    name, which must not exist (a socket nobody listens on, left by an emulator that died, is
+    replaced; anything else is refused).
     """
 
-    def __init__(self, path: str) -> None:
-        self.path = path
-        if os.path.exists(path):
-            os.unlink(path)
-        self.requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]] = queue.SimpleQueue()
+    def __init__(self, path: str | None = None) -> None:
+        parent = os.path.dirname(os.path.abspath(path)) if path is not None else None
+        self._dir = tempfile.mkdtemp(prefix=".conform-emu-" if parent else "conform-emu-",
+                                     dir=parent)
+        self._private = os.path.join(self._dir, "control.sock")
+        self._linked: tuple[int, int] | None = None
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self._sock.bind(path)
-        self._sock.listen(8)
+        try:
+            os.chmod(self._dir, 0o700)
+            self._sock.bind(self._private)
+            os.chmod(self._private, 0o600)
+            if path is not None:
+                _claim(path, self._private)
+                st = os.stat(path)
+                self._linked = (st.st_dev, st.st_ino)
+            self._sock.listen(8)
+        except BaseException:
+            self._sock.close()
+            self._remove_private()
+            raise
+        self.path = path if path is not None else self._private
+        self.requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]] = queue.SimpleQueue()
         self._sock.settimeout(0.2)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, name="emulator-control", daemon=True)
         self._thread.start()
+
+    def _remove_private(self) -> None:
+        for remove, name in ((os.unlink, self._private), (os.rmdir, self._dir)):
+            try:
+                remove(name)
+            except OSError:
+                pass
 
     def _serve(self) -> None:
         while not self._stop.is_set():
@@ -83,8 +110,40 @@ class ControlServer:
         try:
             self._sock.close()
         finally:
-            if os.path.exists(self.path):
-                os.unlink(self.path)
+            if self._linked is not None:  # remove our name, not what may have replaced it
+                try:
+                    st = os.lstat(self.path)
+                    if (st.st_dev, st.st_ino) == self._linked:
+                        os.unlink(self.path)
+                except OSError:
+                    pass
+            self._remove_private()
+
+
+def _claim(path: str, private: str) -> None:
+    """Give the socket at ``private`` the name ``path`` without replacing anything of the
+    user's; a leftover socket nobody listens on is the only thing replaced."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        st = None
+    if st is not None:
+        if not stat.S_ISSOCK(st.st_mode):
+            raise UserError(f"--control {path}: exists and is not a socket; not replacing it")
+        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            probe.settimeout(1.0)
+            probe.connect(path)
+        except OSError:
+            os.unlink(path)  # stale: its emulator is gone
+        else:
+            raise UserError(f"--control {path}: another process is listening on it")
+        finally:
+            probe.close()
+    try:
+        os.link(private, path)
+    except FileExistsError:
+        raise UserError(f"--control {path}: exists (created meanwhile); not replacing it") from None
 
 
 class Emulator:
@@ -124,6 +183,8 @@ class Emulator:
         self._down_until: float | None = None
         self._stop = threading.Event()
         self.bytes_in = self.bytes_out = 0
+        self.bytes_dropped = 0  # answer bytes the host did not read in time
+        self._dropping = 0
 
     def stop(self) -> None:
         self._stop.set()
@@ -203,17 +264,38 @@ class Emulator:
         while self._outgoing and self._outgoing[0][0] <= now:
             _, chunk = self._outgoing.pop(0)
             try:
-                self.endpoint.write(chunk)
+                n = self._write(chunk)
             except PortGone as exc:
                 self.report(f"port gone: {exc}")
                 self._stop.set()
                 return
-            except OSError as exc:  # WriteTimeout (a LinkError) included: nobody reads
+            except (OSError, LinkError) as exc:
                 self.report(f"answer dropped: {exc}")
                 continue
-            self.bytes_out += len(chunk)
-            if self.recorder is not None:
-                self.recorder.chunk("unit", chunk)
+            self._count_dropped(len(chunk) - n)
+            if n:
+                self.bytes_out += n
+                if self.recorder is not None:
+                    self.recorder.chunk("unit", chunk[:n])
+
+    def _write(self, chunk: bytes) -> int:
+        """Write without waiting where the endpoint can: a UART has no flow control, so what
+        the host does not read is lost and the unit goes on serving."""
+        write_some = getattr(self.endpoint, "write_some", None)
+        if write_some is None:
+            self.endpoint.write(chunk)
+            return len(chunk)
+        return write_some(chunk)
+
+    def _count_dropped(self, lost: int) -> None:
+        if lost > 0:
+            if not self._dropping:
+                self.report("the host does not read: answers are lost until it does")
+            self._dropping += lost
+            self.bytes_dropped += lost
+        elif self._dropping:
+            self.report(f"the host reads again ({self._dropping} bytes were lost)")
+            self._dropping = 0
 
     def _run_control(self, now: float) -> None:
         if self.control is None:
