@@ -55,18 +55,14 @@ def _params(variant: Variant) -> Any:
 
 
 def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Variant,
-           arrival: np.ndarray | None = None) -> QueueReplay:
+           arrival: np.ndarray | None = None, compiled: bool | None = None) -> QueueReplay:
     """Push ``ex`` rows flagged in ``accepted`` (vectors) at their arrival times.
 
     ``host_parsed(row)`` returns the parsed Command of a row (for modal values).
     ``arrival`` overrides the arrival time of each row (what-if replays).
+    ``compiled``: None takes the compiled scan (``replay_kernel``) when the session has no
+    H/G/D/K/R/J, True insists on it, False always runs ``MotionExecutor`` itself.
     """
-    from conform.unit.motion import Completion, MotionExecutor, MotionStateError
-
-    naxes = len(variant.axes)
-    log: list = []
-    exe = MotionExecutor(axes=naxes, capacity=variant.queue, max_rate=variant.max_rate,
-                         params=_params(variant), log=log)
     names = ex["name"].to_numpy()
     code = ex["code"].to_numpy()
     t = ex["t_cmd_last"].to_numpy() if arrival is None else arrival
@@ -74,9 +70,102 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     ok = (code == 0) & (ex["status"].to_numpy() == "answered")
     ctrl = np.isin(names, list(MODAL | CONTROL)) & ok
     rows = np.flatnonzero(accepted | ctrl)
+    naxes = len(variant.axes)
     vec = ex[["dx", "dy", "dz", "da"]].to_numpy()[:, :naxes]
     is_vec = accepted[rows]
     cont = names[rows] == "C"
+    control = bool(np.isin(names[rows[~is_vec]], list(CONTROL)).any())
+    if compiled is None:
+        compiled = not control
+    if compiled and control:
+        raise ValueError("the compiled replay takes no H/G/D/K/R/J")
+    run = _run_compiled if compiled else _run_python
+    (seq, starts, ends, v_out, starved), removals, notes = run(
+        rows, t, vec, is_vec, cont, names, host_parsed, variant)
+    # every vector row was pushed, in order, at its arrival time
+    push_rows_a = rows[is_vec].astype(np.int64)
+    # seq counts pushes per executor; J makes a new executor: map by order of completion
+    done_rows = push_rows_a[np.minimum(_global_seq(seq), max(len(push_rows_a) - 1, 0))] \
+        if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
+    pushes_a = t[push_rows_a].astype(float)
+    removals_a = np.asarray(removals, float)
+    ev_t = np.concatenate([pushes_a, ends, removals_a])
+    ev_d = np.concatenate([np.ones(len(pushes_a), np.int8), -np.ones(len(ends), np.int8),
+                           -np.ones(len(removals_a), np.int8)])
+    order = np.lexsort((ev_d, ev_t))
+    depth_t = ev_t[order]
+    depth = np.cumsum(ev_d[order], dtype=np.int64) if len(order) else np.zeros(0, np.int64)
+    rep = QueueReplay(pushes_a, push_rows_a, starts, ends, starved, v_out, done_rows,
+                      removals_a, depth_t, depth, notes=notes, capacity=variant.queue)
+    rep.starvations = _starvation_events(rep)
+    return rep
+
+
+def _modal(p: Any, name: str, args: Any) -> Any:
+    """The motion parameters after a modal command (ValueError if out of range)."""
+    if name == "V" and args:
+        return p.replace(v=float(args[0]))
+    if name == "A" and args:
+        return p.replace(a=float(args[0]) * 1000.0)
+    if name == "B" and args:
+        return p.replace(b=float(args[0]))
+    if name == "$" and args:
+        return p.replace(short=int(args[0]))
+    if name == "T" and args:
+        return p.replace(pause=float(args[0]) / 1000.0)
+    if name in ("VK", "VN"):
+        return p.replace(vk=name == "VK")
+    return p
+
+
+Completions = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray,
+                  cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant
+                  ) -> tuple[Completions, list[float], list[str]]:
+    """Vectors and modal commands only: the parameters each vector captures are worked out
+    here (few modal rows), the scan over every row runs compiled."""
+    from conform.analysis.replay_kernel import replay_vectors
+
+    p = _params(variant)
+    states = [p]
+    notes: list[str] = []
+    for i in np.flatnonzero(~is_vec).tolist():
+        r = int(rows[i])
+        name = str(names[r])
+        try:
+            p = _modal(p, name, getattr(host_parsed(r), "args", ()) or ())
+        except ValueError as err:
+            notes.append(f"replay: {name} at row {r} refused by the model: {err}")
+        states.append(p)
+    state = np.cumsum(~is_vec)[is_vec]  # parameters in force at each push
+    col = lambda f, dt: np.array([getattr(s, f) for s in states], dt)[state]  # noqa: E731
+    push = np.full(len(rows), -1, np.int64)
+    push[is_vec] = np.arange(int(is_vec.sum()))
+    vrows = rows[is_vec]
+    out = replay_vectors(t[rows].astype(float), push, np.ascontiguousarray(vec[vrows], np.int64),
+                         cont[is_vec], col("v", float), col("a", float), col("b", float),
+                         col("short", np.int64), col("pause", float), col("vk", bool),
+                         float(variant.max_rate or 0.0), variant.queue + 10_000)
+    seq, starts, ends, _v_in, v_out, _rest, starved = out
+    return (seq, starts, ends, v_out, starved), [], notes
+
+
+def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray,
+                cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant
+                ) -> tuple[Completions, list[float], list[str]]:
+    """Every row through ``MotionExecutor`` (any session, H/G/D/K/R/J included)."""
+    from conform.unit.motion import Completion, MotionExecutor, MotionStateError
+
+    naxes = len(variant.axes)
+    log: list = []
+
+    def executor() -> Any:
+        return MotionExecutor(axes=naxes, capacity=variant.queue, max_rate=variant.max_rate,
+                              params=_params(variant), log=log)
+
+    exe = executor()
     removals: list[float] = []
     notes: list[str] = []
     advance, push = exe.advance, exe.push
@@ -87,23 +176,10 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
             push(vk, c)
             continue
         name = names[r]
-        cmd = host_parsed(r)
-        args = getattr(cmd, "args", ()) or ()
         try:
             if name in MODAL:
-                p = exe.params
-                if name == "V" and args:
-                    exe.params = p.replace(v=float(args[0]))
-                elif name == "A" and args:
-                    exe.params = p.replace(a=float(args[0]) * 1000.0)
-                elif name == "B" and args:
-                    exe.params = p.replace(b=float(args[0]))
-                elif name == "$" and args:
-                    exe.params = p.replace(short=int(args[0]))
-                elif name == "T" and args:
-                    exe.params = p.replace(pause=float(args[0]) / 1000.0)
-                elif name in ("VK", "VN"):
-                    exe.params = p.replace(vk=name == "VK")
+                exe.params = _modal(exe.params, name,
+                                    getattr(host_parsed(r), "args", ()) or ())
             elif name == "H":
                 exe.halt(tk)
             elif name == "G":
@@ -117,13 +193,9 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
                 exe.restore()
             elif name == "J":
                 removals.extend([tk] * exe.queue_len)
-                log_len = len(log)
-                exe = MotionExecutor(axes=naxes, capacity=variant.queue,
-                                     max_rate=variant.max_rate, params=_params(variant),
-                                     log=log)
+                exe = executor()
                 advance, push = exe.advance, exe.push
                 exe.advance(tk)
-                del log_len
         except (MotionStateError, ValueError) as err:
             notes.append(f"replay: {name} at row {r} refused by the model: {err}")
     end = exe.next_event_time()
@@ -143,22 +215,7 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         seq = np.zeros(0, np.int64)
         starts = ends = v_out = np.zeros(0)
         starved = np.zeros(0, bool)
-    # every vector row was pushed, in order, at its arrival time
-    push_rows_a = rows[is_vec].astype(np.int64)
-    # seq counts pushes per executor; J makes a new executor: map by order of completion
-    done_rows = push_rows_a[np.minimum(_global_seq(seq), max(len(push_rows_a) - 1, 0))] \
-        if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
-    pushes_a = t[push_rows_a].astype(float)
-    removals_a = np.asarray(removals, float)
-    ev_t = np.concatenate([pushes_a, ends, removals_a])
-    ev_d = np.concatenate([np.ones(len(pushes_a)), -np.ones(len(ends)), -np.ones(len(removals_a))])
-    order = np.lexsort((ev_d, ev_t))
-    depth_t = ev_t[order]
-    depth = np.cumsum(ev_d[order]).astype(np.int64) if len(order) else np.zeros(0, np.int64)
-    rep = QueueReplay(pushes_a, push_rows_a, starts, ends, starved, v_out, done_rows,
-                      removals_a, depth_t, depth, notes=notes, capacity=variant.queue)
-    rep.starvations = _starvation_events(rep)
-    return rep
+    return (seq, starts, ends, v_out, starved), removals, notes
 
 
 REPLAY_BLOCK = 65_536  # rows turned into Python values at a time (memory stays flat)
