@@ -24,6 +24,7 @@ import pandas as pd
 
 from conform.analysis import exchanges as exm
 from conform.analysis import frames as fr
+from conform.analysis.columns import isin
 from conform.analysis.findings import Context, Finding, Findings, protocol_findings, recovery_analysis
 from conform.analysis.positions import check_positions
 from conform.analysis.queue import QueueReplay, replay, supply_consumption, whatif
@@ -361,7 +362,7 @@ def accepted_vectors(ex: pd.DataFrame, recovered: np.ndarray | None = None) -> n
     """Vectors the unit took: answered 0, or inside a packet whose answer counts them, or
     (``recovered``) uncertain ones that the sender checked with ``@``/``>`` and moved on."""
     name = ex["name"].to_numpy()
-    is_vec = np.isin(name, ("C", "L")) & (ex["kind"].to_numpy() == "command")
+    is_vec = isin(name, ("C", "L")) & (ex["kind"].to_numpy() == "command")
     packet = ex["packet"].to_numpy()
     ok = (ex["status"].to_numpy() == "answered") & (ex["code"].to_numpy() == 0)
     if recovered is not None:

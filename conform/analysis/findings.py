@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from conform.analysis.columns import isin, vectors
 from conform.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
 
 MAX_LISTED = 50
@@ -149,20 +150,20 @@ def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
     name = ex["name"].to_numpy()
     packet = ex["packet"].to_numpy()
     role = ex["packet_role"].to_numpy()
-    single = np.isin(name, MOTION) & (packet < 0) & (ex["kind"].to_numpy() == "command")
+    single = isin(name, MOTION) & (packet < 0) & (ex["kind"].to_numpy() == "command")
     end = role == "end"
     rows = np.flatnonzero(single | end)
     sig = np.zeros((len(rows), 6), np.int64)
-    vec = ex[["dx", "dy", "dz", "da"]].to_numpy()
-    sig[:, :4] = vec[rows]
+    sig[:, :4] = vectors(ex, rows)
     sig[:, 4] = np.where(name[rows] == "L", 1, 0)
     if end.any():
-        members = (role == "member") & np.isin(name, MOTION)
+        members = (role == "member") & isin(name, MOTION)
+        vec = vectors(ex, np.flatnonzero(members))
         pk = packet[members]
         npk = int(packet.max()) + 1
         sums = np.zeros((npk, 4), np.int64)
         for j in range(4):
-            sums[:, j] = np.bincount(pk, weights=vec[members, j], minlength=npk)
+            sums[:, j] = np.bincount(pk, weights=vec[:, j], minlength=npk)
         cnt = np.bincount(pk, minlength=npk)
         ends = np.flatnonzero(end[rows])
         p = packet[rows[ends]]
@@ -179,8 +180,8 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     rows = mu["row"].to_numpy()
     uncertain = ex["uncertain"].to_numpy()
     name = ctx.name
-    expects = np.isin(ctx.status, ("answered", "unanswered"))
-    is_rec = expects & np.isin(name, ("@", ">"))
+    expects = isin(ctx.status, ("answered", "unanswered"))
+    is_rec = expects & isin(name, ("@", ">"))
     cum_rec = np.cumsum(is_rec)
     res: dict[str, np.ndarray] = {"doubles": np.zeros(0, np.int64),
                                   "checked_resends": np.zeros(0, np.int64),
@@ -215,7 +216,7 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
 
     blind = unc & same_next & ~rec_between
     moved_on = unc & has_next & ~same_next & ~rec_between
-    refused = answered_clean & np.isin(code, (1, 2, 4, 5, 7)) & has_next & ~same_next
+    refused = answered_clean & isin(code, (1, 2, 4, 5, 7)) & has_next & ~same_next
     checked = unc & rec_between
 
     def mk_blind(i: int) -> tuple:
@@ -316,7 +317,7 @@ def _repeat_used(ctx: Context, out: Findings, uncertain: np.ndarray, is_rec: np.
     rep = np.flatnonzero(is_rec & (ctx.name == ">"))
     if len(rep) == 0:
         return
-    exp_rows = np.flatnonzero(np.isin(ctx.status, ("answered", "unanswered")))
+    exp_rows = np.flatnonzero(isin(ctx.status, ("answered", "unanswered")))
     pos = np.searchsorted(exp_rows, rep) - 1
     prev = np.where(pos >= 0, exp_rows[np.maximum(pos, 0)], -1)
     good = (prev >= 0) & uncertain[np.maximum(prev, 0)]
@@ -377,7 +378,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
     out.many("simplex-violation", np.flatnonzero(viol), "error", mk_viol)
 
     # checksum errors, both directions
-    bad_cmd = np.flatnonzero(np.isin(host.checksum, (CS_BAD, CS_MISSING)))
+    bad_cmd = np.flatnonzero(isin(host.checksum, (CS_BAD, CS_MISSING)))
 
     def mk_cs_cmd(r: int) -> tuple:
         what = "does not match" if host.checksum[r] == CS_BAD else "is missing"
@@ -385,7 +386,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
                 f"answered {ctx.ans(r)}", ctx.frames(r), {"direction": "host"})
 
     out.many("checksum-error", bad_cmd, "warning", mk_cs_cmd)
-    bad_ans = np.flatnonzero(np.isin(unit.checksum, (CS_BAD, CS_MISSING))
+    bad_ans = np.flatnonzero(isin(unit.checksum, (CS_BAD, CS_MISSING))
                              & (unit.kind == ANSWER))
 
     def mk_cs_ans(u: int) -> tuple:
@@ -395,7 +396,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
 
     out.many("checksum-error", bad_ans, "warning", mk_cs_ans)
 
-    garbled = np.flatnonzero(np.isin(unit.kind, (GARBLED, PARTIAL)))
+    garbled = np.flatnonzero(isin(unit.kind, (GARBLED, PARTIAL)))
 
     def mk_garbled(u: int) -> tuple:
         return (unit.t_first[u], f"`{ctx.unit_text(u)}` is not an answer: {unit.detail[u]}",
@@ -406,7 +407,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
     # error codes (queue-full on motion is reported as polling)
     clean = answered & (ex["answer_kind"].to_numpy() == ANSWER)
     err = clean & (ctx.code > 0)
-    err &= ~((ctx.code == 1) & np.isin(ctx.name, ("C", "L", "*E")))
+    err &= ~((ctx.code == 1) & isin(ctx.name, ("C", "L", "*E")))
 
     def mk_err(r: int) -> tuple:
         c = int(ctx.code[r])
@@ -449,7 +450,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
     out.many("garbage-sent", garbage, "warning", mk_garbage)
 
     # long waits: HALT and W answer when the motion has ended
-    lw = np.flatnonzero(np.isin(ctx.name, ("H", "W")) & answered
+    lw = np.flatnonzero(isin(ctx.name, ("H", "W")) & answered
                         & (ex["unit_time"].to_numpy() > 0.02))
 
     def mk_lw(r: int) -> tuple:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from conform.analysis.columns import isin
 from conform.analysis.findings import Context, Findings, motion_units
 
 POSITION = {"P": 2, "PF": 3, "P4": 4}
@@ -23,9 +24,8 @@ POSITION = {"P": 2, "PF": 3, "P4": 4}
 
 def _motion_matrix(ex: pd.DataFrame) -> np.ndarray:
     """Per row, the motion it delivers: a vector's pulses, a packet's sum at its ``*E``."""
-    vec = ex[["dx", "dy", "dz", "da"]].to_numpy().copy()
     mu = motion_units(ex)
-    out = np.zeros_like(vec)
+    out = np.zeros((len(ex), 4), np.int64)
     rows = mu["row"].to_numpy()
     out[rows] = mu[["s0", "s1", "s2", "s3"]].to_numpy()
     return out
@@ -37,7 +37,7 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
     name = ctx.name
     answered = ctx.status == "answered"
     clean = answered & (ex["answer_kind"].to_numpy() == "answer") & (ctx.code == 0)
-    pos_rows = np.flatnonzero(np.isin(name, list(POSITION)) & clean)
+    pos_rows = np.flatnonzero(isin(name, list(POSITION)) & clean)
     summary: dict[str, Any] = {"position_reports": int(len(pos_rows)), "checked": 0,
                                "confirmed_double": 0, "confirmed_lost": 0}
     if len(pos_rows) == 0:
@@ -55,8 +55,8 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
         if len(vals) == POSITION[name[r]]:
             reports.append((r, vals))
     # segments between resets; unreliable after H / D / K (motion cut short on purpose)
-    zero = np.flatnonzero(clean & np.isin(name, ("N", "J", "N<axis>")))
-    cut = np.flatnonzero(clean & np.isin(name, ("H", "D", "K")))
+    zero = np.flatnonzero(clean & isin(name, ("N", "J", "N<axis>")))
+    cut = np.flatnonzero(clean & isin(name, ("H", "D", "K")))
     doubles = np.concatenate([rec["doubles"], rec.get("checked_resends", np.zeros(0, np.int64))])
     checked_resends = set(rec.get("checked_resends", np.zeros(0, np.int64)).tolist())
     unclear = set(rec.get("unclear_resends", np.zeros(0, np.int64)).tolist())

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from conform.analysis.columns import isin, vectors
 from conform.spec.model import Variant
 
 MODAL = {"V", "A", "B", "$", "T", "VK", "VN"}
@@ -68,13 +69,13 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     t = ex["t_cmd_last"].to_numpy() if arrival is None else arrival
     t = np.maximum.accumulate(np.nan_to_num(t, nan=0.0))
     ok = (code == 0) & (ex["status"].to_numpy() == "answered")
-    ctrl = np.isin(names, list(MODAL | CONTROL)) & ok
+    ctrl = isin(names, list(MODAL | CONTROL)) & ok
     rows = np.flatnonzero(accepted | ctrl)
     naxes = len(variant.axes)
-    vec = ex[["dx", "dy", "dz", "da"]].to_numpy()[:, :naxes]
+    vec = vectors(ex, rows)[:, :naxes]  # row k of vec is rows[k]
     is_vec = accepted[rows]
     cont = names[rows] == "C"
-    control = bool(np.isin(names[rows[~is_vec]], list(CONTROL)).any())
+    control = bool(isin(names[rows[~is_vec]], list(CONTROL)).any())
     if compiled is None:
         compiled = not control
     if compiled and control:
@@ -143,8 +144,8 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
     col = lambda f, dt: np.array([getattr(s, f) for s in states], dt)[state]  # noqa: E731
     push = np.full(len(rows), -1, np.int64)
     push[is_vec] = np.arange(int(is_vec.sum()))
-    vrows = rows[is_vec]
-    out = replay_vectors(t[rows].astype(float), push, np.ascontiguousarray(vec[vrows], np.int64),
+    out = replay_vectors(t[rows].astype(float), push,
+                         np.ascontiguousarray(vec[is_vec], np.int64),
                          cont[is_vec], col("v", float), col("a", float), col("b", float),
                          col("short", np.int64), col("pause", float), col("vk", bool),
                          float(variant.max_rate or 0.0), variant.queue + 10_000)
@@ -235,7 +236,7 @@ def _blocks(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray
     for b in range(0, len(rows), REPLAY_BLOCK):
         sl = slice(b, b + REPLAY_BLOCK)
         r = rows[sl]
-        yield from zip(r.tolist(), t[r].tolist(), vec[r].tolist(), is_vec[sl].tolist(),
+        yield from zip(r.tolist(), t[r].tolist(), vec[sl].tolist(), is_vec[sl].tolist(),
                        cont[sl].tolist(), strict=True)
         _drain(log, done)
 
