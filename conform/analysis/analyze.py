@@ -24,7 +24,7 @@ import pandas as pd
 
 from conform.analysis import exchanges as exm
 from conform.analysis import frames as fr
-from conform.analysis.columns import isin
+from conform.analysis.columns import isin, release_memory
 from conform.analysis.findings import Context, Finding, Findings, protocol_findings, recovery_analysis
 from conform.analysis.positions import check_positions
 from conform.analysis.queue import QueueReplay, replay, supply_consumption, whatif
@@ -165,7 +165,11 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     """Analyse one capture file (see the module docstring)."""
     from conform.spec import load_spec
 
-    say = step or (lambda _s: None)
+    def say(name: str) -> None:
+        release_memory()
+        if step is not None:
+            step(name)
+
     say("reading")
     raw = read_raw(path, progress)
     spec = load_spec()
@@ -312,8 +316,8 @@ def _check_answer_shapes(ex: pd.DataFrame, unit: fr.DecodedLines, data: np.ndarr
     """An OK answer with the wrong number of fields for its command is garbled (§13.7)."""
     if len(unit) == 0:
         return
-    commas = np.concatenate([[0], np.cumsum(data == fr.COMMA, dtype=np.int64)])
-    nf = commas[unit.lines.end] - commas[unit.lines.start]
+    commas = np.flatnonzero(data == fr.COMMA)  # a few per line, not a count per byte
+    nf = (np.searchsorted(commas, unit.lines.end) - np.searchsorted(commas, unit.lines.start))
     nf = nf - ((unit.checksum != fr.CS_NONE) & (unit.checksum != fr.CS_MISSING))
     want = {cid: len(c.answer) for cid, c in var.commands.items() if cid not in _FREE_ANSWERS}
     want["*E"] = 1

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import pandas as pd
@@ -26,3 +26,22 @@ def vectors(ex: pd.DataFrame, rows: np.ndarray | None = None) -> np.ndarray:
     if rows is not None:
         cols = [c[rows] for c in cols]
     return np.stack(cols, axis=1).astype(np.int64, copy=False)
+
+
+def _libc_trim() -> Callable[[], object] | None:
+    try:
+        import ctypes
+
+        return ctypes.CDLL("libc.so.6").malloc_trim  # glibc only
+    except (OSError, AttributeError):
+        return None
+
+
+_TRIM = _libc_trim()
+
+
+def release_memory() -> None:
+    """Hand freed heap back to the system between steps: glibc keeps the arrays a step
+    freed for reuse, and the next step's peak would stack on top of them."""
+    if _TRIM is not None:
+        _TRIM(0)

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from conform.capture.session import escape_bytes
 from conform.errors import UserError
 
 TEMPLATES = Path(__file__).with_name("templates")
@@ -89,28 +90,38 @@ def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
     return paths
 
 
-def write_parquet(a: Any, out_dir: str | Path) -> dict[str, Path]:
+def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
+                  ) -> dict[str, Path]:
+    """The exchange, frame, series and queue-depth tables, streamed in row groups
+    (``conform.analysis.tables``)."""
     d = Path(out_dir)
     try:
         d.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
-    ex = a.exchanges.copy()
-    for col in ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"):
-        ex[col] = ex[col] - a.t0
-    ex["command"] = [a.host_text(i) for i in range(len(ex))]
-    tables = {"exchanges": ex, "frames_host": a.frames("host"),
-              "frames_unit": a.frames("unit"), "series": a.series}
+    from conform.analysis.tables import ROW_GROUP, relative_times, write_frame
+
+    rows = row_group or ROW_GROUP
+    times = ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last")
+
+    def exchange_rows(part: Any, lo: int, hi: int) -> Any:
+        part = relative_times(part, a.t0, times)
+        bodies = a.host.lines.bodies.slice(lo, hi - lo).to_pylist()
+        part["command"] = [escape_bytes(b) for b in bodies]
+        return part
+
+    out = {"exchanges": write_frame(d / "exchanges.parquet", a.exchanges, rows,
+                                    extra=exchange_rows)}
+    for direction in ("host", "unit"):  # one direction's frames at a time
+        out[f"frames_{direction}"] = write_frame(d / f"frames_{direction}.parquet",
+                                                 a.frames(direction), rows)
+    out["series"] = write_frame(d / "series.parquet", a.series, rows)
     if a.queue is not None:
         import pandas as pd
 
         q = a.queue
-        tables["queue_depth"] = pd.DataFrame({"t": q.depth_t - a.t0, "depth": q.depth})
-    out = {}
-    for name, df in tables.items():
-        p = d / f"{name}.parquet"
-        coded(df).to_parquet(p, index=False)
-        out[name] = p
+        out["queue_depth"] = write_frame(d / "queue_depth.parquet",
+                                         pd.DataFrame({"t": q.depth_t - a.t0, "depth": q.depth}), rows)
     return out
 
 
