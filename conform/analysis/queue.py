@@ -67,13 +67,14 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     names = ex["name"].to_numpy()
     code = ex["code"].to_numpy()
     t = ex["t_cmd_last"].to_numpy() if arrival is None else arrival
-    t = np.maximum.accumulate(np.nan_to_num(t, nan=0.0))
+    t = np.nan_to_num(t, nan=0.0)
+    np.maximum.accumulate(t, out=t)
     ok = (code == 0) & (ex["status"].to_numpy() == "answered")
     ctrl = isin(names, list(MODAL | CONTROL)) & ok
     rows = np.flatnonzero(accepted | ctrl)
     naxes = len(variant.axes)
-    vec = vectors(ex, rows)[:, :naxes]  # row k of vec is rows[k]
     is_vec = accepted[rows]
+    vec = vectors(ex, rows[is_vec])[:, :naxes]  # the pushed vectors, in order
     cont = names[rows] == "C"
     control = bool(isin(names[rows[~is_vec]], list(CONTROL)).any())
     if compiled is None:
@@ -140,13 +141,13 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
         except ValueError as err:
             notes.append(f"replay: {name} at row {r} refused by the model: {err}")
         states.append(p)
-    state = np.cumsum(~is_vec)[is_vec]  # parameters in force at each push
-    col = lambda f, dt: np.array([getattr(s, f) for s in states], dt)[state]  # noqa: E731
+    state = np.cumsum(~is_vec, dtype=np.int32)[is_vec]  # parameters in force at each push
+    col = lambda f, dt: np.array([getattr(s, f) for s in states], dt)  # noqa: E731
     push = np.full(len(rows), -1, np.int64)
     push[is_vec] = np.arange(int(is_vec.sum()))
     out = replay_vectors(t[rows].astype(float), push,
-                         np.ascontiguousarray(vec[is_vec], np.int64),
-                         cont[is_vec], col("v", float), col("a", float), col("b", float),
+                         np.ascontiguousarray(vec, np.int64), cont[is_vec], state,
+                         col("v", float), col("a", float), col("b", float),
                          col("short", np.int64), col("pause", float), col("vk", bool),
                          float(variant.max_rate or 0.0), variant.queue + 10_000)
     seq, starts, ends, _v_in, v_out, _rest, starved = out
@@ -233,10 +234,13 @@ def _blocks(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray
             cont: np.ndarray, log: list, done: list[np.ndarray]) -> Any:
     """(row, time, vector, is a vector, continuous) for every replayed row, converted
     to Python values one block at a time; the completion log is drained between blocks."""
+    vpos = np.maximum(np.cumsum(is_vec) - 1, 0)  # each row's place among the vectors
+    empty = np.zeros((1, vec.shape[1]), np.int64)
     for b in range(0, len(rows), REPLAY_BLOCK):
         sl = slice(b, b + REPLAY_BLOCK)
         r = rows[sl]
-        yield from zip(r.tolist(), t[r].tolist(), vec[sl].tolist(), is_vec[sl].tolist(),
+        v = vec[vpos[sl]] if len(vec) else np.repeat(empty, len(r), axis=0)
+        yield from zip(r.tolist(), t[r].tolist(), v.tolist(), is_vec[sl].tolist(),
                        cont[sl].tolist(), strict=True)
         _drain(log, done)
 

@@ -37,9 +37,10 @@ def _set_prof(F: np.ndarray, p: tuple) -> None:
 
 @njit(cache=True, nogil=True)
 def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  # noqa: E741
-               pv: np.ndarray, pa: np.ndarray, pb: np.ndarray, pshort: np.ndarray,
-               pvk: np.ndarray, tacc: np.ndarray, max_rate: float) -> None:
+               ps: np.ndarray, pv: np.ndarray, pa: np.ndarray, pb: np.ndarray,
+               pshort: np.ndarray, pvk: np.ndarray, tacc: np.ndarray, max_rate: float) -> None:
     h = I[H]
+    p = ps[h]
     t0 = F[READY]
     if tacc[h] > t0:
         t0 = tacc[h]
@@ -49,10 +50,10 @@ def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  #
         x = abs(d[h, k])
         if x > dom:
             dom = x
-    cap = pv[h]
+    cap = pv[p]
     length = 0.0
     if dom:
-        if pvk[h]:
+        if pvk[p]:
             x = d[h, 0]
             y = d[h, 1]
             z = d[h, 2] if d.shape[1] > 2 else 0
@@ -65,9 +66,9 @@ def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  #
             c = max_rate * length / dom
             if c < cap:
                 cap = c
-    b = pb[h]
+    b = pb[p]
     vj = b if b < cap else cap
-    vpeak = vj if dom < pshort[h] else cap
+    vpeak = vj if dom < pshort[p] else cap
     F[LEN] = length
     F[VJ] = vj
     F[VPEAK] = vpeak
@@ -80,7 +81,7 @@ def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  #
         I[STARVED] = 1 if cont[h] else 0
     else:
         I[STARVED] = 0
-    a = pa[h]
+    a = pa[p]
     more = I[N] - h > 1
     if not cont[h]:
         ex = _REST
@@ -108,11 +109,13 @@ def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  #
 
 @njit(cache=True, nogil=True)
 def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: np.ndarray,
-                   pv: np.ndarray, pa: np.ndarray, pb: np.ndarray, pshort: np.ndarray,
+                   ps: np.ndarray, pv: np.ndarray, pa: np.ndarray, pb: np.ndarray, pshort: np.ndarray,
                    ppause: np.ndarray, pvk: np.ndarray, max_rate: float, guard_limit: int
                    ) -> tuple:
     """Advance to every ``ev_t`` (pushing vector ``ev_push`` after it when >= 0), then run
-    the queue out as ``queue.replay`` does (at most ``guard_limit`` steps).
+    the queue out as ``queue.replay`` does (at most ``guard_limit`` steps). Vector ``i``
+    moves by ``d[i]`` with the parameters of row ``ps[i]`` of the tables ``pv`` (V),
+    ``pa`` (A), ``pb`` (B), ``pshort`` ($), ``ppause`` (T) and ``pvk`` (VK).
 
     Returns the completions in order: (seq, t_start, t_end, v_in, v_out, rest, starved).
     """
@@ -145,14 +148,14 @@ def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: n
             if not I[PLANNED]:
                 if I[H] >= I[N]:
                     break
-                _plan_head(F, I, d, cont, pv, pa, pb, pshort, pvk, tacc, max_rate)
+                _plan_head(F, I, d, cont, ps, pv, pa, pb, pshort, pvk, tacc, max_rate)
             t = F[TEND]
             guard += 1
         # advance(t)
         while True:
             if not I[PLANNED]:
                 if I[H] < I[N]:
-                    _plan_head(F, I, d, cont, pv, pa, pb, pshort, pvk, tacc, max_rate)
+                    _plan_head(F, I, d, cont, ps, pv, pa, pb, pshort, pvk, tacc, max_rate)
                 else:
                     break
             if I[EXIT] < 0:
@@ -182,7 +185,7 @@ def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: n
                 r = False
             else:
                 F[V] = 0.0
-                F[READY] = tend + ppause[h]
+                F[READY] = tend + ppause[ps[h]]
                 r = True
                 if cont[h] and (I[H] >= I[N] or cont[I[H]]):
                     I[DRY] = 1
