@@ -67,8 +67,10 @@ class Analysis:
         return df
 
     def chunks(self, direction: str) -> pd.DataFrame:
-        """The raw chunks of one direction as read: offsets, lengths, times (from t0)."""
-        d = self.raw.direction(direction)
+        """The raw chunks of one direction as read: offsets, lengths, times (from t0);
+        read again from the file (the analysis does not keep them)."""
+        raw = read_raw(self.path) if self.raw.released else self.raw
+        d = raw.direction(direction)
         return pd.DataFrame({"direction": direction, "start": d.start, "length": d.length,
                              "offset": d.offset, "t_read": d.t_read - self.t0,
                              "t_first": d.t_first - self.t0, "file_order": d.order})
@@ -229,7 +231,8 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     unit_mode = _step(ev_rank, ev_state, ur, init, strict=True)
     unit = fr.decode_unit(raw.unit, ul, ut, unit_mode)
     packets = exm.find_packets(host)
-    ex, unsolicited = exm.build_exchanges(host, unit, packets, declared)
+    ex, unsolicited = exm.build_exchanges(host, unit, packets, declared, (hr, ur))
+    del hr, ur
 
     # is the baud the capture claims possible?
     used = declared
@@ -255,6 +258,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     t_end = float(np.concatenate([host.t_last, unit.t_last]).max()) if len(t_all) else 0.0
     out = Findings(t0)
     _capture_findings(raw, out, t0, declared, used, source, low, slope)
+    raw.release()
 
     say("findings")
     ctx = Context(ex, lambda i: escape_bytes(host.raw(i)), lambda i: escape_bytes(unit.raw(i)),

@@ -69,7 +69,8 @@ def find_packets(host: DecodedLines) -> Packets:
     return Packets(member, packet, role)
 
 
-def pair(host: DecodedLines, unit: DecodedLines, packets: Packets
+def pair(host: DecodedLines, unit: DecodedLines, packets: Packets,
+         ranks: tuple[np.ndarray, np.ndarray] | None = None
          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(answer line per host line or -1, extra answer lines per host line, unsolicited lines).
 
@@ -79,7 +80,7 @@ def pair(host: DecodedLines, unit: DecodedLines, packets: Packets
     expects = ((host.kind == COMMAND) | ((host.kind == REJECTION) & (host.code >= 0)))
     expects &= ~packets.member & (packets.role != "start")
     exp_idx = np.flatnonzero(expects)
-    hr, ur = merged_rank(host, unit)
+    hr, ur = merged_rank(host, unit) if ranks is None else ranks
     # for each unit line, the last expecting command before it (index into exp_idx)
     c = np.searchsorted(hr[exp_idx], ur, side="left") - 1
     answer = np.full(n, -1, np.int64)
@@ -125,10 +126,12 @@ def _fifo_fix(exp_idx: np.ndarray, cs: np.ndarray, sel: np.ndarray, counts: np.n
             extra[exp_idx[e]] += leftover
 
 
-def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, baud: float | None
+def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, baud: float | None,
+                    ranks: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> tuple[pd.DataFrame, np.ndarray]:
-    """One row per host line (the exchange it opened) and the unsolicited unit lines."""
-    answer, extra, unsolicited = pair(host, unit, packets)
+    """One row per host line (the exchange it opened) and the unsolicited unit lines;
+    ``ranks``: ``merged_rank(host, unit)`` if the caller has it already."""
+    answer, extra, unsolicited = pair(host, unit, packets, ranks)
     n = len(host)
     has = answer >= 0
     a = np.where(has, answer, 0)

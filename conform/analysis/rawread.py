@@ -114,8 +114,16 @@ class RawCapture:
     link_events: list[dict[str, Any]]
     topics: dict[str, int]  # messages per topic
 
+    released: bool = False  # the per-read tables and bytes were let go (``release``)
+
     def direction(self, name: str) -> Direction:
         return self.host if name == "host" else self.unit
+
+    def release(self) -> None:
+        """Let go of the bytes and the per-read tables (the largest arrays of a long
+        capture) once the lines are decoded; ``Analysis.chunks`` reads them again."""
+        self.host, self.unit = Direction.empty("host"), Direction.empty("unit")
+        self.released = True
 
 
 class _Collector:
