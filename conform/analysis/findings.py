@@ -127,6 +127,13 @@ class Context:
         self.code = ex["code"].to_numpy()
         self.t = ex["t_cmd_first"].to_numpy()
         self.answer = ex["answer_frame"].to_numpy()
+        self._units: pd.DataFrame | None = None
+
+    def motion_units(self) -> pd.DataFrame:
+        """``motion_units(ex)``, worked out once for every detector that needs it."""
+        if self._units is None:
+            self._units = motion_units(self.ex)
+        return self._units
 
     def cmd(self, r: int) -> str:
         return self.host_text(int(r))
@@ -176,7 +183,7 @@ def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
 def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     """blind-resend, lost-vector (possible), index-checked, repeat-used, queue-full polling."""
     ex = ctx.ex
-    mu = motion_units(ex)
+    mu = ctx.motion_units()
     rows = mu["row"].to_numpy()
     uncertain = ex["uncertain"].to_numpy()
     name = ctx.name

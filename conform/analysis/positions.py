@@ -14,18 +14,17 @@ from itertools import combinations
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from conform.analysis.columns import isin
-from conform.analysis.findings import Context, Findings, motion_units
+from conform.analysis.findings import Context, Findings
 
 POSITION = {"P": 2, "PF": 3, "P4": 4}
 
 
-def _motion_matrix(ex: pd.DataFrame) -> np.ndarray:
+def _motion_matrix(ctx: Context) -> np.ndarray:
     """Per row, the motion it delivers: a vector's pulses, a packet's sum at its ``*E``."""
-    mu = motion_units(ex)
-    out = np.zeros((len(ex), 4), np.int64)
+    mu = ctx.motion_units()
+    out = np.zeros((len(ctx.ex), 4), np.int64)
     rows = mu["row"].to_numpy()
     out[rows] = mu[["s0", "s1", "s2", "s3"]].to_numpy()
     return out
@@ -42,7 +41,7 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
                                "confirmed_double": 0, "confirmed_lost": 0}
     if len(pos_rows) == 0:
         return summary
-    mot_all = _motion_matrix(ex)
+    mot_all = _motion_matrix(ctx)
     motion = mot_all * rec["contrib"][:, None]
     cum = np.cumsum(motion, axis=0)
     reports: list[tuple[int, tuple[int, ...]]] = []
