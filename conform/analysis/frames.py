@@ -183,6 +183,26 @@ def _vector_regex(variant: Variant, dialect: Dialect, cmd_id: str) -> tuple[str,
     return re.escape(spec.mnemonic), int(p.lo), int(p.hi)
 
 
+DECODE_BLOCK = 131_072  # lines matched against the vector pattern at a time
+
+
+def _vector_fields(bodies: pa.BinaryArray, cand: np.ndarray, rx: str, naxes: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(lines of ``cand`` that match ``rx``, their axis values as an (n, naxes) array)."""
+    m = pc.extract_regex(bodies.take(pa.array(cand)), rx)
+    valid = m.is_valid().to_numpy(zero_copy_only=False)
+    if not valid.any():
+        return cand[:0], np.zeros((0, naxes), np.int64)
+    mv = m.filter(pa.array(valid))
+    cols = []
+    for i in range(naxes):
+        f = mv.field(f"a{i}").cast(pa.string())
+        if i >= 3:
+            f = pc.if_else(pc.equal(f, ""), "0", f)
+        cols.append(pc.cast(f, pa.int64()).to_numpy())
+    return cand[valid], np.stack(cols, axis=1)
+
+
 def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray],
                 variant: Variant, dialect: Dialect, parser: CommandParser,
                 mode_before: np.ndarray) -> DecodedLines:
@@ -233,27 +253,13 @@ def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
         rx = (f"^!{address}{mnem}(?P<a0>-?[0-9]{{1,10}}),(?P<a1>-?[0-9]{{1,10}}),"
               f"(?P<a2>-?[0-9]{{1,10}}){axes}\\z")
         cand = np.flatnonzero(~done)
-        if len(cand) == 0:
-            continue
-        sub = bodies.take(pa.array(cand))
-        m = pc.extract_regex(sub, rx)
-        valid = m.is_valid().to_numpy(zero_copy_only=False)
-        if not valid.any():
-            continue
-        rows = cand[valid]
-        mv = m.filter(pa.array(valid))
-        cols = []
-        for i in range(naxes):
-            f = mv.field(f"a{i}").cast(pa.string())
-            if i >= 3:
-                f = pc.if_else(pc.equal(f, ""), "0", f)
-            cols.append(pc.cast(f, pa.int64()).to_numpy())
-        arr = np.stack(cols, axis=1)
-        inr = ((arr >= lo) & (arr <= hi)).all(axis=1)
-        rows = rows[inr]
-        vec[rows, :naxes] = arr[inr]
-        name[rows] = cid
-        done[rows] = True
+        for b in range(0, len(cand), DECODE_BLOCK):  # a block at a time: flat memory
+            rows, arr = _vector_fields(bodies, cand[b : b + DECODE_BLOCK], rx, naxes)
+            inr = ((arr >= lo) & (arr <= hi)).all(axis=1)
+            rows = rows[inr]
+            vec[rows, :naxes] = arr[inr]
+            name[rows] = cid
+            done[rows] = True
 
     # everything else: once per distinct body
     rest = np.flatnonzero(~done)
