@@ -103,3 +103,22 @@ def test_queue_beyond_capacity_drains_alike() -> None:
     fast = replay(ex, acc, {}.get, var, compiled=True)
     same(fast, replay(ex, acc, {}.get, var, compiled=False))
     assert len(fast.ends) < n
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 7, 450, 100_000])
+def test_replay_does_not_depend_on_the_chunk(chunk: int) -> None:
+    """The compiled scan carries the executor's state and its queued vectors from one
+    chunk of events to the next: any chunk size gives the whole-session result."""
+    spec = load_spec()
+    for seed in (0, 6):
+        var = spec.variant(("gve64-v19", "gve124", "gve64-v10")[seed % 3])
+        ex, acc, parsed = session(seed, 2000)
+        same(replay(ex, acc, parsed.get, var, compiled=True, chunk=chunk),
+             replay(ex, acc, parsed.get, var, compiled=False))
+    var = spec.variant("gve64-v19")  # a queue beyond capacity across chunk boundaries
+    n = var.queue + 3000
+    ex = pd.DataFrame({"name": "C", "code": 0, "status": "answered",
+                       "t_cmd_last": 1.7e9 + 1e-4 * np.arange(n),
+                       "dx": 300, "dy": -120, "dz": 0, "da": 0})
+    same(replay(ex, np.ones(n, bool), {}.get, var, compiled=True, chunk=chunk),
+         replay(ex, np.ones(n, bool), {}.get, var, compiled=True, chunk=10**9))

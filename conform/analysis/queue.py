@@ -56,13 +56,15 @@ def _params(variant: Variant) -> Any:
 
 
 def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Variant,
-           arrival: np.ndarray | None = None, compiled: bool | None = None) -> QueueReplay:
+           arrival: np.ndarray | None = None, compiled: bool | None = None,
+           chunk: int | None = None) -> QueueReplay:
     """Push ``ex`` rows flagged in ``accepted`` (vectors) at their arrival times.
 
     ``host_parsed(row)`` returns the parsed Command of a row (for modal values).
     ``arrival`` overrides the arrival time of each row (what-if replays).
     ``compiled``: None takes the compiled scan (``replay_kernel``) when the session has no
-    H/G/D/K/R/J, True insists on it, False always runs ``MotionExecutor`` itself.
+    H/G/D/K/R/J, True insists on it, False always runs ``MotionExecutor`` itself;
+    ``chunk``: events per compiled call (the result never depends on it).
     """
     names = ex["name"].to_numpy()
     code = ex["code"].to_numpy()
@@ -83,7 +85,7 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         raise ValueError("the compiled replay takes no H/G/D/K/R/J")
     run = _run_compiled if compiled else _run_python
     (seq, starts, ends, v_out, starved), removals, notes = run(
-        rows, t, vec, is_vec, cont, names, host_parsed, variant)
+        rows, t, vec, is_vec, cont, names, host_parsed, variant, chunk)
     # every vector row was pushed, in order, at its arrival time
     push_rows_a = rows[is_vec].astype(np.int64)
     # seq counts pushes per executor; J makes a new executor: map by order of completion
@@ -124,11 +126,12 @@ Completions = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray,
-                  cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant
-                  ) -> tuple[Completions, list[float], list[str]]:
+                  cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant,
+                  chunk: int | None = None) -> tuple[Completions, list[float], list[str]]:
     """Vectors and modal commands only: the parameters each vector captures are worked out
-    here (few modal rows), the scan over every row runs compiled."""
-    from conform.analysis.replay_kernel import replay_vectors
+    here (few modal rows), the scan runs compiled, ``chunk`` events (``REPLAY_CHUNK``) at a
+    time with the executor's state and its queued vectors carried from one to the next."""
+    from conform.analysis.replay_kernel import H, N, new_state, replay_vectors
 
     p = _params(variant)
     states = [p]
@@ -143,20 +146,36 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
         states.append(p)
     state = np.cumsum(~is_vec, dtype=np.int32)[is_vec]  # parameters in force at each push
     col = lambda f, dt: np.array([getattr(s, f) for s in states], dt)  # noqa: E731
-    push = np.full(len(rows), -1, np.int64)
-    push[is_vec] = np.arange(int(is_vec.sum()))
-    out = replay_vectors(t[rows].astype(float), push,
-                         np.ascontiguousarray(vec, np.int64), cont[is_vec], state,
-                         col("v", float), col("a", float), col("b", float),
-                         col("short", np.int64), col("pause", float), col("vk", bool),
-                         float(variant.max_rate or 0.0), variant.queue + 10_000)
-    seq, starts, ends, _v_in, v_out, _rest, starved = out
+    tables = (col("v", float), col("a", float), col("b", float), col("short", np.int64),
+              col("pause", float), col("vk", bool))
+    ev_t = t[rows].astype(float)
+    tacc = ev_t[is_vec]
+    vec = np.ascontiguousarray(vec, np.int64)
+    cont_v = cont[is_vec]
+    pushed = np.cumsum(is_vec)  # vectors pushed up to and including each event
+    F, I = new_state()  # noqa: E741
+    first = 0  # index of the first queued vector, among all the session's vectors
+    parts = []
+    step = max(1, int(chunk or REPLAY_CHUNK))
+    for lo in range(0, max(len(rows), 1), step):  # a chunk of events at a time
+        hi = min(len(rows), lo + step)
+        first += int(I[H])  # what finished is gone; the queue moves to the front
+        I[N] -= I[H]
+        I[H] = 0
+        sl = slice(first, int(pushed[hi - 1]) if hi else 0)
+        push = np.where(is_vec[lo:hi], pushed[lo:hi] - 1 - first, -1)
+        out = replay_vectors(ev_t[lo:hi], push, vec[sl], cont_v[sl], state[sl], tacc[sl],
+                             *tables, float(variant.max_rate or 0.0),
+                             variant.queue + 10_000 if hi == len(rows) else -1, F, I)
+        parts.append((out[0] + first,) + tuple(out[1:]))
+    seq, starts, ends, _v_in, v_out, _rest, starved = (
+        np.concatenate(c) for c in zip(*parts, strict=True))
     return (seq, starts, ends, v_out, starved), [], notes
 
 
 def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray,
-                cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant
-                ) -> tuple[Completions, list[float], list[str]]:
+                cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant,
+                chunk: int | None = None) -> tuple[Completions, list[float], list[str]]:
     """Every row through ``MotionExecutor`` (any session, H/G/D/K/R/J included)."""
     from conform.unit.motion import Completion, MotionExecutor, MotionStateError
 
@@ -220,6 +239,7 @@ def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.nda
     return (seq, starts, ends, v_out, starved), removals, notes
 
 
+REPLAY_CHUNK = 262_144  # events per call of the compiled scan
 REPLAY_BLOCK = 65_536  # rows turned into Python values at a time (memory stays flat)
 
 

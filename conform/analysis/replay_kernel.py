@@ -109,23 +109,24 @@ def _plan_head(F: np.ndarray, I: np.ndarray, d: np.ndarray, cont: np.ndarray,  #
 
 @njit(cache=True, nogil=True)
 def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: np.ndarray,
-                   ps: np.ndarray, pv: np.ndarray, pa: np.ndarray, pb: np.ndarray, pshort: np.ndarray,
-                   ppause: np.ndarray, pvk: np.ndarray, max_rate: float, guard_limit: int
+                   ps: np.ndarray, tacc: np.ndarray, pv: np.ndarray, pa: np.ndarray,
+                   pb: np.ndarray, pshort: np.ndarray, ppause: np.ndarray, pvk: np.ndarray,
+                   max_rate: float, guard_limit: int, F: np.ndarray, I: np.ndarray  # noqa: E741
                    ) -> tuple:
-    """Advance to every ``ev_t`` (pushing vector ``ev_push`` after it when >= 0), then run
-    the queue out as ``queue.replay`` does (at most ``guard_limit`` steps). Vector ``i``
-    moves by ``d[i]`` with the parameters of row ``ps[i]`` of the tables ``pv`` (V),
-    ``pa`` (A), ``pb`` (B), ``pshort`` ($), ``ppause`` (T) and ``pvk`` (VK).
+    """Advance to every ``ev_t`` (pushing vector ``ev_push`` after it when >= 0, which must
+    be the next index, ``I[N]``), then, if ``guard_limit`` >= 0, run the queue out as
+    ``queue.replay`` does (at most ``guard_limit`` steps). Vector ``i`` arrived at
+    ``tacc[i]`` and moves by ``d[i]`` with the parameters of row ``ps[i]`` of the tables
+    ``pv`` (V), ``pa`` (A), ``pb`` (B), ``pshort`` ($), ``ppause`` (T) and ``pvk`` (VK).
 
-    Returns the completions in order: (seq, t_start, t_end, v_in, v_out, rest, starved).
+    ``F`` and ``I`` (``new_state()``) are the executor's state, carried from one call to the
+    next: a session may be replayed a chunk of events at a time, the vectors still queued
+    (``I[H]`` to ``I[N]``) moved to the front of the next call's arrays.
+    Returns this call's completions in order: (index, t_start, t_end, v_in, v_out, rest,
+    starved).
     """
     nv = d.shape[0]
-    tacc = np.zeros(nv)
-    for k in range(len(ev_t)):
-        if ev_push[k] >= 0:
-            tacc[ev_push[k]] = ev_t[k]
-    F = np.zeros(PROF + 8)
-    I = np.zeros(7, np.int64)  # noqa: E741
+    I[NDONE] = 0
     seq = np.empty(nv, np.int64)
     t_start = np.empty(nv)
     t_end = np.empty(nv)
@@ -143,7 +144,7 @@ def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: n
             push = ev_push[k]
             k += 1
         else:  # the final drain: next_event_time(), then advance to it
-            if guard >= guard_limit:
+            if guard >= guard_limit:  # also a call that is not the last (guard_limit < 0)
                 break
             if not I[PLANNED]:
                 if I[H] >= I[N]:
@@ -202,3 +203,8 @@ def replay_vectors(ev_t: np.ndarray, ev_push: np.ndarray, d: np.ndarray, cont: n
             I[N] += 1
     n = I[NDONE]
     return seq[:n], t_start[:n], t_end[:n], v_in[:n], v_out[:n], rest[:n], starved[:n]
+
+
+def new_state() -> tuple[np.ndarray, np.ndarray]:
+    """The state of an executor that has done nothing yet: (floats, integers)."""
+    return np.zeros(PROF + 8), np.zeros(7, np.int64)
