@@ -122,3 +122,23 @@ def test_replay_does_not_depend_on_the_chunk(chunk: int) -> None:
                        "dx": 300, "dy": -120, "dz": 0, "da": 0})
     same(replay(ex, np.ones(n, bool), {}.get, var, compiled=True, chunk=chunk),
          replay(ex, np.ones(n, bool), {}.get, var, compiled=True, chunk=10**9))
+
+
+def test_queue_depth_merge_equals_sort() -> None:
+    """The merge of sorted pushes and ends gives what sorting all events gives, ties
+    (departures first at equal times) included."""
+    from conform.analysis.queue import queue_depth
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        pushes = np.sort(rng.integers(0, 40, rng.integers(0, 60))).astype(float)
+        ends = np.sort(rng.integers(0, 40, rng.integers(0, 60))).astype(float)
+        t, d = queue_depth(pushes, ends, np.zeros(0))
+        ev_t = np.concatenate([pushes, ends])
+        ev_d = np.concatenate([np.ones(len(pushes)), -np.ones(len(ends))])
+        order = np.lexsort((ev_d, ev_t))
+        assert np.array_equal(t, ev_t[order])
+        assert np.array_equal(d, np.cumsum(ev_d[order]).astype(np.int64))
+        t2, d2 = queue_depth(pushes, ends, np.array([5.0]))  # a removal: sorted the long way
+        assert len(t2) == len(t) + 1
+        assert d2[-1] == (d[-1] if len(d) else 0) - 1

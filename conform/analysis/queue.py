@@ -93,16 +93,33 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
     pushes_a = t[push_rows_a].astype(float)
     removals_a = np.asarray(removals, float)
-    ev_t = np.concatenate([pushes_a, ends, removals_a])
-    ev_d = np.concatenate([np.ones(len(pushes_a), np.int8), -np.ones(len(ends), np.int8),
-                           -np.ones(len(removals_a), np.int8)])
-    order = np.lexsort((ev_d, ev_t))
-    depth_t = ev_t[order]
-    depth = np.cumsum(ev_d[order], dtype=np.int64) if len(order) else np.zeros(0, np.int64)
+    depth_t, depth = queue_depth(pushes_a, ends, removals_a)
     rep = QueueReplay(pushes_a, push_rows_a, starts, ends, starved, v_out, done_rows,
                       removals_a, depth_t, depth, notes=notes, capacity=variant.queue)
     rep.starvations = _starvation_events(rep)
     return rep
+
+
+def queue_depth(pushes: np.ndarray, ends: np.ndarray, removals: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(time, depth after it) at every push (+1), end and removal (-1), by time; at equal
+    times the departures first. Pushes and ends come sorted: merged without a sort."""
+    n = len(pushes) + len(ends)
+    if len(removals) == 0 and (np.diff(pushes) >= 0).all() and (np.diff(ends) >= 0).all():
+        at = np.searchsorted(pushes, ends, side="left") + np.arange(len(ends))
+        t = np.empty(n)
+        d = np.ones(n, np.int8)
+        arrive = np.ones(n, bool)
+        arrive[at] = False
+        t[at] = ends
+        t[arrive] = pushes
+        d[at] = -1
+        return t, np.cumsum(d, dtype=np.int64)
+    ev_t = np.concatenate([pushes, ends, removals])
+    ev_d = np.concatenate([np.ones(len(pushes), np.int8), -np.ones(len(ends), np.int8),
+                           -np.ones(len(removals), np.int8)])
+    order = np.lexsort((ev_d, ev_t))
+    return ev_t[order], np.cumsum(ev_d[order], dtype=np.int64)
 
 
 def _modal(p: Any, name: str, args: Any) -> Any:
