@@ -57,13 +57,14 @@ class Analysis:
     notes: list[str] = field(default_factory=list)
     time_range: tuple[float, float] | None = None  # plots over time: seconds from the start
 
-    def frames(self, direction: str) -> pd.DataFrame:
-        """The decoded lines of one direction as a DataFrame (text escaped)."""
+    def frames(self, direction: str, lo: int = 0, hi: int | None = None) -> pd.DataFrame:
+        """The decoded lines ``lo:hi`` of one direction as a DataFrame (text escaped)."""
         d = self.host if direction == "host" else self.unit
-        df = frames_frame(d, self.t0)
+        sl = slice(lo, len(d) if hi is None else hi)
+        df = frames_frame(d, self.t0, sl)
         if direction == "host":
-            df["packet"] = self.exchanges["packet"].to_numpy()
-            df["packet_role"] = self.exchanges["packet_role"].to_numpy()
+            df["packet"] = self.exchanges["packet"].to_numpy()[sl]
+            df["packet_role"] = self.exchanges["packet_role"].to_numpy()[sl]
         return df
 
     def chunks(self, direction: str) -> pd.DataFrame:
@@ -88,22 +89,24 @@ class Analysis:
         return dict(self.metrics.get("finding_counts", {}))
 
 
-def frames_frame(d: fr.DecodedLines, t0: float) -> pd.DataFrame:
+def frames_frame(d: fr.DecodedLines, t0: float, sl: slice = slice(None)) -> pd.DataFrame:
+    lo, hi, _ = sl.indices(len(d))
+    bodies = d.lines.bodies.slice(lo, max(hi - lo, 0)).to_pylist()
     return pd.DataFrame({
         "direction": d.direction,
-        "line": np.arange(len(d)),
-        "offset": d.lines.start,
-        "length": d.lines.end - d.lines.start + d.lines.term,
-        "t_first": d.t_first - t0,
-        "t_last": d.t_last - t0,
-        "kind": d.kind,
-        "name": d.name,
-        "code": d.code,
-        "inta": d.inta,
-        "checksum_status": fr.CHECKSUM_NAMES[d.checksum.astype(np.int64)],
-        "checksum_mode": d.checksum_mode,
-        "detail": d.detail,
-        "text": [escape_bytes(b) for b in d.lines.bodies.to_pylist()],
+        "line": np.arange(lo, max(hi, lo)),
+        "offset": d.lines.start[sl],
+        "length": (d.lines.end - d.lines.start + d.lines.term)[sl],
+        "t_first": d.t_first[sl] - t0,
+        "t_last": d.t_last[sl] - t0,
+        "kind": d.kind[sl],
+        "name": d.name[sl],
+        "code": d.code[sl],
+        "inta": d.inta[sl],
+        "checksum_status": fr.CHECKSUM_NAMES[d.checksum[sl].astype(np.int64)],
+        "checksum_mode": d.checksum_mode[sl],
+        "detail": d.detail[sl],
+        "text": [escape_bytes(b) for b in bodies],
     })
 
 

@@ -99,7 +99,7 @@ def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
         d.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
-    from conform.analysis.tables import ROW_GROUP, relative_times, write_frame
+    from conform.analysis.tables import ROW_GROUP, relative_times, write_frame, write_table
 
     rows = row_group or ROW_GROUP
     times = ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last")
@@ -112,9 +112,11 @@ def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
 
     out = {"exchanges": write_frame(d / "exchanges.parquet", a.exchanges, rows,
                                     extra=exchange_rows)}
-    for direction in ("host", "unit"):  # one direction's frames at a time
-        out[f"frames_{direction}"] = write_frame(d / f"frames_{direction}.parquet",
-                                                 a.frames(direction), rows)
+    for direction in ("host", "unit"):  # a slice of lines at a time
+        out[f"frames_{direction}"] = write_table(
+            d / f"frames_{direction}.parquet", len(a.host if direction == "host" else a.unit),
+            lambda lo, hi, w=direction: a.frames(w, lo, hi), frame_categories(a, direction),
+            rows)
     out["series"] = write_frame(d / "series.parquet", a.series, rows)
     if a.queue is not None:
         import pandas as pd
@@ -123,6 +125,21 @@ def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
         out["queue_depth"] = write_frame(d / "queue_depth.parquet",
                                          pd.DataFrame({"t": q.depth_t - a.t0, "depth": q.depth}), rows)
     return out
+
+
+def frame_categories(a: Any, direction: str) -> dict[str, list[Any] | None]:
+    """The category lists of a frames table, from the decoded columns (no table built)."""
+    from conform.analysis.frames import CHECKSUM_NAMES
+    from conform.analysis.tables import categories_of
+
+    d = a.host if direction == "host" else a.unit
+    cols = {"direction": np.array([direction], object), "kind": d.kind, "name": d.name,
+            "checksum_status": CHECKSUM_NAMES, "detail": d.detail}
+    if direction == "host":
+        cols["packet_role"] = a.exchanges["packet_role"].to_numpy()
+    cats: dict[str, list[Any] | None] = {k: categories_of(v) for k, v in cols.items()}
+    cats["text"] = None
+    return cats
 
 
 def coded(df: Any) -> Any:

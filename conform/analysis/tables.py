@@ -27,10 +27,14 @@ def text_categories(df: pd.DataFrame) -> dict[str, list[Any] | None]:
     out: dict[str, list[Any] | None] = {}
     for col in df.columns:
         if df[col].dtype == object:
-            u = pd.unique(df[col].to_numpy())
-            u = [x for x in u if x is not None and x == x]
-            out[col] = sorted(map(str, u)) if len(u) <= max(1, len(df) // 2) else None
+            u = categories_of(df[col].to_numpy())
+            out[col] = u if len(u) <= max(1, len(df) // 2) else None
     return out
+
+
+def categories_of(values: Any) -> list[str]:
+    """The distinct values of a text column, sorted, without None/NaN."""
+    return sorted(str(x) for x in pd.unique(values) if x is not None and x == x)
 
 
 def _coded(df: pd.DataFrame, cats: dict[str, list[Any] | None]) -> pd.DataFrame:
