@@ -88,6 +88,13 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
               control_path: str | None, link_path: str | None, record_path: str | None,
               switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path."""
+    from conform.families import family_for_variant
+
+    fam = family_for_variant(variant)
+    if fam.name != "gve":  # another protocol family serves its own unit through the same adapter
+        fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
+                  link_path=link_path, record_path=record_path, answer_delay=answer_delay)
+        return
     from conform.link.faults import FaultConfig, FaultInjector
     from conform.unit.model import Unit
     from conform.unit.serve import ControlServer, Emulator

@@ -49,6 +49,22 @@ def list_cmd() -> None:
         table.add_row(v.id, v.title, v.firmware, "".join(v.axes), str(v.queue), f"{v.max_rate:,}",
                       str(len(v.commands)), v.base or "-")
     _console().print(table)
+    _other_families()
+
+
+def _other_families() -> None:
+    """Variants of the other protocol families (conform.families), one table each."""
+    from conform.families import families
+
+    for fam in families():
+        if fam.name == "gve":
+            continue
+        table = Table(title=f"{fam.name} variants")
+        for col in ("variant", "title", "firmware", "axes", "buffers", "notes"):
+            table.add_column(col)
+        for v in fam.variants():
+            table.add_row(v.id, v.title, v.firmware, v.axes, v.buffer, v.notes)
+        _console().print(table)
 
 
 @cli.command("show")

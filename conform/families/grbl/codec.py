@@ -1,0 +1,117 @@
+"""Sans-I/O framing of grbl traffic.
+
+Host side: realtime bytes (specs/grbl/protocol.toml [realtime], and any byte above 0x7F) are
+out of band — they never enter grbl's receive buffer — and everything else forms lines ended by
+LF or CR. :class:`HostSplitter` separates the two as bytes come, keeping each byte's offset.
+Unit side: lines ended by CR LF, classified by the message table (ok, error:N, ALARM:N, the
+status report, the banner, [MSG:...] ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from conform.families import Detection
+from conform.families.grbl.tables import GrblSpec, load_grbl
+
+
+@dataclass
+class HostLine:
+    """One line the sender wrote: its bytes (without the terminator), where it began and
+    where its terminator was, as stream offsets."""
+
+    data: bytes
+    start: int
+    end: int              # offset of the terminator
+    terminator: bytes = b"\n"
+
+    @property
+    def size(self) -> int:
+        """Bytes the line takes in grbl's receive buffer, terminator included."""
+        return len(self.data) + 1
+
+
+@dataclass
+class RealtimeByte:
+    byte: int
+    offset: int
+
+
+@dataclass
+class HostSplitter:
+    """Feed host bytes; collect lines and realtime bytes in order."""
+
+    spec: GrblSpec = field(default_factory=load_grbl)
+    offset: int = 0
+    _buf: bytearray = field(default_factory=bytearray)
+    _start: int = 0
+
+    def feed(self, data: bytes) -> list[HostLine | RealtimeByte]:
+        out: list[HostLine | RealtimeByte] = []
+        rt = self.spec.realtime
+        for b in data:
+            if b in rt or b > 0x7F:
+                out.append(RealtimeByte(b, self.offset))
+            elif b in (0x0A, 0x0D):
+                out.append(HostLine(bytes(self._buf), self._start, self.offset, bytes([b])))
+                self._buf.clear()
+                self._start = self.offset + 1
+            else:
+                if not self._buf:
+                    self._start = self.offset
+                self._buf.append(b)
+            self.offset += 1
+        return out
+
+    @property
+    def partial(self) -> bytes:
+        return bytes(self._buf)
+
+
+@dataclass
+class UnitLine:
+    text: str
+    kind: str
+    code: int | None
+    start: int
+    end: int
+
+
+def split_unit(data: bytes, spec: GrblSpec | None = None) -> tuple[list[UnitLine], bytes]:
+    """Complete lines from grbl (CR LF, or a lone LF) and the unterminated rest."""
+    spec = spec or load_grbl()
+    out = []
+    pos = 0
+    while True:
+        nl = data.find(b"\n", pos)
+        if nl < 0:
+            break
+        raw = data[pos:nl].rstrip(b"\r")
+        text = raw.decode("latin-1")
+        kind, m = spec.classify(text) if text else ("blank", None)
+        code = None
+        if kind in ("error", "alarm") and m is not None:
+            code = int(m.group(1))
+        out.append(UnitLine(text, kind, code, pos, nl))
+        pos = nl + 1
+    return out, data[pos:]
+
+
+def detect(host: bytes, unit: bytes, spec: GrblSpec | None = None) -> Detection:
+    """How grbl-like the traffic is: the share of grbl-shaped lines from the unit, the banner,
+    status reports, '\\n'-ended g-code from the host."""
+    spec = spec or load_grbl()
+    lines, _ = split_unit(unit[:65536], spec)
+    lines = [ln for ln in lines if ln.kind != "blank"]
+    if not lines:
+        if host and (b"\n" in host[:4096]) and host[:4096].count(b"?") >= 1 and b"!0" not in host[:4096]:
+            return Detection("grbl", 0.3, "host traffic looks like g-code but the unit said nothing")
+        return Detection("grbl", 0.0, "no lines from the unit")
+    known = sum(1 for ln in lines if ln.kind != "unknown")
+    share = known / len(lines)
+    banner = any(ln.kind == "banner" for ln in lines)
+    score = min(1.0, share * 0.9 + (0.1 if banner else 0.0))
+    why = f"{known} of {len(lines)} lines from the unit are grbl messages"
+    if banner:
+        why += " (banner seen)"
+    return Detection("grbl", score, why)
