@@ -103,6 +103,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
         quiet: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
+    if _other_family(targets, variant):
+        _run_family(targets, variant, baud, profile, report_dir, patterns, list_only,
+                    allow_motion, allow_eeprom)
+        return
     spec = load_spec()
     if variant is not None:
         spec.variant(variant)
@@ -182,6 +186,37 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     out = Path(report_dir) if report_dir else default_dir()
     write_reports(results, out)
     _print_summary(results, out)
+    if aborted is not None:
+        raise UserError(f"run aborted: {aborted}", exit_code=2)
+    if results.failed():
+        sys.exit(1)
+
+
+def _other_family(targets: tuple[str, ...], variant: str | None) -> bool:
+    """Does this run address a non-GVE protocol family (conform.families)?"""
+    from conform.families import is_family_variant
+
+    wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
+    return any(is_family_variant(v, "grbl") for v in wanted)
+
+
+def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
+                report_dir: str | None, patterns: tuple[str, ...], list_only: bool,
+                allow_motion: bool, allow_eeprom: bool) -> None:
+    """grbl targets: the family's checks, the engine's results, reports and exit codes."""
+    from conform.families.grbl.checks import run_targets
+
+    runs = run_targets(list(targets) or [f"emu:{variant}"], variant, baud=baud,
+                       patterns=patterns, profile=profile, allow_motion=allow_motion,
+                       allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo)
+    if list_only:
+        return
+    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    results = results_of(runs, command)
+    out = Path(report_dir) if report_dir else default_dir()
+    write_reports(results, out)
+    _print_summary(results, out)
+    aborted = next((r.aborted for r in runs if r.aborted), None)
     if aborted is not None:
         raise UserError(f"run aborted: {aborted}", exit_code=2)
     if results.failed():

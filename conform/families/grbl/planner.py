@@ -166,26 +166,36 @@ class Planner:
         return t + head.td
 
     def resume(self, t: float) -> None:
+        """Start again from where the held block stands."""
         self.holding = False
-        if self.blocks and self.running:
+        if self.blocks:
             head = self.blocks[0]
-            s, _ = head.at(t)
-            head.s_done = s
+            if self.running:
+                head.s_done = head.at(t)[0]
             head.profile(t, 0.0, self.exit_speed())
+            self.running = True
+
+    def stopped(self, t: float) -> bool:
+        """The hold's deceleration ended at t: keep the block, standing at its stop point.
+        Returns False when the block was in fact finished (the stop fell at its end)."""
+        head = self.blocks[0]
+        s = head.at(t)[0]
+        self.running = False
+        if s >= head.length - 1e-9:
+            return False
+        head.s_done = s
+        return True
 
     def where(self, t: float) -> tuple[list[float], float]:
         """Machine position and speed (mm/s) at t."""
-        if not self.blocks or not self.running or self.blocks[0].kind not in ("line", "jog", "probe"):
-            return list(self._done_position()), 0.0
+        if self.blocks and not self.running:
+            head = self.blocks[0]
+            return head.point(head.s_done), 0.0
+        if not self.blocks:
+            return list(self.position), 0.0
         head = self.blocks[0]
         s, v = head.at(t)
         return head.point(min(s, head.length)), max(0.0, v)
-
-    def _done_position(self) -> list[float]:
-        for b in self.blocks:
-            if b.kind in ("line", "jog", "probe"):
-                return b.start
-        return self.position
 
     def clear(self, position: list[float]) -> None:
         self.blocks.clear()

@@ -29,6 +29,8 @@ class Code:
     meaning: str
     cite: str
     emulated: bool
+    send: bytes | None = None         # a line that provokes the code (after ``setup``)
+    setup: tuple[bytes, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,7 @@ class Example:
     expect: tuple[str, ...]
     cite: str
     setup: tuple[bytes, ...] = ()
+    power_up: bool = False
 
 
 @dataclass(frozen=True)
@@ -209,8 +212,14 @@ def _codes(rows: _Rows, data: dict[str, Any], section: str) -> dict[int, Code]:
         row = f"{section}.{key}"
         if not key.isdigit():
             raise rows.fail(row, "the code must be a number")
+        send = rows.get(row, d, "send", str, None)
+        setup = rows.get(row, d, "setup", list, [])
+        if not all(isinstance(x, str) for x in setup):
+            raise rows.fail(row, "field 'setup': every entry must be a string")
         out[int(key)] = Code(int(key), rows.get(row, d, "name", str), rows.get(row, d, "meaning", str),
-                             rows.get(row, d, "cite", str), rows.get(row, d, "emulated", bool))
+                             rows.get(row, d, "cite", str), rows.get(row, d, "emulated", bool),
+                             send.encode("latin-1") if send is not None else None,
+                             tuple(x.encode("latin-1") for x in setup))
     return dict(sorted(out.items()))
 
 
@@ -342,6 +351,7 @@ def _load(root: Path) -> GrblSpec:
         examples.append(Example(rows.get(row, d, "id", str),
                                 rows.get(row, d, "send", str).encode("latin-1"), tuple(expect),
                                 rows.get(row, d, "cite", str),
-                                tuple(str(s).encode("latin-1") for s in setup)))
+                                tuple(str(s).encode("latin-1") for s in setup),
+                                rows.get(row, d, "power_up", bool, False)))
     return GrblSpec(root, variants, errors, alarms, settings, messages, realtime, overrides,
                     commands, status, examples)

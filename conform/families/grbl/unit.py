@@ -41,6 +41,7 @@ class GrblUnit:
         self.v = variant
         self.spec = spec or load_grbl()
         self.line_time = line_time
+        self.byte_time = 10.0 / variant.baud
         self.report_delay = report_delay
         self.settings = {n: s.default for n, s in self.spec.settings.items()}
         if settings:
@@ -69,18 +70,27 @@ class GrblUnit:
         return self.planner.where(self._now)[0]
 
     def receive(self, data: bytes, t: float) -> None:
-        """Bytes from the sender that arrived at ``t``."""
-        self._advance(t)
-        t = self._now
-        for b in data:
+        """Bytes from the sender whose last byte arrived at ``t``.
+
+        A UART hands grbl one byte at a time: byte i of n arrived (n-1-i) byte times before
+        ``t`` (10 bits a byte at the variant's baud), never before the unit's present.
+        """
+        n = len(data)
+        for i, b in enumerate(data):
+            tb = t - (n - 1 - i) * self.byte_time
+            if tb > self._now:
+                self._advance(tb)
+            tb = self._now
             if b in self.spec.realtime:
-                self._realtime(b, t)
+                self._realtime(b, tb)
             elif b > 0x7F:
                 continue                     # unknown extended byte: dropped by the ISR
             elif len(self.rx) >= self.v.rx_buffer:
                 self.lost += 1
             else:
                 self.rx.append(b)
+                if len(self.rx) == 1 and self._ready_to_parse() and self._parser_free <= tb:
+                    self._read_rx(tb)
         self._advance(t)
 
     def poll(self, t: float) -> list[tuple[float, bytes]]:
@@ -353,14 +363,19 @@ class GrblUnit:
 
     def _block_done(self, t: float) -> None:
         pl = self.planner
+        if pl.holding:
+            # the hold's deceleration ended: stand still (Hold:0) until '~'
+            self.hold_sub = 0
+            pl.holding = False
+            if pl.stopped(t):
+                return
+            done = pl.blocks.popleft()
+            if done.kind == "probe":
+                self._probe_done(t, done)
+            return
         done = pl.blocks.popleft()
         pl.running = False
         v_exit = done.v1
-        if self.state in ("Hold", "Door") and self.hold_sub == 1:
-            # the hold ended with this block: stand still, resume later
-            self.hold_sub = 0
-            if pl.blocks:
-                return
         if done.kind == "probe":
             self._probe_done(t, done)
         if self._jog_cancel and not any(b.kind == "jog" for b in pl.blocks):
@@ -417,8 +432,6 @@ class GrblUnit:
                 if self.planner.blocks:
                     self.planner.resume(t)
                     self.state = "Jog" if self.planner.blocks[0].kind == "jog" else "Run"
-                    if not self.planner.running:
-                        self._start_motion(t)
         elif effect == "jog-cancel":
             if self.state == "Jog":
                 self._cancel_jog(t)
