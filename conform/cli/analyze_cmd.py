@@ -48,6 +48,10 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler)
         return
     file = files[0]
+    from conform.families.capture_hook import analyze_other_family
+
+    if analyze_other_family(file, variant, report_dir):  # grbl or unknown traffic
+        return
     window = _time_range(time_range)
 
     try:

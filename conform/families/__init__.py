@@ -123,3 +123,29 @@ def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = No
         return Detection("unknown", best.score, best.why if best.score else
                          "no family recognises the traffic")
     return best
+
+
+UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the GVE analyser, as before
+
+
+def divert(host: bytes, unit: bytes, metadata: dict[str, Any], variant: str | None
+           ) -> Detection | None:
+    """Which non-GVE family should analyse this traffic (None: the GVE analyser, as always).
+
+    An explicit ``--variant`` or the capture's own variant decides; otherwise the bytes do.
+    Traffic no family recognises is diverted as ``unknown`` only when there is enough of it
+    and it holds no GVE command line at all, so damaged or tiny GVE captures keep their
+    GVE findings.
+    """
+    named = variant or str(metadata.get("variant", "") or "")
+    if named:
+        fam = family_for_variant(named)
+        return None if fam.name == "gve" else Detection(fam.name, 1.0, f"variant {named}")
+    d = detect_family(host, unit, metadata)
+    if d.family == "gve":
+        return None
+    if d.family != "unknown":
+        return d
+    if len(host) + len(unit) >= UNKNOWN_MIN_BYTES and family("gve").detect(host, unit, metadata).score == 0:
+        return d
+    return None

@@ -1,0 +1,324 @@
+"""Analysis of grbl traffic: lines paired with their ok/error:N, realtime bytes out of band,
+the streaming method, receive-buffer overflow hazards, errors, alarms, status polling and
+planner starvation.
+
+The core, :func:`analyze_streams`, takes the two directions as timed chunks (sans-I/O, testable
+in-process); :func:`analyze_capture` reads them from a capture file. Pairing follows the
+protocol (interface.md): every line the sender ends with LF or CR gets exactly one ``ok`` or
+``error:N``, in order; realtime bytes never do and never occupy the receive buffer. The bytes
+in flight are what a character-counting sender must keep within the receive buffer: the bytes
+of every line sent and not yet answered (grbl's own streaming example counts the same). When
+they could exceed the buffer, a byte may be lost on the hardware: a hazard.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from conform.families.grbl.codec import HostLine, HostSplitter, RealtimeByte, split_unit
+from conform.families.grbl.tables import GrblSpec, load_grbl
+
+MAX_LISTED = 50
+DEFAULT_VARIANT = "grbl-1.1f"
+Chunk = tuple[float, bytes]
+
+
+@dataclass
+class Finding:
+    kind: str
+    t: float
+    severity: str         # info | warning | error | hazard
+    message: str
+    clause: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Exchange:
+    line: int
+    text: str
+    size: int
+    t_sent: float
+    answer: str | None = None
+    t_answer: float | None = None
+    lines_in_flight: int = 0
+    bytes_in_flight: int = 0
+
+
+@dataclass
+class GrblAnalysis:
+    path: str
+    family: str
+    variant: str
+    detected: str
+    exchanges: list[Exchange]
+    findings: list[Finding]
+    metrics: dict[str, Any]
+    notes: list[str] = field(default_factory=list)
+
+    def kinds(self) -> dict[str, int]:
+        return dict(self.metrics.get("finding_counts", {}))
+
+    def hazards(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == "hazard"]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"format": "conform-grbl-analysis/1", "path": self.path, "family": self.family,
+                "variant": self.variant, "detected": self.detected, "metrics": self.metrics,
+                "findings": [asdict(f) for f in self.findings], "notes": self.notes}
+
+
+class _Out:
+    def __init__(self) -> None:
+        self.items: list[Finding] = []
+        self.counts: dict[str, int] = {}
+
+    def add(self, kind: str, t: float, severity: str, message: str, clause: str = "",
+            **extra: Any) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if self.counts[kind] <= MAX_LISTED:
+            self.items.append(Finding(kind, round(t, 6), severity, message, clause, extra))
+
+
+def _byte_times(chunks: list[tuple[float, float, bytes]]) -> tuple[bytes, list[float]]:
+    """All bytes of a direction and each byte's arrival time (spread from first to last)."""
+    data = bytearray()
+    times: list[float] = []
+    for t_first, t_read, b in chunks:
+        n = len(b)
+        if n == 0:
+            continue
+        t0 = t_first if t_first == t_first else t_read
+        step = (t_read - t0) / (n - 1) if n > 1 and t_read > t0 else 0.0
+        times.extend(t0 + i * step for i in range(n))
+        data += b
+    return bytes(data), times
+
+
+def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
+                    unit: list[Chunk] | list[tuple[float, float, bytes]], *,
+                    variant: str = DEFAULT_VARIANT, spec: GrblSpec | None = None,
+                    path: str = "", detected: str = "") -> GrblAnalysis:
+    """Analyse grbl traffic given as (t, bytes) or (t_first, t_read, bytes) chunks."""
+    spec = spec or load_grbl()
+    v = spec.variant(variant)
+    hb, ht = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in host])
+    ub, ut = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in unit])
+    events = HostSplitter(spec).feed(hb)
+    lines = [e for e in events if isinstance(e, HostLine)]
+    realtime = [e for e in events if isinstance(e, RealtimeByte)]
+    ulines, _rest = split_unit(ub, spec)
+    out = _Out()
+    t0 = min([*ht[:1], *ut[:1]], default=0.0)
+
+    def rel(t: float) -> float:
+        return t - t0
+
+    # pair answers with lines, in order
+    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end])
+                 for i, ln in enumerate(lines)]
+    answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error")]
+    k = 0
+    for t_ans, u in answers:
+        if k >= len(exchanges):
+            out.add("unsolicited-answer", rel(t_ans), "warning",
+                    f"{u.text!r} answers no line the sender wrote",
+                    "interface.md §Grbl Response Messages")
+            continue
+        if exchanges[k].t_sent > t_ans + 1e-9:
+            out.add("unsolicited-answer", rel(t_ans), "warning",
+                    f"{u.text!r} came before line {k} ({exchanges[k].text!r}) was complete",
+                    "interface.md §Grbl Response Messages")
+            continue
+        exchanges[k].answer, exchanges[k].t_answer = u.text, t_ans
+        k += 1
+
+    # bytes and lines in flight when each line was complete
+    ends = [e.t_answer for e in exchanges]
+    sizes = [e.size for e in exchanges]
+    answered_bytes = 0
+    answered_n = 0
+    order = sorted((t, i) for i, t in enumerate(ends) if t is not None)
+    j = 0
+    sent_bytes = 0
+    for i, e in enumerate(exchanges):
+        sent_bytes += sizes[i]
+        while j < len(order) and order[j][0] < e.t_sent:
+            answered_bytes += sizes[order[j][1]]
+            answered_n += 1
+            j += 1
+        e.bytes_in_flight = sent_bytes - answered_bytes
+        e.lines_in_flight = i + 1 - answered_n
+
+    # overflow hazards: episodes where what is in flight could exceed the receive buffer
+    limit = v.rx_buffer
+    episode: list[Exchange] = []
+    for e in [*exchanges, None]:
+        if e is not None and e.bytes_in_flight > limit:
+            episode.append(e)
+            continue
+        if episode:
+            worst = max(episode, key=lambda x: x.bytes_in_flight)
+            out.add("rx-overflow-hazard", rel(episode[0].t_sent), "hazard",
+                    f"{worst.bytes_in_flight} bytes in flight (receive buffer {limit}) from line "
+                    f"{episode[0].line} {episode[0].text!r}; {len(episode)} lines sent over the "
+                    "limit: grbl loses what does not fit",
+                    v.cite.get("rx_buffer", ""), first_line=episode[0].line,
+                    max_bytes=worst.bytes_in_flight, lines=len(episode))
+            episode = []
+
+    # errors, alarms, resets
+    meaning = {n: c.name for n, c in spec.errors.items()}
+    for e in exchanges:
+        if e.answer and e.answer.startswith("error:"):
+            code = int(e.answer[6:])
+            later = [x for x in exchanges if x.t_sent > (e.t_answer or e.t_sent)]
+            goes_on = "the sender went on" if later else "the sender stopped after it"
+            out.add("error-response", rel(e.t_answer or e.t_sent), "error",
+                    f"line {e.line} {e.text!r}: error:{code} "
+                    f"({meaning.get(code, 'unknown code')}); {goes_on}",
+                    spec.errors[code].cite if code in spec.errors else "", code=code)
+    for u in ulines:
+        t = ut[u.end]
+        if u.kind == "alarm":
+            name = spec.alarms[u.code].name if u.code in spec.alarms else "unknown alarm"
+            out.add("alarm", rel(t), "error", f"ALARM:{u.code} ({name})",
+                    spec.alarms[u.code].cite if u.code in spec.alarms else "", code=u.code)
+        elif u.kind == "banner" and rel(t) > 0.5:
+            asked = any(0 <= t - ht[r.offset] < 0.5 for r in realtime if r.byte == 0x18)
+            out.add("reset", rel(t), "info" if asked else "warning",
+                    "soft reset by the sender (Ctrl-X)" if asked else
+                    f"grbl restarted unasked: {u.text!r}", "interface.md §Start Up Message")
+    unanswered = [e for e in exchanges if e.answer is None]
+    if unanswered:
+        out.add("unanswered-lines", rel(unanswered[0].t_sent), "error",
+                f"{len(unanswered)} lines got no ok/error, the first line {unanswered[0].line} "
+                f"{unanswered[0].text!r} (lost bytes, a reset, or the capture ended)",
+                "interface.md §Grbl Response Messages", count=len(unanswered))
+
+    # streaming method
+    max_lines = max((e.lines_in_flight for e in exchanges), default=0)
+    max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
+    if not exchanges:
+        method = "none"
+    elif max_lines <= 1:
+        method = "send-response"
+    elif max_bytes <= limit:
+        method = "character-counting"
+    else:
+        method = "unbounded"
+    if method == "unbounded":
+        out.add("streaming-method", 0.0, "warning",
+                f"lines were sent without waiting for answers and without keeping within the "
+                f"{limit}-byte receive buffer (at most {max_bytes} bytes in flight)",
+                v.cite.get("rx_buffer", ""))
+
+    # status polling and the reports
+    polls = [ht[r.offset] for r in realtime if r.byte == 0x3F]
+    reports = [(ut[u.end], u.text) for u in ulines if u.kind == "status"]
+    intervals = [b - a for a, b in zip(polls, polls[1:], strict=False)]
+    rate = (len(polls) - 1) / (polls[-1] - polls[0]) if len(polls) > 1 and polls[-1] > polls[0] else 0.0
+    _starvation(exchanges, reports, v.planner_blocks, rel, out)
+
+    duration = max([*ht[-1:], *ut[-1:]], default=t0) - t0
+    rt_counts: dict[str, int] = {}
+    for r in realtime:
+        name = spec.realtime[r.byte].name if r.byte in spec.realtime else f"0x{r.byte:02X}"
+        rt_counts[name] = rt_counts.get(name, 0) + 1
+    findings = sorted(out.items, key=lambda f: f.t)
+    metrics = {
+        "family": "grbl", "variant": v.id, "lines": len(exchanges),
+        "answered": len(exchanges) - len(unanswered),
+        "ok": sum(1 for e in exchanges if e.answer == "ok"),
+        "errors": sum(1 for e in exchanges if e.answer and e.answer.startswith("error:")),
+        "alarms": out.counts.get("alarm", 0), "duration_s": duration,
+        "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
+        "streaming_method": method, "max_lines_in_flight": max_lines,
+        "max_bytes_in_flight": max_bytes, "rx_buffer": limit,
+        "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
+        "poll_rate_hz": rate,
+        "poll_interval_median_s": statistics.median(intervals) if intervals else None,
+        "finding_counts": dict(sorted(out.counts.items())),
+        "hazards": out.counts.get("rx-overflow-hazard", 0),
+    }
+    return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics)
+
+
+def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blocks: int,
+                rel: Any, out: _Out) -> None:
+    """The planner ran dry mid-job: a report says Idle (or Bf: shows every block free while
+    running) after the first motion line and before the sender's last line."""
+    motion = [e for e in exchanges if e.text[:2].upper() in ("G0", "G1", "G2", "G3")
+              or e.text[:3].upper() in ("$J=",)]
+    if len(motion) < 2:
+        return
+    t_first, t_last = motion[0].t_answer or motion[0].t_sent, motion[-1].t_sent
+    for t, text in reports:
+        if not (t_first < t < t_last):
+            continue
+        fields = text.strip("<>").split("|")
+        state = fields[0]
+        bf = next((f[3:] for f in fields if f.startswith("Bf:")), None)
+        free = int(bf.split(",")[0]) if bf else None
+        if state == "Idle" or (state == "Run" and free is not None and free >= blocks):
+            out.add("planner-starved", rel(t), "warning",
+                    f"the planner ran dry mid-job ({text}): the sender did not keep it fed",
+                    "interface.md §Buffer State; planner.h BLOCK_BUFFER_SIZE")
+
+
+def analyze_capture(path: str, *, variant: str | None = None, detected: str = "",
+                    **_ignored: Any) -> GrblAnalysis:
+    """Analyse a capture file of grbl traffic."""
+    from conform.analysis.rawread import read_raw
+
+    return analyze_raw(read_raw(path), path, variant=variant, detected=detected)
+
+
+def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: str = ""
+                ) -> GrblAnalysis:
+    """Analyse the raw directions of a capture already read (conform.analysis.rawread)."""
+    session = raw.metadata.get("conform.session", {})
+    spec = load_grbl()
+    vid = variant or str(session.get("variant", "") or "")
+    notes = []
+    if vid not in spec.variants:
+        if vid:
+            notes.append(f"variant {vid!r} is not a grbl variant; analysed as {DEFAULT_VARIANT}")
+        vid = DEFAULT_VARIANT
+
+    def chunks(d: Any) -> list[tuple[float, float, bytes]]:
+        data = d.data.tobytes()
+        return [(float(f), float(r), data[s:s + n]) for s, n, f, r in
+                zip(d.start.tolist(), d.length.tolist(), d.t_first.tolist(), d.t_read.tolist(),
+                    strict=True)]
+
+    a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, spec=spec, path=path,
+                        detected=detected)
+    a.notes += notes
+    if not raw.status.complete:
+        a.notes.append(f"capture incomplete: {raw.status.problem}")
+    return a
+
+
+def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
+    """findings.json and summary.md in ``directory``."""
+    from conform.errors import UserError
+
+    d = Path(directory)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "findings.json").write_text(json.dumps(a.to_json(), indent=1, default=str),
+                                         encoding="utf-8")
+        lines = [f"# grbl capture analysis: {a.path}", "", f"family: grbl ({a.detected})", ""]
+        lines += [f"- {k}: {v}" for k, v in a.metrics.items() if k != "finding_counts"]
+        lines += ["", "## Findings", ""]
+        lines += [f"- {f.t:.4f} s {f.severity} {f.kind}: {f.message} [{f.clause}]"
+                  for f in a.findings] or ["none"]
+        (d / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
+    return {"json": d / "findings.json", "md": d / "summary.md"}
