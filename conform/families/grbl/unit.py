@@ -435,6 +435,9 @@ class GrblUnit:
         elif effect == "jog-cancel":
             if self.state == "Jog":
                 self._cancel_jog(t)
+        elif effect == "spindle-stop":
+            if self.state == "Hold":
+                self.spindle_stopped = not self.spindle_stopped
         elif effect.startswith(("feed", "rapid", "spindle=", "spindle+", "spindle-")):
             self._override(effect)
         elif effect == "flood" and self.state in ("Idle", "Run", "Hold"):
@@ -528,6 +531,7 @@ class GrblUnit:
         self.prb = getattr(self, "prb", [0.0] * 3)
         self.prb_ok = getattr(self, "prb_ok", False)
         self.ov_feed = self.ov_rapid = self.ov_spindle = 100
+        self.spindle_stopped = False
         self._wco_counter = self._ovr_counter = 0
         if self.state in ("Alarm", "Sleep") or (power_up and self.settings[22]):
             self.state = "Alarm"
@@ -552,9 +556,7 @@ class GrblUnit:
 
     # ============================================================ status report
     def _status_report(self, t: float) -> bytes:
-        pos, v = self.planner.where(t)
-        if self.state == "Check":
-            pos = list(self._check_pos)
+        pos, v = self.planner.where(t)   # the machine's position (check mode moves nothing)
         inches = bool(self.settings[13])
         name = self.state
         if self.state in ("Hold", "Door"):
