@@ -168,6 +168,9 @@ class GrblUnit:
         """Move bytes from the ring into the line buffer until a line ends."""
         while self.rx:
             c = self.rx.popleft()
+            after_cr, self._after_cr = self._after_cr, c == 0x0D
+            if c == 0x0A and after_cr and not self.v.crlf_is_two_lines:
+                continue                     # a build that takes CR LF as one line end
             if c in (0x0A, 0x0D):
                 text, overflow = "".join(self._line), self._overflow
                 self._line, self._overflow, self._paren, self._semi = [], False, False, False
@@ -514,7 +517,7 @@ class GrblUnit:
         self.planner.clear(pos)
         self.rx: deque[int] = deque()
         self._line: list[str] = []
-        self._overflow = self._paren = self._semi = False
+        self._overflow = self._paren = self._semi = self._after_cr = False
         self._pending: tuple[Any, ...] | None = None
         self._busy: tuple[Any, ...] | None = None
         self._busy_until: float | None = None
