@@ -106,7 +106,7 @@ def test_status_mask_and_refresh_counters():
     assert say(u, b"?", 0.3)[0].endswith("|Ov:100,100,100>")
     for k in range(8):
         assert "WCO" not in say(u, b"?", 0.4 + k * 0.1)[0]
-    assert "WCO:" in say(u, b"?", 1.3)[0]   # the 10th report when idle
+    assert "WCO:" in say(u, b"?", 1.3)[0]   # every 10th report when idle: the 11th
 
 
 def test_repeated_queries_before_a_report_merge():
