@@ -91,3 +91,18 @@ def test_registry_and_detection():
     noise = detect_family(b"AT+CSQ\r\n" * 40, b"+CSQ: 20,99\r\nOK\r\n" * 40)
     assert noise.family == "unknown"
     assert detect_family(b"", b"", {"variant": "grbl-1.1f"}).family == "grbl"
+
+
+def test_spec_commands_show_grbl():
+    from click.testing import CliRunner
+
+    from conform.cli.main import cli
+
+    r = CliRunner()
+    listed = r.invoke(cli, ["spec", "list"])
+    assert listed.exit_code == 0 and "grbl-1.1f" in listed.output and "gve64-v19" in listed.output
+    shown = r.invoke(cli, ["spec", "show", "grbl-1.1f", "settings"], terminal_width=200)
+    assert shown.exit_code == 0 and "$130" in shown.output and "step pulse time" in shown.output
+    assert r.invoke(cli, ["spec", "show", "grbl-1.1f", "bogus"]).exit_code != 0
+    checked = r.invoke(cli, ["spec", "check"])
+    assert checked.exit_code == 0 and "grbl: 1 variant, 36 error codes" in checked.output

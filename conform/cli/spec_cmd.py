@@ -72,6 +72,13 @@ def _other_families() -> None:
 @click.argument("command", required=False)
 def show_cmd(variant: str, command: str | None) -> None:
     """Show a variant's commands (or one command) with ranges and manual clauses."""
+    from conform.families import family_for_variant
+
+    if family_for_variant(variant).name == "grbl":
+        from conform.families.grbl.show import show
+
+        show(variant, command, _console())
+        return
     spec = load_spec()
     v = spec.variant(variant)
     console = _console()
@@ -148,3 +155,10 @@ def check_cmd(root: str | None) -> None:
     n = sum(len(v.commands) for v in spec.variants.values())
     click.echo(f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
                f"({n} variant commands), {len(spec.questions)} open questions, {len(spec.examples)} examples")
+    if root is None:
+        from conform.families.grbl.tables import load_grbl
+
+        g = load_grbl()
+        click.echo(f"ok: grbl: {len(g.variants)} variant, {len(g.errors)} error codes, "
+                   f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
+                   f"{len(g.commands)} $ commands, {len(g.examples)} examples")
