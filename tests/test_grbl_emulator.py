@@ -57,7 +57,9 @@ def emulator():
 def test_answers_like_grbl_over_a_pty(emulator):
     port = serial.Serial(emulator, 115200, timeout=0.05)
     try:
-        assert read_lines(port, 2) == ["", V.banner]                 # on open (power-up)
+        # the power-up banner went out when the emulator started; pyserial flushes its input on
+        # open, so whether this open still sees it is a race (no DTR reset on a pty)
+        assert read_lines(port, 2, timeout=0.3) in ([], ["", V.banner])
         port.write(b"\x18")
         assert read_lines(port, 2) == ["", V.banner]                 # on Ctrl-X
         port.write(b"$$\n")
