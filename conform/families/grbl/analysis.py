@@ -187,7 +187,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         if u.kind == "alarm":
             name = spec.alarms[u.code].name if u.code in spec.alarms else "unknown alarm"
             out.add("alarm", rel(t), "error", f"ALARM:{u.code} ({name})",
-                    spec.alarms[u.code].cite if u.code in spec.alarms else "", code=u.code)
+                    spec.alarms[u.code].cite if u.code in spec.alarms else "", code=u.code,
+                    t_abs=t)
         elif u.kind == "banner" and rel(t) > 0.5:
             asked = any(0 <= t - ht[r.offset] < 0.5 for r in realtime if r.byte == 0x18)
             out.add("reset", rel(t), "info" if asked else "warning",
