@@ -131,3 +131,24 @@ def test_an_overflowing_sender_is_caught_by_analyze(tmp_path):
     assert "protocol family grbl" in p.stdout
     assert "hazard  rx-overflow-hazard" in p.stdout
     assert "streaming unbounded" in p.stdout
+
+
+@pytest.mark.slow
+def test_proxy_in_front_of_the_emulator_records_the_overflow(tmp_path):
+    cap = tmp_path / "proxy.mcap"
+    emu, path = start()
+    proxy = subprocess.Popen([sys.executable, "-m", "conform", "proxy", "--unit", path, "-o",
+                              str(cap), "--variant", "grbl-1.1f"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        host_path = proxy.stdout.readline().strip()
+        assert host_path.startswith("/dev/"), proxy.stderr.read()
+        subprocess.run([sys.executable, "-c", SENDER, host_path], timeout=60, check=True)
+    finally:
+        stop(proxy)
+        stop(emu)
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(cap)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert "protocol family grbl (variant grbl-1.1f)" in p.stdout
+    assert "rx-overflow-hazard" in p.stdout
