@@ -216,15 +216,19 @@ def parse(line: str, state: Modal, position: list[float], *, jog: bool = False,
             if letter == "T" and value > tool_max:
                 raise _fail(38)
             values[letter] = value
-    if jog:
-        allowed = {"distance", "units", "nonmodal"}
-        if m_groups or any(g not in allowed for g in groups) or (
-                "nonmodal" in groups and groups["nonmodal"] != "53"):
-            raise _fail(16)
-        if set(values) - set("FNXYZ"):
-            raise _fail(16)
     return _check(groups, m_groups, values, axis_command, state, position, jog,
                   line_number_max)
+
+
+def _jog_words(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, float]
+               ) -> None:
+    """A jog carries only G20/G21, G90/G91, G53, N, F and axis words (jogging.md)."""
+    allowed = {"distance", "units", "nonmodal"}
+    if m_groups or any(g not in allowed for g in groups) or (
+            "nonmodal" in groups and groups["nonmodal"] != "53"):
+        raise _fail(16)
+    if set(values) - set("FNXYZ"):
+        raise _fail(16)
 
 
 def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, float],
@@ -252,7 +256,8 @@ def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, f
     feed = state.feed
     if jog:
         if "F" not in values:
-            raise _fail(22)
+            raise _fail(22)       # gcode.c checks the jog's F before its words
+        _jog_words(groups, m_groups, values)
         feed = values["F"] * scale
     elif inverse:
         if axis_command == "motion" and motion not in ("0", "80") and "F" not in values:
