@@ -74,3 +74,21 @@ def test_conform_run_on_the_emulator_writes_reports(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
                           "emu:grbl-1.1f:nonsense"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "no deviant units" in bad.stderr
+
+
+def test_characterize_reads_what_the_build_does(tmp_path):
+    from conform.families.grbl.characterize import characterize, write_profile
+
+    obs = {o.name: o for o in characterize(EmuTarget(lambda: BigRing(), "emu:deviant"), V.id)}
+    assert obs["rx_buffer"].observed == 256 and not obs["rx_buffer"].same
+    assert obs["crlf_is_two_lines"].observed is False
+    assert all(obs[n].same for n in ("version", "build", "planner_blocks", "line_max"))
+    path = tmp_path / "p.toml"
+    write_profile(list(obs.values()), str(path), target="emu:deviant", variant=V.id)
+    import tomllib
+
+    prof = tomllib.loads(path.read_text())
+    assert prof["observed"]["rx_buffer"] == 256 and prof["table"]["rx_buffer"] == 128
+    p = subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:grbl-1.1f", "-o",
+                        str(tmp_path / "q.toml")], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "0 item(s) differ" in p.stdout

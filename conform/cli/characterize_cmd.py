@@ -24,6 +24,13 @@ from conform.spec import load_spec
 def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: bool,
         max_steps: int | None, allow_eeprom: bool) -> None:
     """Probe the open questions A1–A29 and write what the unit actually does."""
+    from conform.families import is_family_variant
+
+    if is_family_variant(variant or parse_target(target)[1], "grbl"):
+        from conform.families.grbl.characterize import run
+
+        run(target, output, variant, baud, echo=click.echo)
+        return
     spec = load_spec()
     if allow_motion and max_steps is None:
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
