@@ -122,3 +122,20 @@ def test_gve_capture_stays_with_the_gve_analyser(tmp_path):
     p = analyze_cli(path)
     assert p.returncode == 0, p.stderr
     assert "protocol" not in p.stdout and "exchanges" in p.stdout
+
+
+def test_the_two_host_splitters_agree():
+    import random
+
+    from conform.families.grbl.codec import HostLine, HostSplitter, split_host
+
+    rng = random.Random(1)
+    for _ in range(300):
+        data = bytes(rng.choice(b"G1X-0.5\n\r?!~\x18\x85\xa0 (;)$=") for _ in range(rng.randrange(300)))
+        splitter = HostSplitter()
+        events = splitter.feed(data[:40]) + splitter.feed(data[40:])      # fed in pieces
+        lines, realtime = split_host(data)
+        assert [(x.data, x.start, x.end) for x in events if isinstance(x, HostLine)] == [
+            (x.data, x.start, x.end) for x in lines]
+        assert [(x.byte, x.offset) for x in events if not isinstance(x, HostLine)] == [
+            (x.byte, x.offset) for x in realtime]

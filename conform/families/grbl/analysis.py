@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.families.grbl.codec import HostLine, HostSplitter, RealtimeByte, split_unit
+from conform.families.grbl.codec import split_host, split_unit
 from conform.families.grbl.tables import GrblSpec, load_grbl
 
 MAX_LISTED = 50
@@ -84,20 +84,21 @@ class _Out:
             self.items.append(Finding(kind, round(t, 6), severity, message, clause, extra))
 
 
-def _byte_times(chunks: list[tuple[float, float, bytes]]) -> tuple[bytes, list[float]]:
+def _byte_times(chunks: list[tuple[float, float, bytes]]) -> tuple[bytes, Any]:
     """All bytes of a direction and each byte's arrival time (spread from first to last)."""
-    data = bytearray()
-    times: list[float] = []
-    for t_first, t_read, b in chunks:
-        n = len(b)
-        if n == 0:
-            continue
-        t0 = t_first if t_first == t_first else t_read
-        step = (t_read - t0) / (n - 1) if n > 1 and t_read > t0 else 0.0
-        times.extend(t0 + i * step for i in range(n))
-        data += b
-    return bytes(data), times
+    import numpy as np
 
+    chunks = [c for c in chunks if c[2]]
+    if not chunks:
+        return b"", np.zeros(0)
+    n = np.array([len(c[2]) for c in chunks], np.int64)
+    t_read = np.array([c[1] for c in chunks], float)
+    t_first = np.array([c[0] for c in chunks], float)
+    t_first = np.where(np.isnan(t_first), t_read, t_first)
+    step = np.where((n > 1) & (t_read > t_first), (t_read - t_first) / np.maximum(n - 1, 1), 0.0)
+    first = np.concatenate([[0], np.cumsum(n)[:-1]])
+    k = np.arange(int(n.sum())) - np.repeat(first, n)
+    return b"".join(c[2] for c in chunks), np.repeat(t_first, n) + np.repeat(step, n) * k
 
 def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                     unit: list[Chunk] | list[tuple[float, float, bytes]], *,
@@ -108,9 +109,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     v = spec.variant(variant)
     hb, ht = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in host])
     ub, ut = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in unit])
-    events = HostSplitter(spec).feed(hb)
-    lines = [e for e in events if isinstance(e, HostLine)]
-    realtime = [e for e in events if isinstance(e, RealtimeByte)]
+    lines, realtime = split_host(hb, spec)
+    ht, ut = ht.tolist(), ut.tolist()
     ulines, _rest = split_unit(ub, spec)
     out = _Out()
     t0 = min([*ht[:1], *ut[:1]], default=0.0)
@@ -173,10 +173,11 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
 
     # errors, alarms, resets
     meaning = {n: c.name for n, c in spec.errors.items()}
+    last_sent = exchanges[-1].t_sent if exchanges else 0.0
     for e in exchanges:
         if e.answer and e.answer.startswith("error:"):
             code = int(e.answer[6:])
-            later = [x for x in exchanges if x.t_sent > (e.t_answer or e.t_sent)]
+            later = last_sent > (e.t_answer or e.t_sent)    # lines go out in time order
             goes_on = "the sender went on" if later else "the sender stopped after it"
             out.add("error-response", rel(e.t_answer or e.t_sent), "error",
                     f"line {e.line} {e.text!r}: error:{code} "

@@ -44,7 +44,7 @@ class HostSplitter:
     spec: GrblSpec = field(default_factory=load_grbl)
     offset: int = 0
     _buf: bytearray = field(default_factory=bytearray)
-    _start: int = 0
+    _start: int = 0     # offset of the current line's first byte
 
     def feed(self, data: bytes) -> list[HostLine | RealtimeByte]:
         out: list[HostLine | RealtimeByte] = []
@@ -53,9 +53,9 @@ class HostSplitter:
             if b in rt or b > 0x7F:
                 out.append(RealtimeByte(b, self.offset))
             elif b in (0x0A, 0x0D):
-                out.append(HostLine(bytes(self._buf), self._start, self.offset, bytes([b])))
+                start = self._start if self._buf else self.offset
+                out.append(HostLine(bytes(self._buf), start, self.offset, bytes([b])))
                 self._buf.clear()
-                self._start = self.offset + 1
             else:
                 if not self._buf:
                     self._start = self.offset
@@ -66,6 +66,32 @@ class HostSplitter:
     @property
     def partial(self) -> bytes:
         return bytes(self._buf)
+
+
+def split_host(data: bytes, spec: GrblSpec | None = None
+               ) -> tuple[list[HostLine], list[RealtimeByte]]:
+    """The whole host stream at once (numpy): the same lines and realtime bytes as
+    :class:`HostSplitter`, for long captures."""
+    import numpy as np
+
+    spec = spec or load_grbl()
+    arr = np.frombuffer(data, np.uint8)
+    rt_mask = arr > 0x7F
+    for b in spec.realtime:
+        if b <= 0x7F:
+            rt_mask |= arr == b
+    rt_at = np.flatnonzero(rt_mask)
+    realtime = [RealtimeByte(int(arr[i]), int(i)) for i in rt_at.tolist()]
+    orig = np.flatnonzero(~rt_mask)
+    kept = arr[orig]
+    ends = np.flatnonzero((kept == 0x0A) | (kept == 0x0D))
+    starts = np.concatenate([[0], ends[:-1] + 1]) if len(ends) else np.zeros(0, np.int64)
+    raw = kept.tobytes()
+    lines = []
+    for a, e in zip(starts.tolist(), ends.tolist(), strict=True):
+        start = int(orig[a]) if a < e else int(orig[e])
+        lines.append(HostLine(raw[a:e], start, int(orig[e]), raw[e:e + 1]))
+    return lines, realtime
 
 
 @dataclass
