@@ -37,7 +37,7 @@ class Finding:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
+@dataclass(slots=True)
 class Exchange:
     line: int
     text: str
@@ -137,22 +137,21 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         exchanges[k].answer, exchanges[k].t_answer = u.text, t_ans
         k += 1
 
-    # bytes and lines in flight when each line was complete
-    ends = [e.t_answer for e in exchanges]
-    sizes = [e.size for e in exchanges]
-    answered_bytes = 0
-    answered_n = 0
-    order = sorted((t, i) for i, t in enumerate(ends) if t is not None)
-    j = 0
-    sent_bytes = 0
-    for i, e in enumerate(exchanges):
-        sent_bytes += sizes[i]
-        while j < len(order) and order[j][0] < e.t_sent:
-            answered_bytes += sizes[order[j][1]]
-            answered_n += 1
-            j += 1
-        e.bytes_in_flight = sent_bytes - answered_bytes
-        e.lines_in_flight = i + 1 - answered_n
+    # bytes and lines in flight when each line was complete: everything sent so far minus
+    # the lines answered strictly before it (vectorised: answers sorted by time)
+    import numpy as np
+
+    sizes = np.fromiter((e.size for e in exchanges), np.int64, len(exchanges))
+    t_sent = np.fromiter((e.t_sent for e in exchanges), float, len(exchanges))
+    done = [(e.t_answer, e.size) for e in exchanges if e.t_answer is not None]
+    done.sort()
+    t_done = np.fromiter((d[0] for d in done), float, len(done))
+    cum = np.concatenate([[0], np.cumsum([d[1] for d in done], dtype=np.int64)])
+    j = np.searchsorted(t_done, t_sent, side="left")
+    in_bytes = (np.cumsum(sizes) - cum[j]).tolist()
+    in_lines = (np.arange(1, len(exchanges) + 1) - j).tolist()
+    for e, b, n in zip(exchanges, in_bytes, in_lines, strict=True):
+        e.bytes_in_flight, e.lines_in_flight = b, n
 
     # overflow hazards: episodes where what is in flight could exceed the receive buffer
     limit = v.rx_buffer

@@ -15,7 +15,7 @@ from conform.families import Detection
 from conform.families.grbl.tables import GrblSpec, load_grbl
 
 
-@dataclass
+@dataclass(slots=True)
 class HostLine:
     """One line the sender wrote: its bytes (without the terminator), where it began and
     where its terminator was, as stream offsets."""
@@ -31,7 +31,7 @@ class HostLine:
         return len(self.data) + 1
 
 
-@dataclass
+@dataclass(slots=True)
 class RealtimeByte:
     byte: int
     offset: int
@@ -94,7 +94,7 @@ def split_host(data: bytes, spec: GrblSpec | None = None
     return lines, realtime
 
 
-@dataclass
+@dataclass(slots=True)
 class UnitLine:
     text: str
     kind: str
@@ -114,6 +114,10 @@ def split_unit(data: bytes, spec: GrblSpec | None = None) -> tuple[list[UnitLine
             break
         raw = data[pos:nl].rstrip(b"\r")
         text = raw.decode("latin-1")
+        if text == "ok":                 # most lines of a stream: skip the pattern table
+            out.append(UnitLine(text, "ok", None, pos, nl))
+            pos = nl + 1
+            continue
         kind, m = spec.classify(text) if text else ("blank", None)
         code = None
         if kind in ("error", "alarm") and m is not None:
