@@ -44,6 +44,8 @@ def test_uncounted_lines_overflow_and_are_caught():
     assert u.lost > 0
     kinds = a.kinds()
     assert kinds["rx-overflow-hazard"] >= 1
+    assert a.metrics["streaming_method"] == "character-counting"     # counting, overshot
+    assert any("outside the count" in f.message for f in a.findings)
     hazard = a.hazards()[0]
     assert hazard.extra["max_bytes"] > 128 and "receive buffer 128" in hazard.message
     assert kinds.get("error-response", 0) + kinds.get("unanswered-lines", 0) >= 1

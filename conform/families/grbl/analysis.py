@@ -204,11 +204,12 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     # streaming method
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
+    over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
     if not exchanges:
         method = "none"
     elif max_lines <= 1:
         method = "send-response"
-    elif max_bytes <= limit:
+    elif over * 2 < len(exchanges):
         method = "character-counting"
     else:
         method = "unbounded"
@@ -216,6 +217,12 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         out.add("streaming-method", 0.0, "warning",
                 f"lines were sent without waiting for answers and without keeping within the "
                 f"{limit}-byte receive buffer (at most {max_bytes} bytes in flight)",
+                v.cite.get("rx_buffer", ""))
+    elif method == "character-counting" and over:
+        out.add("streaming-method", 0.0, "warning",
+                f"character counting that overshot the {limit}-byte receive buffer at {over} "
+                f"lines (at most {max_bytes} bytes): something is sent outside the count, such "
+                "as a polling thread's $G or a realtime byte followed by a newline",
                 v.cite.get("rx_buffer", ""))
 
     # status polling and the reports

@@ -495,6 +495,9 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
     runs = []
     for text in plan:
         kind, what, mutant = parse_target(text)
+        if kind == "emu" and what and what not in spec.variants:
+            raise UserError(f"target {text!r} is not a grbl unit: run GVE and grbl targets "
+                            "separately")
         vid = variant or (what if kind == "emu" else None) or next(iter(spec.variants))
         spec.variant(vid)
         if list_only:
