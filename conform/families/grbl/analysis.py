@@ -205,11 +205,16 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
     over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
+    # after a byte is lost its line is never answered and every later count looks inflated,
+    # so the method is judged on the lines before the first overshoot
+    first_over = next((i for i, e in enumerate(exchanges) if e.bytes_in_flight > limit),
+                      len(exchanges))
     if not exchanges:
         method = "none"
     elif max_lines <= 1:
         method = "send-response"
-    elif over * 2 < len(exchanges):
+    elif first_over >= min(20, len(exchanges)) and any(
+            e.lines_in_flight > 1 for e in exchanges[:first_over]):
         method = "character-counting"
     else:
         method = "unbounded"
