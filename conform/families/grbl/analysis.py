@@ -205,16 +205,19 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
     over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
-    # after a byte is lost its line is never answered and every later count looks inflated,
-    # so the method is judged on the lines before the first overshoot
-    first_over = next((i for i, e in enumerate(exchanges) if e.bytes_in_flight > limit),
-                      len(exchanges))
+    # a sender that counts waits for an answer before it sends more once the buffer is full:
+    # most of its lines follow an answer that came after its previous line. One that does not
+    # count sends in bursts, whatever comes back. (Counting bytes in flight alone would
+    # mislead: after a byte is lost, its line is never answered and every later count looks
+    # inflated.)
+    n_done = np.searchsorted(t_done, t_sent, side="right")
+    paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
+    share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
     if not exchanges:
         method = "none"
     elif max_lines <= 1:
         method = "send-response"
-    elif first_over >= min(20, len(exchanges)) and any(
-            e.lines_in_flight > 1 for e in exchanges[:first_over]):
+    elif share >= 0.5:
         method = "character-counting"
     else:
         method = "unbounded"
@@ -250,7 +253,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "errors": sum(1 for e in exchanges if e.answer and e.answer.startswith("error:")),
         "alarms": out.counts.get("alarm", 0), "duration_s": duration,
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
-        "streaming_method": method, "max_lines_in_flight": max_lines,
+        "streaming_method": method, "paced_share": round(share, 3),
+        "max_lines_in_flight": max_lines,
         "max_bytes_in_flight": max_bytes, "rx_buffer": limit,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
