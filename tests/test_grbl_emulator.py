@@ -152,3 +152,19 @@ def test_proxy_in_front_of_the_emulator_records_the_overflow(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "protocol family grbl (variant grbl-1.1f)" in p.stdout
     assert "rx-overflow-hazard" in p.stdout
+
+
+def test_faults_apply_to_the_grbl_emulator():
+    proc, path = start("--faults", "unit.corrupt=1", "--seed", "1")
+    try:
+        port = serial.Serial(path, 115200, timeout=0.05)
+        read_lines(port, 2, timeout=0.3)
+        port.write(b"$I\n")
+        got = b""
+        end = time.monotonic() + 3
+        while len(got) < 30 and time.monotonic() < end:
+            got += port.read(256)
+        port.close()
+    finally:
+        stop(proc)
+    assert len(got) >= 30 and b"VER" not in got and b"ok" not in got   # every byte flipped
