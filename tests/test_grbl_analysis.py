@@ -101,9 +101,19 @@ def test_analyze_detects_grbl_from_the_traffic(tmp_path):
     u, traffic, _ = run("counting", extra={40: "$G", 41: "$G"}, timeout=60)
     path = tmp_path / "noname.mcap"
     record(path, traffic.host, traffic.unit)              # no variant in the metadata
-    p = analyze_cli(path)
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(path), "--report",
+                        str(tmp_path / "rep"), "--parquet", str(tmp_path / "pq")],
+                       capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
     assert "protocol family grbl (" in p.stdout and "grbl messages" in p.stdout
+    import json
+
+    import pyarrow.parquet as pq
+
+    ex = pq.read_table(tmp_path / "pq" / "exchanges.parquet").to_pydict()
+    assert max(ex["bytes_in_flight"]) > 128 and ex["answer"][0] == "ok"
+    found = json.loads((tmp_path / "rep" / "findings.json").read_text())
+    assert found["family"] == "grbl" and found["metrics"]["hazards"] >= 1
     assert "rx-overflow-hazard" in p.stdout
     assert "not a hex digit" not in p.stdout
 

@@ -63,7 +63,8 @@ def detect_capture(path: str, variant: str | None) -> Detection | None:
     return divert(host, unit, meta, variant)
 
 
-def analyze_other_family(path: str, variant: str | None, report_dir: str | None) -> bool:
+def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
+                         parquet_dir: str | None = None) -> bool:
     """Analyse ``path`` with its family if it is not GVE traffic; False leaves it to GVE."""
     d = detect_capture(path, variant)
     if d is None:
@@ -71,7 +72,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None)
     if d.family == "unknown":
         click.echo(f"{path}: protocol unknown ({d.why}); not analysed as GVE or grbl traffic")
         return True
-    from conform.families.grbl.analysis import analyze_capture, write_report
+    from conform.families.grbl.analysis import analyze_capture, write_parquet, write_report
 
     click.echo(f"{path}: protocol family {d.family} ({d.why})")
     a = analyze_capture(path, variant=variant if variant and d.family == "grbl" else None,
@@ -91,4 +92,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None)
     if report_dir:
         paths = write_report(a, report_dir)
         click.echo(f"report: {paths['md']}")
+    if parquet_dir:
+        write_parquet(a, parquet_dir)
+        click.echo(f"tables: {parquet_dir}")
     return True

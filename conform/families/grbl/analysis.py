@@ -339,3 +339,35 @@ def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     except OSError as exc:
         raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
     return {"json": d / "findings.json", "md": d / "summary.md"}
+
+
+def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:
+    """exchanges.parquet (one row per line sent) and findings.parquet in ``directory``."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from conform.errors import UserError
+
+    d = Path(directory)
+    ex = a.exchanges
+    t0 = min((e.t_sent for e in ex), default=0.0)
+    tables = {
+        "exchanges": pa.table({
+            "line": [e.line for e in ex], "text": [e.text for e in ex],
+            "bytes": [e.size for e in ex], "t_sent": [e.t_sent - t0 for e in ex],
+            "answer": [e.answer for e in ex],
+            "t_answer": [None if e.t_answer is None else e.t_answer - t0 for e in ex],
+            "lines_in_flight": [e.lines_in_flight for e in ex],
+            "bytes_in_flight": [e.bytes_in_flight for e in ex]}),
+        "findings": pa.table({
+            "t": [f.t for f in a.findings], "kind": [f.kind for f in a.findings],
+            "severity": [f.severity for f in a.findings],
+            "message": [f.message for f in a.findings], "clause": [f.clause for f in a.findings]}),
+    }
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        for name, table in tables.items():
+            pq.write_table(table, d / f"{name}.parquet")
+    except OSError as exc:
+        raise UserError(f"{d}: cannot write the tables: {exc.strerror or exc}") from None
+    return {name: d / f"{name}.parquet" for name in tables}
