@@ -223,3 +223,12 @@ def test_never_dies_of_what_a_sender_sends():
         u.receive(data, t)
         for due, out in u.poll(t):
             assert due <= t + 1e-9 and out.endswith(b"\r\n")
+
+
+def test_the_parser_waits_for_a_probe():
+    u = fresh()
+    u.receive(b"G38.3Z-1F60\nG90\n", 0.1)
+    assert [d for _, d in u.poll(0.5)] == []           # neither answered while probing
+    out = say(u, b"", 2.0)
+    assert out == ["ok", "ok"]                         # G38.3: no alarm without contact
+    assert say(u, b"$#\n", 2.1)[-2] == "[PRB:0.000,0.000,-1.000:0]"

@@ -131,8 +131,8 @@ class GrblUnit:
         return best
 
     def _ready_to_parse(self) -> bool:
-        return (bool(self.rx) and self._pending is None and self._busy_until is None
-                and not self._critical and self.state != "Sleep")
+        return (bool(self.rx) and self._pending is None and self._busy is None
+                and self._busy_until is None and not self._critical and self.state != "Sleep")
 
     def _step(self, t: float) -> None:
         if self._report_at is not None and self._report_at <= t:
@@ -292,8 +292,7 @@ class GrblUnit:
         if block.kind == "probe":
             self._plan(block, t, False)
             self._busy_until = None
-            self._busy = ("probe", startup, block)
-            self._probe_wait = True
+            self._busy = ("probe", startup, block)   # the parser waits for the probe
             return
         if block.kind in ("line", "arc", "home28", "home30"):
             self._plan(block, t, False)
@@ -526,7 +525,6 @@ class GrblUnit:
         self._critical = False
         self._carry_speed = 0.0
         self._jog_cancel = False
-        self._probe_wait = False
         self.hold_sub = 0
         ee = self.eeprom_coords
         self.modal = Modal(coords=[list(c) for c in ee.coords], g28=list(ee.g28), g30=list(ee.g30))
