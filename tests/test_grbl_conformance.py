@@ -92,3 +92,14 @@ def test_characterize_reads_what_the_build_does(tmp_path):
     p = subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:grbl-1.1f", "-o",
                         str(tmp_path / "q.toml")], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0 and "0 item(s) differ" in p.stdout
+
+
+def test_the_stop_is_confirmed_by_the_banner():
+    from conform.families.grbl.checks import _stop
+
+    target = EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f")
+    target.send(b"G1X-20F300\n")
+    target.wait(0.5)
+    assert target.unit.state == "Run"
+    assert _stop(target).startswith("stopped")
+    assert target.unit.state == "Alarm" and not target.unit.planner.blocks   # ALARM:3: moved

@@ -469,16 +469,24 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
                        log=list(s.target.log), duration=time.perf_counter() - t0, **base)
 
 
-def _stop(target: Any) -> str:
-    """Feed hold, then a soft reset: the machine stops and the queue is gone."""
-    sent = []
-    for b in STOP:
+def _stop(target: Any, attempts: int = 3) -> str:
+    """Feed hold, then a soft reset, until grbl acknowledges with its banner: the machine
+    stands and the planner and receive buffer are empty."""
+    notes = []
+    for _ in range(attempts):
         try:
-            target._write(b)
-            sent.append(repr(b))
-        except Exception as exc:  # noqa: BLE001 - report, keep trying the next byte
-            sent.append(f"{b!r} not sent ({exc})")
-    return "stopped with " + ", ".join(sent)
+            target._write(b"!")
+            target._write(b"\x18")
+            deadline = target.now() + 2.0
+            buf = b""
+            while target.now() < deadline and b"for help]" not in buf:
+                buf += target._read(deadline)
+            if b"for help]" in buf:
+                return "stopped: feed hold and soft reset, acknowledged by the banner"
+            notes.append("no banner after the reset")
+        except Exception as exc:  # noqa: BLE001 - report, try again
+            notes.append(f"not sent ({exc})")
+    return "stop NOT acknowledged: " + "; ".join(notes)
 
 
 def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
