@@ -102,4 +102,6 @@ def test_the_stop_is_confirmed_by_the_banner():
     target.wait(0.5)
     assert target.unit.state == "Run"
     assert _stop(target).startswith("stopped")
-    assert target.unit.state == "Alarm" and not target.unit.planner.blocks   # ALARM:3: moved
+    # held until still, then reset: no ALARM:3, so Idle (not Alarm) and the position is kept
+    assert target.unit.state == "Idle" and not target.unit.planner.blocks
+    assert -20.0 < target.unit.position[0] < 0.0

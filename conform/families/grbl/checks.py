@@ -469,6 +469,19 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
                        log=list(s.target.log), duration=time.perf_counter() - t0, **base)
 
 
+def _until_still(target: Any, seconds: float) -> None:
+    """Ask '?' until grbl reports Hold:0, Idle, Alarm or Door:0 (or the time is up)."""
+    deadline = target.now() + seconds
+    while target.now() < deadline:
+        target._write(b"?")
+        buf = b""
+        end = min(deadline, target.now() + 0.2)
+        while target.now() < end:
+            buf += target._read(end)
+        if any(s in buf for s in (b"<Hold:0|", b"<Idle|", b"<Alarm|", b"<Door:0|")):
+            return
+
+
 def _stop(target: Any, attempts: int = 3) -> str:
     """Feed hold, then a soft reset, until grbl acknowledges with its banner: the machine
     stands and the planner and receive buffer are empty."""
@@ -476,6 +489,7 @@ def _stop(target: Any, attempts: int = 3) -> str:
     for _ in range(attempts):
         try:
             target._write(b"!")
+            _until_still(target, 5.0)   # a reset after the stop keeps the position (no ALARM:3)
             target._write(b"\x18")
             deadline = target.now() + 2.0
             buf = b""
