@@ -74,3 +74,21 @@ def test_a_sender_that_overflows_the_buffer_fails(tmp_path):
     assert g["alarm/alarm-stops"] is Grade.FAIL
     failed = next(c for c in run.checks if c.id.endswith("stream/within-buffer"))
     assert "bytes in flight" in failed.actual and failed.clause
+
+
+@pytest.mark.parametrize("sent,scenario,grade", [
+    (["G90", "G1X-1F100", "G0X0"], "stream", "PASS"),
+    (["G90", "$G", "G1 X-1 F100", "G0X0"], "stream", "PASS"),      # polls are not the job's
+    (["G90", "G0X0"], "stream", "FAIL"),                             # a line skipped
+    (["G90", "G1X-1F100", "G1X-1F100", "G0X0"], "stream", "FAIL"),   # a line sent twice
+    (["G90"], "error", "PASS"),                                      # stopped early: a prefix
+    (["G1X-1F100"], "error", "FAIL"),
+])
+def test_job_in_order_rule(sent, scenario, grade):
+    from conform.families.grbl.analysis import Exchange, GrblAnalysis
+    from conform.families.grbl.sendercheck import SCENARIOS, SenderRun, _in_order
+
+    a = GrblAnalysis("", "grbl", "grbl-1.1f", "",
+                     [Exchange(i, t, len(t) + 1, 0.0) for i, t in enumerate(sent)], [], {})
+    run = SenderRun(SCENARIOS[scenario], ["G90", "G1X-1F100", "G0X0"], a, 0, 0, False, "")
+    assert _in_order(run)[0] == grade
