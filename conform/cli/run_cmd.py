@@ -104,6 +104,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         quiet: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
     if _other_family(targets, variant):
+        if mutants or matrix or replay or dialect_file:
+            raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
         _run_family(targets, variant, baud, profile, report_dir, patterns, list_only,
                     allow_motion, allow_eeprom)
         return
