@@ -106,3 +106,14 @@ def test_spec_commands_show_grbl():
     assert r.invoke(cli, ["spec", "show", "grbl-1.1f", "bogus"]).exit_code != 0
     checked = r.invoke(cli, ["spec", "check"])
     assert checked.exit_code == 0 and "grbl: 1 variant, 36 error codes" in checked.output
+
+
+def test_gve_only_options_are_usage_errors_for_grbl():
+    import subprocess
+    import sys
+
+    for args in (["run", "--target", "emu:grbl-1.1f", "--mutants"],
+                 ["emulate", "serve", "grbl-1.1f", "--dialect", "A1=crlf"]):
+        p = subprocess.run([sys.executable, "-m", "conform", *args], capture_output=True,
+                           text=True, timeout=60)
+        assert p.returncode == 2 and "GVE units only" in p.stderr and "Traceback" not in p.stderr
