@@ -88,6 +88,7 @@ def test_registry_and_detection():
     assert grbl.family == "grbl" and grbl.score > 0.9
     gve = detect_family(b"!0L100,0,0\r!0?\r", b"0\r0,IP64MPG v19\r")
     assert gve.family == "gve"
+    assert detect_family(b"", b"0\r0,5C\r1\r8\r" * 30).family == "gve"   # a unit-only tap
     noise = detect_family(b"AT+CSQ\r\n" * 40, b"+CSQ: 20,99\r\nOK\r\n" * 40)
     assert noise.family == "unknown"
     assert detect_family(b"", b"", {"variant": "grbl-1.1f"}).family == "grbl"

@@ -51,6 +51,8 @@ class GveFamily:
         hits = len(_HOST_LINE.findall(host[:65536]))
         answers = len(_ANSWER.findall(unit[:65536]))
         if hits == 0:
+            if answers >= 3 and not host.strip():
+                return Detection(self.name, 0.5, f"{answers} GVE-shaped answers, no host bytes")
             return Detection(self.name, 0.0, "no '!<address><command>' lines from the host")
         score = min(1.0, hits / min(lines, 200) * 0.8 + (0.2 if answers else 0.0))
         return Detection(self.name, score, f"{hits} GVE command lines from the host")
