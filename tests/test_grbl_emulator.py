@@ -117,6 +117,7 @@ time.sleep(0.5)
 """
 
 
+@pytest.mark.slow
 def test_an_overflowing_sender_is_caught_by_analyze(tmp_path):
     cap = tmp_path / "grbl.mcap"
     proc, path = start("--record", str(cap))
