@@ -66,14 +66,23 @@ def test_a_careful_sender_passes(tmp_path):
 
 
 def test_a_sender_that_overflows_the_buffer_fails(tmp_path):
+    """Through the command a user types: conform check-sender --variant grbl-1.1f -- ..."""
+    import json
+    import subprocess
+
     script = tmp_path / "sender.py"
     script.write_text(SENDER)
-    run = check_sender([sys.executable, str(script), "careless"], scenarios=["stream", "alarm"])
-    g = grades(run)
-    assert g["stream/within-buffer"] is Grade.FAIL
-    assert g["alarm/alarm-stops"] is Grade.FAIL
-    failed = next(c for c in run.checks if c.id.endswith("stream/within-buffer"))
-    assert "bytes in flight" in failed.actual and failed.clause
+    p = subprocess.run([sys.executable, "-m", "conform", "check-sender", "--variant", "grbl-1.1f",
+                        "--scenario", "stream", "--scenario", "alarm", "--report",
+                        str(tmp_path / "rep"), "--", sys.executable, str(script), "careless"],
+                       capture_output=True, text=True, timeout=180)
+    assert p.returncode == 1, p.stdout + p.stderr
+    results = json.loads((tmp_path / "rep" / "results.json").read_text())
+    g = {c["id"].split("/", 2)[2]: c["grade"] for c in results["checks"]}
+    assert g["stream/within-buffer"] == "FAIL" and g["alarm/alarm-stops"] == "FAIL"
+    failed = next(c for c in results["checks"] if c["id"].endswith("stream/within-buffer"))
+    assert "bytes in flight" in failed["actual"] and failed["clause"]
+    assert "FAIL" in p.stdout and "report:" in p.stdout
 
 
 @pytest.mark.parametrize("sent,scenario,grade", [

@@ -35,6 +35,13 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         timeout: float | None, job_file: str | None, seed: int, as_json: bool,
         command: tuple[str, ...]) -> None:
     """Run COMMAND once per scenario against the emulator and grade it per rule and clause."""
+    from conform.families import is_family_variant
+
+    if is_family_variant(variant, "grbl"):  # grbl senders: that family's scenarios and rules
+        from conform.families.grbl.sendercheck import run_cli
+
+        sys.exit(run_cli(list(command), variant or "", list(scenarios), report_dir, timeout,
+                         job_file, as_json, echo=click.echo))
     import json
     from pathlib import Path
 

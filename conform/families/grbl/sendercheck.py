@@ -1,7 +1,7 @@
 """Judging a grbl sender program: run it against the grbl reference unit on a pty, record the
 traffic, analyse it (:mod:`.analysis`) and grade rules, each citing its source.
 
-    python -m conform.families.grbl.sendercheck [--scenario NAME] [--report DIR] -- COMMAND ...
+    conform check-sender --variant grbl-1.1f [--scenario NAME] [--report DIR] -- COMMAND ...
 
 ``{port}`` in the arguments becomes the device path (also ``CONFORM_PORT``), ``{job}`` a
 g-code file to stream (``CONFORM_JOB``). Exit status: 0 no MUST rule failed, 1 one did, 2 usage.
@@ -90,7 +90,8 @@ class SenderRun:
 
 
 def run_sender(command: list[str], scenario: Scenario, *, variant: str = "grbl-1.1f",
-               job: list[str] | None = None, baud: int = 115200) -> SenderRun:
+               job: list[str] | None = None, baud: int = 115200,
+               timeout: float | None = None) -> SenderRun:
     """Run ``command`` once against the emulator; the traffic analysed."""
     from conform.families.grbl.unit import GrblUnit
     from conform.link.pty import PtyEndpoint
@@ -116,7 +117,7 @@ def run_sender(command: list[str], scenario: Scenario, *, variant: str = "grbl-1
         hung = False
         try:
             proc = subprocess.run(argv, env=env, capture_output=True, text=True,
-                                  timeout=scenario.timeout)
+                                  timeout=timeout or scenario.timeout)
             code, output = proc.returncode, (proc.stdout + proc.stderr)[-2000:]
         except subprocess.TimeoutExpired as exc:
             hung, code = True, None
@@ -235,8 +236,8 @@ def grade(r: SenderRun, variant: str = "grbl-1.1f") -> list[CheckResult]:
 
 
 def check_sender(command: list[str], *, variant: str = "grbl-1.1f",
-                 scenarios: list[str] | None = None, job: list[str] | None = None
-                 ) -> TargetRun:
+                 scenarios: list[str] | None = None, job: list[str] | None = None,
+                 timeout: float | None = None) -> TargetRun:
     """Every scenario, graded: one TargetRun for the engine's reports."""
     from datetime import UTC, datetime
 
@@ -248,40 +249,72 @@ def check_sender(command: list[str], *, variant: str = "grbl-1.1f",
                     datetime.now(UTC).isoformat(timespec="seconds"))
     t0 = time.perf_counter()
     for name in names:
-        r = run_sender(command, SCENARIOS[name], variant=variant, job=job)
+        r = run_sender(command, SCENARIOS[name], variant=variant, job=job, timeout=timeout)
         run.checks += grade(r, variant)
     run.duration = time.perf_counter() - t0
     return run
 
 
+def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: str | None,
+            timeout: float | None, job_file: str | None, as_json: bool,
+            echo: Any = print) -> int:
+    """``conform check-sender --variant grbl-… -- COMMAND``: exit status 0, 1 or 2."""
+    import json
+
+    from conform.conformance.suite import results_of
+    from conform.errors import read_user_text
+    from conform.report.render import default_dir, write_reports
+
+    names = [n for x in scenarios for n in x.split(",") if n]
+    if "list" in names:
+        for sc in SCENARIOS.values():
+            echo(f"{sc.name:14} {sc.title}")
+        return 0
+    if not command:
+        raise UserError("no program given: conform check-sender --variant grbl-1.1f -- COMMAND "
+                        "ARGS... (`{port}` in ARGS becomes the device path)")
+    if timeout is not None and not 0 < timeout <= 86400:
+        raise UserError(f"--timeout {timeout:g}: must be between 0 and 86400 seconds")
+    load_grbl().variant(variant)
+    job = None
+    if job_file is not None:
+        job = [x for x in read_user_text(job_file).splitlines() if x.strip()]
+        if not job:
+            raise UserError(f"{job_file}: no lines in the file")
+    run = check_sender(command, variant=variant, scenarios=names or None, job=job,
+                       timeout=timeout)
+    results = results_of([run], "conform check-sender " + " ".join(command))
+    out = Path(report_dir) if report_dir else default_dir().with_name(
+        "check-sender-" + default_dir().name)
+    write_reports(results, out)
+    if as_json:
+        echo(json.dumps(results.to_json(), indent=1, default=str))
+    else:
+        for c in run.checks:
+            echo(f"{c.grade.value:15} {c.id} — {c.actual}")
+        counts = ", ".join(f"{k} {n}" for k, n in run.counts().items() if n)
+        echo(f"{len(names or SCENARIOS)} scenario(s) in {run.duration:.1f} s: {counts}")
+        echo(f"report: {out / 'index.html'}")
+    return 1 if results.failed() else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    from conform.conformance.suite import results_of
-    from conform.report.render import default_dir, write_reports
-
     p = argparse.ArgumentParser(prog="python -m conform.families.grbl.sendercheck")
     p.add_argument("--variant", default="grbl-1.1f")
-    p.add_argument("--scenario", action="append", default=None)
+    p.add_argument("--scenario", action="append", default=[])
     p.add_argument("--report", default=None)
+    p.add_argument("--timeout", type=float, default=None)
+    p.add_argument("--job", default=None)
     p.add_argument("command", nargs=argparse.REMAINDER)
     ns = p.parse_args(argv)
     command = ns.command[1:] if ns.command[:1] == ["--"] else ns.command
     try:
-        if not command:
-            raise UserError("no program given: ... -- COMMAND ARGS ({port} becomes the device)")
-        load_grbl().variant(ns.variant)
-        run = check_sender(command, variant=ns.variant, scenarios=ns.scenario)
+        return run_cli(command, ns.variant, ns.scenario, ns.report, ns.timeout, ns.job, False)
     except UserError as exc:
         print(f"check-sender: {exc}", file=sys.stderr)
         return 2
-    results = results_of([run], "check-sender " + " ".join(command))
-    out = Path(ns.report) if ns.report else default_dir()
-    write_reports(results, out)
-    for c in run.checks:
-        print(f"{c.grade.value:15} {c.id} — {c.actual}")
-    print(f"report: {out / 'index.html'}")
-    return 1 if results.failed() else 0
 
 
 if __name__ == "__main__":
