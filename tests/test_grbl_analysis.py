@@ -151,3 +151,15 @@ def test_the_two_host_splitters_agree():
             (x.data, x.start, x.end) for x in lines]
         assert [(x.byte, x.offset) for x in events if not isinstance(x, HostLine)] == [
             (x.byte, x.offset) for x in realtime]
+
+
+def test_recording_a_grbl_session_says_why_frames_are_not_decoded(tmp_path):
+    from conform.capture.reader import open_capture
+
+    path = tmp_path / "g.mcap"
+    rec = Recorder(path, {"variant": "grbl-1.1f"})
+    rec.chunk("host", b"?")
+    rec.close()
+    notes = [x.get("message", "") for x in open_capture(path).logs()]
+    assert any("decoded by conform analyze from the raw bytes" in n for n in notes)
+    assert not any("unknown variant" in n for n in notes)
