@@ -92,8 +92,9 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
 
     fam = family_for_variant(variant)
     if fam.name != "gve":  # another protocol family serves its own unit through the same adapter
-        if dialect_pairs or profile or switch_pairs or control_path:
-            raise UserError("--dialect, --profile, --switch and --control apply to GVE units only")
+        if dialect_pairs or profile or switch_pairs or control_path or truth_path:
+            raise UserError("--dialect, --profile, --switch, --control and --truth apply to GVE "
+                            "units only")
         fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
                   link_path=link_path, record_path=record_path, answer_delay=answer_delay)
         return

@@ -27,8 +27,8 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
     v = spec.variant(variant)
     if baud is not None and baud <= 0:
         raise UserError(f"--baud {baud}: must be positive")
-    if answer_delay < 0:
-        raise UserError("--answer-delay: must not be negative")
+    if not 0 <= answer_delay <= 60:  # nan fails this too
+        raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
     t_start = time.monotonic()
     unit = GrblUnit(v, spec, t0=t_start, line_time=max(answer_delay, 0.0005))
     injector = None
