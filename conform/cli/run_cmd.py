@@ -11,7 +11,7 @@ import click
 from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.safety import Guard
+from conform.conformance.safety import run_guard
 from conform.conformance.suite import (
     PROFILE_NAMES,
     parse_replay,
@@ -139,8 +139,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     with _Progress(not quiet and sys.stderr.isatty()) as bar:
         for t in plan:
             kind, what, _ = parse_target(t)
-            guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps,
-                                                                 allow_eeprom)
+            guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
             target, implied = open_target(t, spec, baud=baud, guard=guard)
             notes = []
             try:
@@ -157,7 +156,9 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     raise UserError(f"no check of {vid} matches {wanted} (see --list)")
                 if not target.emulated and not allow_motion:
                     notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
-                options = RunOptions(profile=profile, seed=seed, notes=notes)
+                options = RunOptions(profile=profile, seed=seed, notes=notes,
+                                     announce=None if quiet else
+                                     (lambda text: click.echo(text, err=True)))
                 progress = bar.task(f"{target.name} ({vid})", len(checks))
                 try:
                     run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
@@ -196,6 +197,11 @@ def _print_summary(results, out: Path) -> None:  # noqa: ANN001
         for c in r.checks:
             if c.grade is Grade.FAIL:
                 click.echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+        if r.aborted:
+            click.echo(f"  INCOMPLETE: {r.aborted}")
+        for g in r.not_verified:
+            click.echo(f"  not verified: {g['count']} checks {g['reason']}"
+                       + (f" — enable with {g['how']}" if g["how"] else ""))
     if results.mutants:
         killed = sum(1 for m in results.mutants if m["killed"])
         click.echo(f"mutants: {killed}/{len(results.mutants)} killed")

@@ -34,7 +34,18 @@ _VALID_ARGS: dict[str, list[Any]] = {
     "W": ["X", -100, 1000, 100, 500], "N<axis>": ["X", 100], "7V": [0], "*E": [1],
 }
 _POSITION_CMDS = {"P", "PF", "P4"}
-_ENV_CMDS = {"?", "Q", "ER", "EFR", "EUR", "I1", "I2"}
+# answers that depend on the unit at hand (its processor id, EEPROM contents, inputs): compared
+# by the table's shape on a real unit. `?` is not among them: the firmware string is the
+# variant's (tables), compared byte for byte.
+_ENV_CMDS = {"Q", "ER", "EFR", "EUR", "I1", "I2"}
+
+
+def answer_kind(cid: str) -> str:
+    return POSITION if cid in _POSITION_CMDS else ENVIRONMENT if cid in _ENV_CMDS else ""
+
+
+def answer_shape(cmd: Any) -> tuple[tuple[str, int | None], ...]:
+    return tuple((f.radix, f.width) for f in cmd.answer)
 _TIMEOUTS = {"H": 5.0, "W": 60.0, "G": 1.0}
 _RANGE_QUESTIONS = {"velocity": ("A7",)}
 
@@ -154,11 +165,12 @@ class _Builder:
         elif addr == 0:
             addr = self.v.interpolator_address
         line = encode_command(self.v, spec_cmd, args, address=addr, checksum_on=cs)
-        kind = POSITION if cid in _POSITION_CMDS else ENVIRONMENT if cid in _ENV_CMDS else ""
+        kind = kw.pop("kind", answer_kind(cid))
         kw.setdefault("timeout", _TIMEOUTS.get(cid, 0.5))
         if cid == ">":
             kw.setdefault("lines", 2)
-        return Step(line=line, subject=subject, kind=kind, **kw)
+        shape = answer_shape(spec_cmd) if kind == ENVIRONMENT else ()
+        return Step(line=line, subject=subject, kind=kind, shape=shape, **kw)
 
     def _foreign(self, cid: str) -> Any:
         """A command this variant lacks, resolved by a variant that has it (for its ranges)."""
@@ -336,7 +348,7 @@ def _valid_steps(b: _Builder, cid: str, cs: bool = False) -> list[Step]:
         c = b.cmd_step("C", [100, 0, 0], cs, answer=False, subject=False)
         return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs)]
     if cid == "J":
-        return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, kind=ENVIRONMENT)]
+        return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, ready=True)]
     step = b.cmd_step(cid, b.valid_args(cid), cs)
     if cid in ("L", "C", "W"):
         return [step, Step(wait=1.5), b.cmd_step("PF", [], cs, subject=False)]
@@ -402,7 +414,9 @@ def _edges(b: _Builder, cid: str, p: Any, args: list[Any], at: int, prefix: str,
         if cid == "*E":  # the count closes a packet
             steps.append(b.cmd_step("*S", [], answer=False, subject=False))
             intent = intent if name != "hi" else SYNTAX  # count mismatch (A12)
-        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5)))
+        kind = answer_kind(cid) if intent == OK else ""
+        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5), kind=kind,
+                          shape=answer_shape(cmd) if kind == ENVIRONMENT else ()))
         b.add(cid, f"{prefix}/{name}",
               f"{cid} {p.name}={value} ({'inside' if intent == OK else 'outside'} "
               f"{p.lo}..{p.hi})", steps, intent=intent, questions=questions)
@@ -506,7 +520,7 @@ def _semantic_checks(b: _Builder) -> None:
               questions=("A20",) if w not in v.status_words else ())
     # EEPROM byte written and read back (GVE64 §13.5.10)
     b.add("EW", "read-back", "EW10,5A then ER10 reads 5A",
-          [RESET, b.raw("!0EW10,5A"), b.cmd_step("ER", [0x10], subject=True)])
+          [RESET, b.raw("!0EW10,5A"), b.cmd_step("ER", [0x10], subject=True, kind="")])
     # K/R: the manual's recovery sequence (GVE64 §13.5.9)
     b.add("K", "recovery", "the manual's recovery example: H, K, L out and back, R, G",
           [RESET, b.raw("!0V1000"), b.raw(f"!0C{b.travel},0,0"), b.raw(f"!0C{b.travel},0,0"),
@@ -524,7 +538,7 @@ def _semantic_checks(b: _Builder) -> None:
     # reset (GVE64 §13.4)
     b.add("J", "reset-state", "J restores the reset state: position, checksum off, V",
           [RESET, *b.position(10, 20, 30), b.raw("!0%+"), b.raw("!0J", cs=True),
-           b.raw("!0PF", wait=2.2, kind=POSITION, subject=True), b.raw("!0@")],
+           b.raw("!0PF", wait=2.2, ready=True, kind=POSITION, subject=True), b.raw("!0@")],
           questions=("A17", "A10"))
     # spindle: address 7 V is not address 0 V (GVE64 §13.6)
     if "7V" in v.commands:

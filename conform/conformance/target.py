@@ -68,6 +68,7 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
         self.t_log0 = 0.0
+        self.keeper: Any = None  # a link's StateKeeper (conform.conformance.state)
 
     # -- what subclasses provide ------------------------------------------------------------
     @abstractmethod
@@ -104,9 +105,27 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
 
-    def begin_log(self) -> None:
-        self.log = []
-        self.t_log0 = self.now()
+    def prepare(self, script: Any) -> None:
+        """Reach the state ``script`` starts from (its reset step): by default a reset."""
+        self.reset()
+
+    def ready_wait(self, seconds: float) -> float:
+        """How long to wait for the unit to hear again after J (a script asked ``seconds``)."""
+        return seconds
+
+    def resync(self) -> bytes:
+        """Drop whatever is pending so the next exchange starts clean; returns it."""
+        return self.drain()
+
+    def begin_log(self, keep: bool = False) -> None:
+        """Times from now on count from here; ``keep`` the entries so far (negative times)."""
+        t = self.now()
+        if keep:
+            for e in self.log:
+                e.t -= t - self.t_log0
+        else:
+            self.log = []
+        self.t_log0 = t
 
     def _note(self, direction: str, data: bytes) -> None:
         self.log.append(LogEntry(self.now() - self.t_log0, direction, data))
@@ -164,10 +183,13 @@ class Target(ABC):
         return reply
 
     def _track_checksum(self, line: bytes, reply: Reply) -> None:
+        """What the host believes about checksums changes only with a command the unit took:
+        ``%±`` answered 0, or ``J`` not refused (silence or 0: A17)."""
+        accepted = not reply.lines or reply.lines[0][:1] in (b"0", b"8")
         m = _CHECKSUM_CMD.match(line)
-        if m and reply.lines and reply.lines[0][:1] in (b"0", b"8"):
+        if m and reply.lines and accepted:
             self.checksum_on = m.group(1) == b"+"
-        elif line[2:3] == b"J" and line[:2] in (b"!0", b"!7"):
+        elif line[2:3] == b"J" and line[:2] in (b"!0", b"!7") and accepted and not reply.partial:
             self.checksum_on = False
 
     def frame(self, body: str, checksum: bool | None = None) -> bytes:
@@ -176,28 +198,48 @@ class Target(ABC):
         use = self.checksum_on if checksum is None else checksum
         return (append_checksum(raw) if use else raw) + b"\r"
 
-    def safe_stop(self) -> str:
-        """Halt, delete the queue and switch every output off: H, D, O0,FF (GVE64 §13.5.9)."""
+    def safe_stop(self, h_bound: float = 7.0, h_every: float = 0.25) -> str:
+        """Halt, delete the queue and switch every output off: H, D, O0,FF (GVE64 §13.5.9).
+
+        H is sent again every ``h_every`` s until the unit acknowledges it (it may be deaf after
+        a J, or its answer lost), for at most ``h_bound`` s (the deaf time, the longest brake and
+        a margin); each line is tried in both checksum framings when refused."""
         sent = []
         for body in STOP_SEQUENCE:
-            line = self.frame("!0" + body)
             try:
-                self._note("note", b"abort: " + line)
-                self._write(line)
-                timeout = 30.0 if body == "H" else 1.0
-                reply = Reply(line, self.now())
-                deadline = self.now() + timeout
-                buf = b""
-                while b"\r" not in buf and self.now() < deadline:
-                    chunk = self._read(deadline)
-                    if chunk:
-                        self._note("rx", chunk)
-                        buf += chunk
-                reply.lines = [buf.partition(b"\r")[0]] if b"\r" in buf else []
-                sent.append(f"{body} → {reply.text()}")
+                self._note("note", b"abort: " + self.frame("!0" + body))
+                answer = self._stop_line(body, h_bound if body == "H" else 1.0,
+                                         h_every if body == "H" else 1.0)
+                sent.append(f"{body} → {answer}")
             except (LinkError, OSError, HarnessError) as exc:
                 sent.append(f"{body} → not sent ({exc})")
         return "sent " + ", ".join(sent)
+
+    def _stop_line(self, body: str, bound: float, every: float) -> str:
+        """Send ``!0<body>`` until an answer comes (at most ``bound`` s); the answer text."""
+        deadline = self.now() + bound
+        tries = 0
+        buf = b""
+        while True:
+            line = self.frame("!0" + body)
+            self._note("tx", line)
+            self._write(line)
+            tries += 1
+            until = min(deadline, self.now() + every)
+            while b"\r" not in buf and self.now() < until:
+                chunk = self._read(until)
+                if chunk:
+                    self._note("rx", chunk)
+                    buf += chunk
+            if b"\r" in buf:
+                answer = buf.partition(b"\r")[0]
+                if answer[:1] not in (b"4", b"C") or tries > 3:
+                    return answer.decode("latin-1") + (f" (after {tries} tries)" if tries > 1
+                                                       else "")
+                self.checksum_on = not self.checksum_on  # syntax error: try the other framing
+                buf = b""
+            if self.now() >= deadline:
+                return f"no answer after {tries} tries in {bound:g} s"
 
 
 class EmuTarget(Target):
@@ -295,6 +337,41 @@ class LinkTarget(Target):
         self.baud = baud
         self.ready_after = ready_after
         self._t0 = time.monotonic()
+
+    def prepare(self, script: Any) -> None:
+        if self.keeper is not None:
+            self.keeper.prepare(script)
+        else:
+            self.reset()
+
+    def reset(self) -> None:
+        if self.keeper is not None:  # J with the readiness measured (nothing else shows)
+            self.keeper.power_up(quiet=True)
+            self._buffer = b""
+        else:
+            super().reset()
+
+    def ready_wait(self, seconds: float) -> float:
+        from conform.conformance.state import QUIET_MARGIN
+
+        ready = self.keeper.stats.readiness if self.keeper is not None else None
+        return seconds if ready is None else max(seconds, ready + QUIET_MARGIN)
+
+    def resync(self, quiet: float = 0.03, bound: float = 1.0) -> bytes:
+        """End any line in progress (an empty line gets no answer) and drain until the link has
+        been quiet for ``quiet`` s (at most ``bound`` s)."""
+        got = self.drain()
+        if got:
+            self._write(b"\r")
+            self._note("tx", b"\r")
+            end = self.now() + bound
+            while self.now() < end:
+                chunk = self._read(min(end, self.now() + quiet))
+                if not chunk:
+                    break
+                self._note("rx", chunk)
+                got += chunk
+        return got
 
     def now(self) -> float:
         return time.monotonic() - self._t0
