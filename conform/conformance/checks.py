@@ -21,7 +21,8 @@ from conform.protocol import encode_command
 from conform.protocol.checksum import append_checksum, checksum
 
 RESET = Step(reset=True)
-OK, QUEUE_FULL, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = 0, 1, 3, 4, 5, 6, 7
+OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = 0, 1, 2, 3, 4, 5, 6, 7
+AT_ONCE_S = 0.05  # tolerance of "the answer is sent at once" (GVE64 §13.7) on a link
 
 # a typical valid value per range name
 _TYPICAL = {"velocity": 1000, "pause": 5, "short": 512, "accel": 20, "percent": 100,
@@ -549,6 +550,25 @@ def _semantic_checks(b: _Builder) -> None:
     b.add(None, "unknown-address", "a line for another address gets no answer",
           [RESET, b.raw("!3V100", subject=True), b.raw("!0V100")], questions=("A23",),
           clause=next((c for c in a23 if c.startswith(b.manual)), a23[0]))
+    # the manual's timing words (GVE64 §13.7, GVE124 §12.6): answers are sent at once (HALT's
+    # once the unit has stopped); a line that does not arrive complete is answered 2 when the
+    # watchdog runs out (A13). Tolerance: the USB converter latency the manuals name (1–16 ms
+    # each way) and the unit's own time, ±AT_ONCE_S.
+    words = b.spec.questions["A13"].clauses
+    timing = next((c for c in words if c.startswith(b.manual)), words[0])
+    # a mnemonic no firmware has: unknown command (3)
+    b.add(None, "unknown-command", "a mnemonic no firmware has is an unknown command (3)",
+          [RESET, b.raw("!0ZZ", subject=True)], clause=timing, intent=UNKNOWN,
+          questions=("A21",))
+    b.add(None, "timing/at-once", "answers come at once (HALT's too when nothing moves)",
+          [RESET, b.cmd_step("V", [1000], tolerance=AT_ONCE_S),
+           b.cmd_step("F", [], tolerance=AT_ONCE_S),
+           b.cmd_step("?", [], tolerance=AT_ONCE_S),
+           b.cmd_step("H", [], tolerance=AT_ONCE_S)], clause=timing)
+    b.add(None, "timing/watchdog", "a line without its CR is answered 2 when the watchdog runs "
+          "out", [RESET, Step(line=b"!0V100", subject=True, timeout=1.5, tolerance=AT_ONCE_S),
+                  b.raw("!0V100")],
+          clause=timing, intent=WATCHDOG, questions=("A13",))
     # checksum missing while on (A11)
     b.add("%", "missing-checksum", "with checksums on, a line without one is refused",
           [RESET, b.raw("!0%+"), b.raw("!0V1000", subject=True)], intent=SYNTAX,

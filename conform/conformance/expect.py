@@ -172,6 +172,11 @@ def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loo
         why = line_mismatch(step, e, a, loose, tol if expected.moving else 0.0)
         if why:
             return why
+    if step.tolerance is not None and expected.t_rx is not None and actual.t_rx is not None:
+        d_e, d_a = expected.t_rx - expected.t_tx, actual.t_rx - actual.t_tx
+        if abs(d_a - d_e) > step.tolerance:
+            return (f"answered after {d_a * 1000:.0f} ms where the reference answers after "
+                    f"{d_e * 1000:.0f} ms (tolerance ±{step.tolerance * 1000:.0f} ms)")
     return None
 
 

@@ -118,7 +118,7 @@ class Guard:
 
 
 # why a check was not run on this target; the text before " (" groups them (not_verified)
-INPUTS_SKIP = "needs inputs driven (only the emulator can: run it with --target emu:VARIANT)"
+INPUTS_SKIP = "needs inputs driven (only the emulator drives inputs: enable with --target emu:VARIANT)"
 _ENABLE = {"motion": "--allow-motion --max-steps N", "actuator": "--allow-motion --max-steps N",
            "eeprom": "--allow-eeprom"}
 

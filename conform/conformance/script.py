@@ -37,6 +37,8 @@ class Step:
     kind: str = ""  # POSITION | ENVIRONMENT | ""
     shape: tuple[tuple[str, int | None], ...] = ()  # (radix, width) of each answer field: how
     #                      an ENVIRONMENT answer is compared on a real unit
+    tolerance: float | None = None  # the answer's delay must be the reference's within ± this
+    #                      (the manual's timing words: at once, the watchdog)
     ready: bool = False  # the wait lets the unit come back after J (a link waits at least the
     #                      readiness it measured, plus a margin)
 

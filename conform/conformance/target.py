@@ -201,45 +201,66 @@ class Target(ABC):
     def safe_stop(self, h_bound: float = 7.0, h_every: float = 0.25) -> str:
         """Halt, delete the queue and switch every output off: H, D, O0,FF (GVE64 §13.5.9).
 
-        H is sent again every ``h_every`` s until the unit acknowledges it (it may be deaf after
-        a J, or its answer lost), for at most ``h_bound`` s (the deaf time, the longest brake and
-        a margin); each line is tried in both checksum framings when refused."""
+        H is sent again every ``h_every`` s until the unit is known to have heard one (it may
+        be deaf after a J, or an answer lost) — an answer to H, then F answered, then H once
+        more answered — for at most ``h_bound`` s (the deaf time, the longest brake and a
+        margin); a line refused as a syntax error is tried in the other checksum framing."""
         sent = []
         for body in STOP_SEQUENCE:
             try:
+                self.drain()  # answers still on their way (J's, a held line's) are not these
                 self._note("note", b"abort: " + self.frame("!0" + body))
-                answer = self._stop_line(body, h_bound if body == "H" else 1.0,
-                                         h_every if body == "H" else 1.0)
+                if body == "H":
+                    answer = self._halt(h_bound, h_every)
+                else:
+                    answer = self._stop_line(body, 1.0)
                 sent.append(f"{body} → {answer}")
             except (LinkError, OSError, HarnessError) as exc:
                 sent.append(f"{body} → not sent ({exc})")
         return "sent " + ", ".join(sent)
 
-    def _stop_line(self, body: str, bound: float, every: float) -> str:
-        """Send ``!0<body>`` until an answer comes (at most ``bound`` s); the answer text."""
+    def _line_within(self, line: bytes, seconds: float) -> bytes | None:
+        """Send ``line``; the first answer line within ``seconds``, or None."""
+        self._note("tx", line)
+        self._write(line)
+        until = self.now() + seconds
+        buf = self._buffer
+        self._buffer = b""
+        while b"\r" not in buf and self.now() < until:
+            chunk = self._read(until)
+            if chunk:
+                self._note("rx", chunk)
+                buf += chunk
+        if b"\r" not in buf:
+            return None
+        answer, _, self._buffer = buf.partition(b"\r")
+        if answer[:1] in (b"4", b"C"):  # a syntax error: the other checksum framing
+            self.checksum_on = not self.checksum_on
+        return answer
+
+    def _halt(self, bound: float, every: float) -> str:
         deadline = self.now() + bound
         tries = 0
-        buf = b""
-        while True:
-            line = self.frame("!0" + body)
-            self._note("tx", line)
-            self._write(line)
+        while self.now() < deadline:
             tries += 1
-            until = min(deadline, self.now() + every)
-            while b"\r" not in buf and self.now() < until:
-                chunk = self._read(until)
-                if chunk:
-                    self._note("rx", chunk)
-                    buf += chunk
-            if b"\r" in buf:
-                answer = buf.partition(b"\r")[0]
-                if answer[:1] not in (b"4", b"C") or tries > 3:
-                    return answer.decode("latin-1") + (f" (after {tries} tries)" if tries > 1
-                                                       else "")
-                self.checksum_on = not self.checksum_on  # syntax error: try the other framing
-                buf = b""
-            if self.now() >= deadline:
-                return f"no answer after {tries} tries in {bound:g} s"
+            if self._line_within(self.frame("!0H"), every) is None:
+                continue  # deaf, braking or lost: again
+            if self._line_within(self.frame("!0F"), every) is None:
+                continue
+            tries += 1  # the unit hears: this H is executed, its answer comes after the brake
+            answer = self._line_within(self.frame("!0H"), max(0.5, deadline - self.now()))
+            if answer is not None:
+                return f"{answer.decode('latin-1')} (after {tries} tries)"
+        return f"no answer after {tries} tries in {bound:g} s"
+
+    def _stop_line(self, body: str, timeout: float) -> str:
+        for _ in range(2):
+            answer = self._line_within(self.frame("!0" + body), timeout)
+            if answer is None:
+                return f"no answer in {timeout:g} s"
+            if answer[:1] not in (b"4", b"C"):
+                break
+        return answer.decode("latin-1")
 
 
 class EmuTarget(Target):
