@@ -87,6 +87,21 @@ def _arg_strategy(p: Any, v: Any, max_travel: int) -> st.SearchStrategy[list[Any
     return one.map(lambda x: [x])
 
 
+W_SECONDS = 2.0  # the longest leg of a generated reference move (W answers when it is done)
+
+
+def _short_reference_move(args: list[Any]) -> list[Any]:
+    """W's travels cut to what its speeds cover in W_SECONDS: a unit answers nothing else until
+    W is done, so a slow, long move would stall a run on a link for minutes."""
+    axis, to_switch, speed_to, from_switch, speed_from = args
+    if isinstance(speed_to, int) and isinstance(to_switch, int) and speed_to > 0:
+        cap = int(speed_to * W_SECONDS)
+        to_switch = max(-cap, min(cap, to_switch))
+    if isinstance(speed_from, int) and isinstance(from_switch, int) and speed_from > 0:
+        from_switch = min(int(speed_from * W_SECONDS), from_switch)
+    return [axis, to_switch, speed_to, from_switch, speed_from]
+
+
 def _families(v: Any, allowed: set[str], emulated: bool) -> dict[str, list[Any]]:
     out: dict[str, list[Any]] = defaultdict(list)
     for cmd in v.commands.values():
@@ -268,6 +283,8 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
                 args += data.draw(_arg_strategy(p, v, max_travel), label=p.name)
             if cmd.id == "Y" and "motion" not in allowed:
                 args = ["-"]
+            if cmd.id == "W":
+                args = _short_reference_move(args)
             if cmd.id in ("EW", "EFW", "EUW") and "eeprom" not in allowed:
                 return
             self._command(cmd, args)

@@ -35,8 +35,18 @@ def _bodies(body: str) -> list[str]:
     return [body, body[: m.start()]] if m else [body]
 
 
-def hazards(line: bytes) -> set[str]:
-    """The risks a command line carries for a real machine (empty for a harmless line)."""
+def _zero_vector(body: str) -> bool:
+    """``L0,0,0`` / ``C0,0``: a vector of no pulses (whatever a unit makes of it, nothing moves)."""
+    v = _VECTOR.match(body)
+    return v is not None and v.end() == len(body) and all(
+        int(x) == 0 for x in v.group(1).split(","))
+
+
+def hazards(line: bytes, idle: bool = False) -> set[str]:
+    """The risks a command line carries for a real machine (empty for a harmless line).
+
+    ``idle``: the host knows the queue is empty and nothing moves (read back with F after the
+    state was reached, nothing that moves sent since), so ``G`` has nothing to start."""
     m = _LINE.match(line)
     if m is None:
         return set()
@@ -51,7 +61,11 @@ def hazards(line: bytes) -> set[str]:
             if body.startswith("V") and body[1:].lstrip("0") != "":
                 out.add("actuator")
         elif address == 0:
-            if body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
+            if body[:1] in ("L", "C") and _zero_vector(body):
+                pass
+            elif body[:1] == "G" and idle:
+                pass
+            elif body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
                 out.add("motion")
             elif body.startswith("O") and body.upper() != "O0,FF":
                 out.add("actuator")
@@ -105,8 +119,8 @@ class Guard:
             allowed.add("eeprom")
         return risks - allowed
 
-    def check(self, line: bytes) -> None:
-        bad = self.blocked(hazards(line))
+    def check(self, line: bytes, idle: bool = False) -> None:
+        bad = self.blocked(hazards(line, idle))
         if bad:
             raise SafetyRefusal(f"refused to send {line!r}: {', '.join(sorted(bad))} not allowed "
                                 "(use --allow-motion with --max-steps)")

@@ -60,9 +60,12 @@ Script = tuple[Step, ...]
 def script_needs(script: Script) -> set[str]:
     """What a script asks of the machine: motion, actuator, eeprom, reset, inputs."""
     out: set[str] = set()
+    idle = True  # the runner starts every script with the queue empty (read back)
     for step in script:
         if step.line:
-            out |= hazards(step.line)
+            risks = hazards(step.line, idle)
+            out |= risks
+            idle = idle and "motion" not in hazards(step.line)
         if step.input is not None:
             out.add("inputs")
     return out

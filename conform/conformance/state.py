@@ -222,6 +222,7 @@ class StateKeeper:
         for line, want in zip(self._confirm, self._confirm_expected, strict=True):
             if tg.exchange(line).lines != want:
                 return False
+        tg.idle = True  # F read back: queue empty, nothing runs
         return True
 
     def power_up(self, quiet: bool = False) -> None:
@@ -244,12 +245,14 @@ class StateKeeper:
             self.stats.quiet_resets += 1
             tg.wait(max(0.0, t_sent + self.stats.readiness + QUIET_MARGIN - tg.now()))
             tg.drain()
+            tg.idle = True
             return
         self.stats.resets += 1
         bound = t_sent + self._ready_after + READY_MARGIN
         while tg.now() < bound:
             reply = tg.exchange(POLL_LINE, POLL_EVERY, linger=0.0)
             if reply.lines and reply.lines[-1][:1] in b"0123456789ABCDEF":
+                tg.idle = True  # just reset: queue empty, nothing runs (GVE64 §13.4)
                 ready = tg.now() - t_sent
                 if self.stats.readiness is None or ready > self.stats.readiness:
                     self.stats.readiness = ready

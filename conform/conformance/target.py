@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from conform.conformance.results import LogEntry
-from conform.conformance.safety import STOP_SEQUENCE, Guard
+from conform.conformance.safety import STOP_SEQUENCE, Guard, hazards
 from conform.errors import LinkError, UserError
 from conform.protocol.checksum import append_checksum
 
@@ -69,6 +69,9 @@ class Target(ABC):
         self._buffer = b""
         self.t_log0 = 0.0
         self.keeper: Any = None  # a link's StateKeeper (conform.conformance.state)
+        # the host knows nothing moves and the queue is empty (read back after reaching a
+        # check's state; nothing that moves sent since): G has nothing to start
+        self.idle = False
 
     # -- what subclasses provide ------------------------------------------------------------
     @abstractmethod
@@ -141,7 +144,9 @@ class Target(ABC):
 
     def send(self, data: bytes) -> tuple[float, bytes]:
         """Send bytes without waiting for an answer; returns the time and what came unasked."""
-        self.guard.check(data)
+        self.guard.check(data, idle=self.idle)
+        if "motion" in hazards(data):
+            self.idle = False
         stray = self.drain()
         t = self.now()
         self._note("tx", data)
@@ -425,6 +430,7 @@ class LinkTarget(Target):
         self._write(line)
         self.wait(self.ready_after)
         self._buffer = b""
+        self.idle = True
 
     def close(self) -> None:
         self.endpoint.close()
