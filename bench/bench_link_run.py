@@ -3,10 +3,11 @@ check by check with the in-process emulator, against the targets (quick ≤ 5 mi
 per variant at 115 200 Bd).
 
 For each variant: `conform emulate serve V --baud 115200` on a pty, then
-`conform run --target PTY --variant V --allow-motion --max-steps 1000000 --allow-eeprom`, and the
-same run with `--target emu:V`; both as a user runs them (subprocesses).
+`conform run --target PTY --variant V --allow-motion --max-steps 1000000 --allow-eeprom` (with
+`--inputs-control` to the emulator's control socket unless --no-inputs), and the same run with
+`--target emu:V`; both as a user runs them (subprocesses).
 
-    python bench/bench_link_run.py [--profile quick|full] [--variant V ...] [--baud N]
+    python bench/bench_link_run.py [--profile quick|full] [--variant V ...] [--baud N] [--no-inputs]
 """
 
 from __future__ import annotations
@@ -37,10 +38,12 @@ def _grades(report: Path) -> tuple[dict[str, str], dict]:
     return {c["id"]: c["grade"] for c in data["checks"]}, run
 
 
-def run_variant(variant: str, profile: str, baud: int, work: Path) -> dict:
+def run_variant(variant: str, profile: str, baud: int, work: Path, inputs: bool) -> dict:
+    control = work / f"{variant}.sock"
     emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", variant,
-                            "--baud", str(baud)], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True)
+                            "--baud", str(baud), "--control", str(control)],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    drive = ["--inputs-control", str(control)] if inputs else []
     try:
         assert emu.stdout is not None
         pty = emu.stdout.readline().strip()
@@ -48,7 +51,7 @@ def run_variant(variant: str, profile: str, baud: int, work: Path) -> dict:
         t0 = time.perf_counter()
         c0 = os.times()
         link = _conform("run", "--target", pty, "--variant", variant, "--profile", profile,
-                        "--baud", str(baud), "--report", str(link_dir), *OPTIONS)
+                        "--baud", str(baud), "--report", str(link_dir), *OPTIONS, *drive)
         c1 = os.times()
         wall = time.perf_counter() - t0
     finally:
@@ -63,6 +66,11 @@ def run_variant(variant: str, profile: str, baud: int, work: Path) -> dict:
              str(emu_dir), *OPTIONS)
     emu_wall = time.perf_counter() - t0
     got, run = _grades(link_dir)
+    data = json.loads((link_dir / "results.json").read_text())
+    bad = [{"id": c["id"], "grade": c["grade"], "expected": c["expected"],
+            "actual": c["actual"], "detail": c["detail"],
+            "log": [f"{e['t']:.4f} {e['dir']} {e['data']!r}" for e in c["log"]][-30:]}
+           for c in data["checks"] if c["grade"] in ("FAIL", "ERROR")]
     want, _ = _grades(emu_dir)
     mismatches = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))
     counts: dict[str, int] = {}
@@ -75,6 +83,7 @@ def run_variant(variant: str, profile: str, baud: int, work: Path) -> dict:
             "mismatches": len(mismatches), "mismatch_ids": mismatches[:20],
             "emu_wall_s": round(emu_wall, 1), "estimate_s": run.get("estimate_s"),
             "state": run.get("state", {}), "complete": run.get("complete", False),
+            "failures": bad,
             "ratio": round(wall / TARGET_S[profile], 3)}
 
 
@@ -83,12 +92,15 @@ def main() -> None:
     ap.add_argument("--profile", choices=sorted(TARGET_S), default="quick")
     ap.add_argument("--variant", action="append", choices=VARIANTS)
     ap.add_argument("--baud", type=int, default=115200)
+    ap.add_argument("--no-inputs", action="store_true",
+                    help="do not drive the emulator's inputs (--inputs-control): the two checks "
+                         "that need inputs are then SKIPPED on the link")
     args = ap.parse_args()
     target = TARGET_S[args.profile]
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-link-") as tmp:
         for variant in args.variant or VARIANTS:
-            r = run_variant(variant, args.profile, args.baud, Path(tmp))
+            r = run_variant(variant, args.profile, args.baud, Path(tmp), not args.no_inputs)
             rows.append(r)
             shown = ", ".join(f"{k} {v}" for k, v in sorted(r["grades"].items()))
             st = r["state"]
@@ -99,6 +111,11 @@ def main() -> None:
                   f"ratio to {target:.0f} s: {r['ratio']:.3f}", flush=True)
             for m in r["mismatch_ids"]:
                 print(f"    mismatch: {m}")
+            for f in r["failures"]:
+                print(f"    {f['grade']} {f['id']}: expected {f['expected']} / got {f['actual']}"
+                      f" ({f['detail']})")
+                for line in f["log"]:
+                    print(f"        {line}")
     worst = max(r["wall_s"] for r in rows)
     bad = sum(r["grades"].get("FAIL", 0) + r["grades"].get("ERROR", 0) for r in rows)
     mism = sum(r["mismatches"] for r in rows)

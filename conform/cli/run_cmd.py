@@ -96,12 +96,15 @@ class _Progress:
 @click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
 @click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
+@click.option("--inputs-control", default=None, metavar="PATH",
+              help="Drive the inputs of an emulator behind the link through its control socket "
+                   "(`conform emulate serve` prints it), for the checks that need inputs.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        quiet: bool) -> None:
+        inputs_control: str | None, quiet: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
     spec = load_spec()
     if variant is not None:
@@ -141,6 +144,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
             kind, what, _ = parse_target(t)
             guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
             target, implied = open_target(t, spec, baud=baud, guard=guard)
+            if inputs_control and not target.emulated:
+                target.inputs = inputs_control  # type: ignore[attr-defined]
             notes = []
             try:
                 vid = variant or implied

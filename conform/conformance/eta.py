@@ -59,7 +59,7 @@ def estimate_run(runner: Any, checks: Sequence[Any]) -> Estimate:
             cost = runner.machine_budget() or 0.0
             if sim is not None:
                 sim.done(False)
-        elif skip_reason(check.script, target.guard, target.emulated) is None:
+        elif skip_reason(check.script, target.guard, target.drives_inputs) is None:
             ref = runner.ref
             t = EmuTarget(lambda r=ref: r.unit_cls(r.variant, r.dialect), "estimate")
             body = check.script[1:] if check.script and check.script[0].reset else check.script

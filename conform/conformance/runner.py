@@ -64,18 +64,20 @@ class Runner:
         run = TargetRun(self.target.name, self.variant.id, self.target.emulated,
                         self.options.profile, started, notes=list(self.options.notes))
         self.current = run
-        if not self.target.emulated:
-            run.machine_budget_s = self.machine_budget()
-            if self.estimate is None:
-                self.estimate = estimate_run(self, checks)
-            run.estimate_s = round(self.estimate.total, 1)
-            self._say(f"{self.target.name} ({self.variant.id}): {len(checks)} checks, estimate "
-                      f"{_mmss(self.estimate.total)} (state machine budget "
-                      f"{_mmss(run.machine_budget_s or 0)})")
         t0 = time.perf_counter()
         next_eta = t0 + self.options.eta_every
         link_errors = 0
         try:
+            if not self.target.emulated:
+                run.machine_budget_s = self.machine_budget()
+                if self.estimate is None:
+                    self.estimate = estimate_run(self, checks)
+                run.estimate_s = round(self.estimate.total, 1)
+                self._say(f"{self.target.name} ({self.variant.id}): {len(checks)} checks, "
+                          f"estimate {_mmss(self.estimate.total)} (state machine budget "
+                          f"{_mmss(run.machine_budget_s or 0)})")
+                t0 = next_eta = time.perf_counter()
+                next_eta += self.options.eta_every
             for check in checks:
                 result = self.run_check(check)
                 run.checks.append(result)
@@ -137,7 +139,7 @@ class Runner:
         if check.na is not None:
             return self._result(check, Grade.NOT_APPLICABLE, detail=check.na)
         if check.kind != "machine":
-            why = skip_reason(check.script, self.target.guard, self.target.emulated)
+            why = skip_reason(check.script, self.target.guard, self.target.drives_inputs)
             if why is not None:
                 return self._result(check, Grade.SKIPPED, detail=why,
                                     sequence=[s.describe() for s in check.script])

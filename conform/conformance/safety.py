@@ -132,7 +132,8 @@ class Guard:
 
 
 # why a check was not run on this target; the text before " (" groups them (not_verified)
-INPUTS_SKIP = "needs inputs driven (only the emulator drives inputs: enable with --target emu:VARIANT)"
+INPUTS_SKIP = ("needs inputs driven (a real unit's inputs are switched by hand; with `conform "
+               "emulate serve` behind the link: enable with --inputs-control PATH)")
 _ENABLE = {"motion": "--allow-motion --max-steps N", "actuator": "--allow-motion --max-steps N",
            "eeprom": "--allow-eeprom"}
 

@@ -71,10 +71,10 @@ def script_needs(script: Script) -> set[str]:
     return out
 
 
-def skip_reason(script: Script, guard: Guard, emulated: bool) -> str | None:
+def skip_reason(script: Script, guard: Guard, drives_inputs: bool) -> str | None:
     """Why a script may not run on this target, or None (see :func:`safety.not_verified`)."""
     needs = script_needs(script)
-    if "inputs" in needs and not emulated:
+    if "inputs" in needs and not drives_inputs:
         return INPUTS_SKIP
     blocked = guard.blocked(needs - {"inputs"})
     if blocked:

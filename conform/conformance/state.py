@@ -25,6 +25,7 @@ the unit is given the readiness measured by earlier polls plus a margin instead.
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -227,39 +228,55 @@ class StateKeeper:
 
     def power_up(self, quiet: bool = False) -> None:
         """J; then wait until the unit hears again (polled, bounded)."""
-        tg = self.target
-        tg.resync()
-        for attempt in range(2):
-            line = tg.frame("!0J")
-            t_sent = tg.now()
-            reply = tg.exchange(line, 0.05)
-            code = reply.lines[0][:1] if reply.lines else b""
-            if code and code not in (b"0", b"8"):  # refused (its framing): the other one
-                tg.checksum_on = not tg.checksum_on
-                if attempt == 0:
-                    continue
-                raise HarnessError(f"{tg.name}: J refused ({reply.text()})")
-            break
-        tg.checksum_on = False
-        if quiet and self.stats.readiness is not None:
-            self.stats.quiet_resets += 1
-            tg.wait(max(0.0, t_sent + self.stats.readiness + QUIET_MARGIN - tg.now()))
+        power_up(self.target, self.stats, self._ready_after, quiet)
+
+
+_POLL_ANSWER = re.compile(rb"^[0-9A-F],")  # @'s answer (J's own, under A17, has no field)
+
+
+def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = False) -> None:
+    """J, then wait until ``tg`` hears again: polled with ``@`` every POLL_EVERY s (bounded by
+    ``ready_after`` + READY_MARGIN), or — ``quiet``, when a poll would show in what follows — the
+    longest readiness measured so far plus QUIET_MARGIN. A J the unit refused (a checksum
+    framing it did not expect: an error code, or a unit that hears at once) is sent again in
+    the other framing."""
+    tg.resync()
+    for attempt in range(3):
+        framing = tg.checksum_on
+        t_sent = tg.now()
+        tg.exchange(tg.frame("!0J"), 0.0, linger=0.0)
+        if quiet and stats.readiness is not None and attempt == 0:
+            stats.quiet_resets += 1
+            tg.wait(max(0.0, t_sent + stats.readiness + QUIET_MARGIN - tg.now()))
             tg.drain()
+            tg.checksum_on = False
             tg.idle = True
             return
-        self.stats.resets += 1
-        bound = t_sent + self._ready_after + READY_MARGIN
+        refused = False
+        bound = t_sent + ready_after + READY_MARGIN
         while tg.now() < bound:
-            reply = tg.exchange(POLL_LINE, POLL_EVERY, linger=0.0)
-            if reply.lines and reply.lines[-1][:1] in b"0123456789ABCDEF":
-                tg.idle = True  # just reset: queue empty, nothing runs (GVE64 §13.4)
+            reply = tg.exchange(POLL_LINE, POLL_EVERY, lines=2, linger=0.01)
+            answers = [*([reply.stray] if reply.stray else []), *reply.lines]
+            if any(a[:1] in (b"4", b"C") for a in answers):
+                refused = True
+                break
+            if reply.lines and _POLL_ANSWER.match(reply.lines[-1]):
                 ready = tg.now() - t_sent
-                if self.stats.readiness is None or ready > self.stats.readiness:
-                    self.stats.readiness = ready
+                if ready < ready_after / 2:  # it never stopped hearing: J was not taken
+                    refused = True
+                    break
+                stats.resets += 1
+                stats.readiness = max(stats.readiness or 0.0, ready)
+                tg.checksum_on = False
+                tg.idle = True  # just reset: queue empty, nothing runs (GVE64 §13.4)
                 tg.wait(0.02)
                 tg.drain()
-                if quiet:  # the poll would show: J again, then the readiness just measured
-                    self.power_up(quiet=True)
+                if quiet:  # the poll would show: J again, with the readiness just measured
+                    power_up(tg, stats, ready_after, quiet=True)
                 return
-        raise HarnessError(f"{tg.name}: no answer {self._ready_after + READY_MARGIN:.1f} s "
-                           "after J (link lost or unit not resetting)")
+        if not refused:
+            raise HarnessError(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after J "
+                               "(link lost or unit not resetting)")
+        tg.checksum_on = not framing
+        tg.resync()
+    raise HarnessError(f"{tg.name}: J refused in both checksum framings")

@@ -108,6 +108,11 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
 
+    @property
+    def drives_inputs(self) -> bool:
+        """Can the harness switch this unit's inputs (``set_input``)?"""
+        return self.emulated
+
     def prepare(self, script: Any) -> None:
         """Reach the state ``script`` starts from (its reset step): by default a reset."""
         self.reset()
@@ -356,13 +361,34 @@ class LinkTarget(Target):
     emulated = False
 
     def __init__(self, endpoint: Any, name: str, guard: Guard, baud: int,
-                 ready_after: float = 2.2) -> None:
+                 ready_after: float = 2.0) -> None:
         super().__init__(guard)
         self.endpoint = endpoint
         self.name = name
         self.baud = baud
         self.ready_after = ready_after
         self._t0 = time.monotonic()
+        self.reset_stats: Any = None  # J's readiness measured (conform.conformance.state)
+        self.inputs: str | None = None  # an emulator's control socket that drives its inputs
+
+    @property
+    def drives_inputs(self) -> bool:
+        return self.inputs is not None
+
+    def set_input(self, port: int, bit: int, active: bool) -> None:
+        """Inputs of an emulator behind the link, through its control socket (``inputs``)."""
+        if self.inputs is None:
+            super().set_input(port, bit, active)
+        from conform.unit.control import send_control
+
+        word = "press" if active else "release"
+        try:
+            reply = send_control(self.inputs, f"{word} {port}.{bit}")
+        except OSError as exc:
+            raise HarnessError(f"--inputs-control {self.inputs}: {exc}") from None
+        self._note("note", f"input {port}.{bit} {word}: {reply}".encode())
+        if not reply.startswith("ok"):
+            raise HarnessError(f"--inputs-control {self.inputs}: {reply}")
 
     def prepare(self, script: Any) -> None:
         if self.keeper is not None:
@@ -424,13 +450,14 @@ class LinkTarget(Target):
                 self._buffer += data
 
     def _fresh(self) -> None:
-        """J, then the ~2 s the unit needs (GVE64 §13.4)."""
-        line = self.frame("!0J")
-        self._note("tx", line)
-        self._write(line)
-        self.wait(self.ready_after)
+        """J, then the ~2 s the unit needs (GVE64 §13.4): polled the first time, then the
+        readiness measured (what follows may be about @ or >, which a poll would change)."""
+        from conform.conformance.state import StateStats, power_up
+
+        if self.reset_stats is None:
+            self.reset_stats = StateStats()
+        power_up(self, self.reset_stats, self.ready_after, quiet=True)
         self._buffer = b""
-        self.idle = True
 
     def close(self) -> None:
         self.endpoint.close()
@@ -480,7 +507,8 @@ def open_target(text: str, spec: Any, *, baud: int = 115200, guard: Guard | None
     if kind == "emu":
         variant_id = what or DEFAULT_VARIANT
         factory = emulator_factory(spec, variant_id, dialect, mutant)
-        return EmuTarget(factory, text if what else f"emu:{variant_id}", baud=baud), variant_id
+        return EmuTarget(factory, text if what else f"emu:{variant_id}", guard,
+                         baud=baud), variant_id
     from conform.link import open_port
 
     assert what is not None
