@@ -60,7 +60,7 @@ def _link_run(spec, port, variant, checks, guard, inputs=None, **opts):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("variant,extra", [("gve64-v19", ()), ("gve124", ("--baud", "115200"))])
+@pytest.mark.parametrize("variant,extra", [("gve124", ("--baud", "115200"))])
 def test_link_grades_equal_in_process(spec, variant, extra, tmp_path):
     guard = Guard(True, 1000000, True)
     checks = suite(spec, variant, patterns=SUBSET, guard=guard)
@@ -231,3 +231,30 @@ def test_not_verified_says_how_to_enable(spec):
     assert how["needs eeprom"] == "--allow-eeprom"
     assert how["needs inputs driven"] == "--inputs-control PATH"
     assert not_verified(run.checks) == run.not_verified
+
+
+@pytest.mark.slow
+def test_a_link_gone_silent_is_an_error_not_a_fail(spec, monkeypatch):
+    """A unit that stops answering mid-run (a cable pulled; the port stays open): the check that
+    met the silence is ERROR, and the run stops cleanly after three, marked incomplete."""
+
+    class GoesSilent(UnitEndpoint):
+        silent = False
+
+        def write(self, data):
+            self.silent = self.silent or data.startswith(b"!0V")
+            if not self.silent:
+                super().write(data)
+
+    import conform.conformance.state as state
+
+    monkeypatch.setattr(state, "READY_MARGIN", 0.5)  # the deaf time + 0.5 s of silence: lost
+    target = LinkTarget(GoesSilent(spec, "gve64-v19"), "fake://unit", Guard(False, None, False),
+                        115200, ready_after=0.2)
+    checks = select(generate(spec, "gve64-v19"), ["*/V/*", "*/A/*"])
+    run = Runner(spec, target, "gve64-v19").run(checks)
+    grades = [c.grade for c in run.checks]
+    assert Grade.FAIL not in grades and grades[-3:] == [Grade.ERROR] * 3
+    assert grades[0] is Grade.PASS  # V/* ran before the silence
+    assert "link lost" in run.aborted and not run.complete
+    assert any("no answer to F" in c.detail for c in run.checks)

@@ -21,7 +21,7 @@ from conform.conformance.results import CheckResult, Grade, TargetRun
 from conform.conformance.safety import SafetyRefusal, not_verified
 from conform.conformance.script import run_script, skip_reason
 from conform.conformance.state import StateKeeper
-from conform.conformance.target import HarnessError, Target
+from conform.conformance.target import HarnessError, LinkSilent, Target
 from conform.errors import LinkError
 
 Progress = Callable[[CheckResult], None]
@@ -128,7 +128,8 @@ class Runner:
 
     def _link_failed(self, result: CheckResult) -> bool:
         return (result.grade is Grade.ERROR and not self.target.emulated
-                and result.detail.startswith(("HarnessError", "LinkError", "PortGone", "OSError")))
+                and result.detail.startswith(("HarnessError", "LinkSilent", "LinkError", "PortGone",
+                                              "OSError")))
 
     def _result(self, check: Check, grade: Grade, **kw: Any) -> CheckResult:
         return CheckResult(id=check.id, grade=grade, clause=check.clause, level=check.level,
@@ -157,8 +158,9 @@ class Runner:
             replies = run_script(self.target, check.script)
         except (HarnessError, LinkError, SafetyRefusal, OSError) as exc:
             detail = f"{type(exc).__name__}: {exc}"
-            if not self.target.emulated:
-                detail += f"; {self.target.safe_stop()}"
+            if not self.target.emulated:  # after seconds of silence H needs no deaf-time retries
+                bound = 1.0 if isinstance(exc, LinkSilent) else 7.0
+                detail += f"; {self.target.safe_stop(h_bound=bound)}"
             if keeper is not None:
                 keeper.done(False)
             return self._result(check, Grade.ERROR, detail=detail, sequence=sequence,
@@ -175,6 +177,13 @@ class Runner:
         grade = Grade(verdict.grade)
         if keeper is not None:
             keeper.done(grade is Grade.PASS)
+            if grade is not Grade.PASS and any(r is not None and r.silent for r in replies):
+                lost = keeper.link_lost()
+                if lost:  # the unit did not fall silent: the link did
+                    return self._result(check, Grade.ERROR, detail=f"HarnessError: {lost}",
+                                        expected=verdict.expected, actual=verdict.actual,
+                                        sequence=sequence, log=list(self.target.log),
+                                        duration=time.perf_counter() - t0)
         if grade is Grade.PASS:
             exp = ""
             subject = [i for i, s in enumerate(check.script) if s.subject]

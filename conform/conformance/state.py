@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from conform.conformance.expect import first_mismatch
 from conform.conformance.script import Script, run_steps
-from conform.conformance.target import EmuTarget, HarnessError
+from conform.conformance.target import EmuTarget, HarnessError, LinkSilent
 from conform.protocol.checksum import append_checksum
 
 if TYPE_CHECKING:
@@ -212,6 +212,19 @@ class StateKeeper:
         self.shadow = self.pending if state_known else None
         self.pending = None
 
+    def link_lost(self, every: float = 0.5) -> str | None:
+        """After a check that met silence: does the unit still answer (F, in either checksum
+        framing, for the deaf time after a J and a margin)? None if it does; else why the link
+        counts as lost."""
+        tg = self.target
+        tg.resync()
+        tries = int((self._ready_after + READY_MARGIN) / every)
+        for _ in range(tries):
+            if tg.exchange(tg.frame("!0F"), every).lines:
+                return None
+            tg.checksum_on = not tg.checksum_on
+        return f"{tg.name}: no answer to F in {tries} tries after the check met silence (link lost)"
+
     def _tidy(self, lines: list[bytes]) -> bool:
         tg = self.target
         tg.resync()
@@ -275,8 +288,8 @@ def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = Fa
                     power_up(tg, stats, ready_after, quiet=True)
                 return
         if not refused:
-            raise HarnessError(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after J "
-                               "(link lost or unit not resetting)")
+            raise LinkSilent(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after J "
+                             "(link lost or unit not resetting)")
         tg.checksum_on = not framing
         tg.resync()
     raise HarnessError(f"{tg.name}: J refused in both checksum framings")

@@ -28,6 +28,10 @@ class HarnessError(Exception):
     """The harness or the link failed (graded ERROR, never the unit's fault)."""
 
 
+class LinkSilent(HarnessError):
+    """Nothing comes back any more: the link is lost (a unit would answer something)."""
+
+
 @dataclass
 class Reply:
     """What came back for one line sent."""
