@@ -92,6 +92,8 @@ class StateKeeper:
         self._confirm_expected = [probe.exchange(line).lines for line in self._confirm]
         self._ready_after = float(self.v.reset.get("ready_after_s", 2.0))
         self._poll_shows: dict[Script, bool] = {}
+        self._moved = False  # the last check moved an axis (see tidy_lines)
+        self._start_position: tuple[int, ...] = ()
 
     # -- what the reference says ---------------------------------------------------------------
     def _body(self, script: Script) -> Script:
@@ -104,17 +106,20 @@ class StateKeeper:
         want = self.ref.transcript(script)[len(script) - len(body):]
         return first_mismatch(body, want, got, False, lambda e, a: 0.0) is None
 
-    def tidy_lines(self, unit: Any) -> tuple[list[bytes], list[str]]:
-        """Commands that restore what ``unit`` differs in from power-up; and what they cannot."""
+    def tidy_lines(self, unit: Any, moved: bool = False) -> tuple[list[bytes], list[str]]:
+        """Commands that restore what ``unit`` differs in from power-up; and what they cannot.
+
+        ``moved``: the last check moved an axis; a move that ends within a few ms of the
+        reference's end may still run on the unit (the link's latency), so H and D go anyway."""
         f = self._fresh
         lines: list[bytes] = []
         cannot: list[str] = []
         if unit.checksum_on:
             lines.append(_line("!0%-", True))
-        if unit.queue_len or unit.run:
+        if unit.queue_len or unit.run or moved:
             lines.append(_line("!0H"))
-        if (unit.queue_len or unit.inta or unit.run or any(unit.status(n) != f.status(n)
-                                                           for n in (4, 5, 6))):
+        if (unit.queue_len or unit.inta or unit.run or moved
+                or any(unit.status(n) != f.status(n) for n in (4, 5, 6))):
             lines.append(_line("!0D"))
         if tuple(unit.position) != tuple(f.position):
             lines.append(_line("!0N"))
@@ -160,9 +165,10 @@ class StateKeeper:
         if self.shadow is not None:
             sim = self.shadow
             self.shadow = None  # run on: it will be the state after this check
-            lines, cannot = self.tidy_lines(sim.unit)
+            lines, cannot = self.tidy_lines(sim.unit, self._moved)
             for line in lines + self._confirm:
                 sim.exchange(line, 5.0)
+            self._start_position = sim.unit.executor.position
             if self._same_as_fresh(script, sim):
                 self.pending = sim
                 return lines, ""
@@ -177,6 +183,7 @@ class StateKeeper:
         sim = _fresh_target(self.ref)
         if not self.poll_shows(script):
             sim.exchange(POLL_LINE)
+        self._start_position = sim.unit.executor.position
         run_steps(sim, self._body(script))
         return sim
 
@@ -210,6 +217,8 @@ class StateKeeper:
     def done(self, state_known: bool) -> None:
         """The check ran; its answers were the reference's (``state_known``) or not."""
         self.shadow = self.pending if state_known else None
+        self._moved = self.shadow is not None and (
+            self.shadow.unit.executor.position != self._start_position)
         self.pending = None
 
     def link_lost(self, every: float = 0.5) -> str | None:
