@@ -347,7 +347,9 @@ def _valid_setup(b: _Builder, cid: str, cs: bool = False) -> tuple[list[Step], i
 def _valid_steps(b: _Builder, cid: str, cs: bool = False) -> list[Step]:
     if cid in ("*S", "*E"):
         c = b.cmd_step("C", [100, 0, 0], cs, answer=False, subject=False)
-        return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs)]
+        # the vector the packet carried is accounted for by the position it reached
+        return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs),
+                Step(wait=1.0), b.cmd_step("PF", [], cs, subject=False)]
     if cid == "J":
         return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, ready=True)]
     step = b.cmd_step(cid, b.valid_args(cid), cs)
@@ -464,7 +466,7 @@ def _semantic_checks(b: _Builder) -> None:
     fill = b.queue_fill(v.queue)
     b.add("C", "queue-full", f"the queue holds {v.queue} C vectors; the next answers 1",
           [RESET, *fill, b.raw(f"!0C{b.travel},20,0", subject=True),
-           b.cmd_step("F", [], subject=False)],
+           b.cmd_step("F", [], subject=False), b.cmd_step("PF", [], subject=False)],
           clause=f"{b.clause('C')}, {v.clause('queue')}", intent=QUEUE_FULL, questions=("A5",))
     # the @ index (GVE64 §13.5.13; A10)
     b.add("@", "advance", "@ counts the commands received",
@@ -489,7 +491,7 @@ def _semantic_checks(b: _Builder) -> None:
     # HALT during a move: INTA on the answer and afterwards (GVE64 §13.5.9, §13.7)
     b.add("H", "running", "H brakes a move; the answer and the next carry INTA",
           [RESET, *b.running(), b.cmd_step("H", []), b.cmd_step("SR", [6], subject=False),
-           b.raw("!0V1000")], questions=("A24",))
+           b.raw("!0V1000"), b.cmd_step("PF", [], subject=False)], questions=("A24",))
     # position read-back after moves, every axis separately (GVE64 §13.5.6)
     moves = [(1, -2, 3, 4)[: len(v.axes)], (300, 0, -200, 0)[: len(v.axes)]]
     for i, m in enumerate(moves):
@@ -528,7 +530,7 @@ def _semantic_checks(b: _Builder) -> None:
            Step(wait=0.2), b.raw("!0H", timeout=5.0), b.raw("!0SR6"), b.raw("!0K", subject=True),
            b.raw("!0L0,0,-1000"), Step(wait=3.0), b.raw("!0L0,0,1000"), Step(wait=3.0),
            b.raw("!0R", subject=True), b.raw("!0V500"), b.raw("!0XA"), b.raw("!0G"),
-           b.raw("!0SR6")], questions=("A4",))
+           b.raw("!0SR6"), b.cmd_step("PF", [], subject=False)], questions=("A4",))
     # inputs: an enabled interrupt brakes and sets INTA (GVE64 §13.5.12)
     b.add("SR", "interrupt", "an enabled input interrupt stops the move and sets INTA and ST4",
           [RESET, b.raw("!0SW0,01"), *b.running(), Step(wait=0.2),
