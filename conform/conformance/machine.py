@@ -27,7 +27,7 @@ from conform.conformance.expect import first_mismatch, reply_mismatch, show
 from conform.conformance.results import INFO, CheckResult, Grade, LogEntry
 from conform.conformance.safety import SafetyRefusal, hazards
 from conform.conformance.script import ENVIRONMENT, Step
-from conform.conformance.target import EmuTarget, HarnessError, Reply
+from conform.conformance.target import POLL_LINE, EmuTarget, HarnessError, Reply
 from conform.errors import LinkError
 from conform.protocol import encode_command
 from conform.protocol.checksum import append_checksum
@@ -140,8 +140,13 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             if self.off:
                 shared.cut += 1
                 return
-            target.reset()
+            # J and its readiness polled with @ (on a link the unit's deaf time is measured,
+            # never guessed); the reference gets the same @
+            poll = target.reset_polled()
             target.begin_log()
+            self.script.append(Step(line=POLL_LINE))
+            self.actual.append(poll)
+            self.ref.exchange(POLL_LINE)
             shared.examples += 1
 
         # -- sending -------------------------------------------------------------------------

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from conform.conformance.expect import first_mismatch
 from conform.conformance.script import Script, run_steps
-from conform.conformance.target import EmuTarget, HarnessError, LinkSilent
+from conform.conformance.target import POLL_LINE, EmuTarget, HarnessError, LinkSilent, Reply
 from conform.protocol.checksum import append_checksum
 
 if TYPE_CHECKING:
@@ -41,8 +41,7 @@ if TYPE_CHECKING:
 
 POLL_EVERY = 0.1  # seconds between readiness polls after J
 READY_MARGIN = 3.0  # seconds past the table's deaf time before a silent unit is a lost link
-QUIET_MARGIN = 0.25  # seconds added to the measured readiness when a poll would show
-POLL_LINE = b"!0@\r"  # answered once the unit hears again; not counted (A10), no > line kept
+QUIET_MARGIN = 0.4  # seconds added to the measured readiness when a poll would show
 
 
 @dataclass
@@ -248,15 +247,16 @@ class StateKeeper:
         tg.idle = True  # F read back: queue empty, nothing runs
         return True
 
-    def power_up(self, quiet: bool = False) -> None:
-        """J; then wait until the unit hears again (polled, bounded)."""
-        power_up(self.target, self.stats, self._ready_after, quiet)
+    def power_up(self, quiet: bool = False) -> Reply | None:
+        """J; then wait until the unit hears again (polled, bounded); the poll's answer."""
+        return power_up(self.target, self.stats, self._ready_after, quiet)
 
 
 _POLL_ANSWER = re.compile(rb"^[0-9A-F],")  # @'s answer (J's own, under A17, has no field)
 
 
-def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = False) -> None:
+def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = False
+             ) -> Reply | None:
     """J, then wait until ``tg`` hears again: polled with ``@`` every POLL_EVERY s (bounded by
     ``ready_after`` + READY_MARGIN), or — ``quiet``, when a poll would show in what follows — the
     longest readiness measured so far plus QUIET_MARGIN. A J the unit refused (a checksum
@@ -273,7 +273,7 @@ def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = Fa
             tg.drain()
             tg.checksum_on = False
             tg.idle = True
-            return
+            return None
         refused = False
         bound = t_sent + ready_after + READY_MARGIN
         while tg.now() < bound:
@@ -294,8 +294,10 @@ def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = Fa
                 tg.wait(0.02)
                 tg.drain()
                 if quiet:  # the poll would show: J again, with the readiness just measured
-                    power_up(tg, stats, ready_after, quiet=True)
-                return
+                    return power_up(tg, stats, ready_after, quiet=True)
+                reply.lines = reply.lines[-1:]  # the poll's own answer (not J's, A17)
+                reply.stray = b""
+                return reply
         if not refused:
             raise LinkSilent(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after J "
                              "(link lost or unit not resetting)")

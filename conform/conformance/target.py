@@ -22,6 +22,7 @@ from conform.protocol.checksum import append_checksum
 
 DEFAULT_VARIANT = "gve64-v19"
 DEFAULT_TIMEOUT = 0.5
+POLL_LINE = b"!0@\r"  # readiness after J: answered once the unit hears; not counted (A10)
 
 
 class HarnessError(Exception):
@@ -111,6 +112,12 @@ class Target(ABC):
         self._fresh()
         self.checksum_on = False
         self._buffer = b""
+
+    def reset_polled(self) -> Reply:
+        """J, then ``!0@`` until the unit answers (its readiness); the answer. What follows
+        starts from power-up and one ``@`` (which A10 does not count)."""
+        self.reset()
+        return self.exchange(POLL_LINE)
 
     @property
     def drives_inputs(self) -> bool:
@@ -406,6 +413,14 @@ class LinkTarget(Target):
             self._buffer = b""
         else:
             super().reset()
+
+    def reset_polled(self) -> Reply:
+        if self.keeper is None:
+            return super().reset_polled()
+        reply = self.keeper.power_up(quiet=False)
+        assert reply is not None
+        self._buffer = b""
+        return reply
 
     def ready_wait(self, seconds: float) -> float:
         from conform.conformance.state import QUIET_MARGIN
