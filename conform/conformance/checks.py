@@ -535,9 +535,10 @@ def _semantic_checks(b: _Builder) -> None:
     b.add("SR", "interrupt", "an enabled input interrupt stops the move and sets INTA and ST4",
           [RESET, b.raw("!0SW0,01"), *b.running(), Step(wait=0.2),
            Step(input=(1, 0, True)), Step(wait=1.0), b.cmd_step("SR", [4]),
-           b.raw("!0SR6"), b.raw("!0V1000")], questions=("A24",))
+           b.raw("!0SR6"), b.raw("!0V1000"), Step(input=(1, 0, False))], questions=("A24",))
     b.add("I1", "inputs", "I1 shows an active input",
-          [RESET, Step(input=(1, v.input_bits["port1"][-1], True)), b.cmd_step("I1", [])])
+          [RESET, Step(input=(1, v.input_bits["port1"][-1], True)), b.cmd_step("I1", []),
+           Step(input=(1, v.input_bits["port1"][-1], False))])  # inputs are physical: released
     # reset (GVE64 §13.4)
     b.add("J", "reset-state", "J restores the reset state: position, checksum off, V",
           [RESET, *b.position(10, 20, 30), b.raw("!0%+"), b.raw("!0J", cs=True),

@@ -114,6 +114,15 @@ class Runner:
             run.notes.append(f"end of run: {self.target.safe_stop()}")
         return run
 
+    def _release_inputs(self, check: Check) -> None:
+        """Inputs are physical and outlive J: on a link, whatever a check asserted is released
+        (the checks release them themselves; this covers a check cut short)."""
+        if self.target.emulated:
+            return
+        held = {s.input[:2] for s in check.script if s.input is not None and s.input[2]}
+        for port, bit in sorted(held):
+            self.target.set_input(port, bit, False)
+
     def _say(self, text: str) -> None:
         if self.options.announce is not None:
             self.options.announce(text)
@@ -155,7 +164,10 @@ class Runner:
                 if keeper is not None:
                     keeper.done(False)
                 return result
-            replies = run_script(self.target, check.script)
+            try:
+                replies = run_script(self.target, check.script)
+            finally:
+                self._release_inputs(check)
         except (HarnessError, LinkError, SafetyRefusal, OSError) as exc:
             detail = f"{type(exc).__name__}: {exc}"
             if not self.target.emulated:  # after seconds of silence H needs no deaf-time retries
