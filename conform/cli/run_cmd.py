@@ -11,7 +11,7 @@ import click
 from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.safety import Guard
+from conform.conformance.safety import run_guard
 from conform.conformance.suite import (
     PROFILE_NAMES,
     parse_replay,
@@ -96,12 +96,15 @@ class _Progress:
 @click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
 @click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
+@click.option("--inputs-control", default=None, metavar="PATH",
+              help="Drive the inputs of an emulator behind the link through its control socket "
+                   "(`conform emulate serve` prints it), for the checks that need inputs.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        quiet: bool) -> None:
+        inputs_control: str | None, quiet: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
     if _other_family(targets, variant):
         if mutants or matrix or replay or dialect_file:
@@ -145,9 +148,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     with _Progress(not quiet and sys.stderr.isatty()) as bar:
         for t in plan:
             kind, what, _ = parse_target(t)
-            guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps,
-                                                                 allow_eeprom)
+            guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
             target, implied = open_target(t, spec, baud=baud, guard=guard)
+            if inputs_control and not target.emulated:
+                target.inputs = inputs_control  # type: ignore[attr-defined]
             notes = []
             try:
                 vid = variant or implied
@@ -163,7 +167,9 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     raise UserError(f"no check of {vid} matches {wanted} (see --list)")
                 if not target.emulated and not allow_motion:
                     notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
-                options = RunOptions(profile=profile, seed=seed, notes=notes)
+                options = RunOptions(profile=profile, seed=seed, notes=notes,
+                                     announce=None if quiet else
+                                     (lambda text: click.echo(text, err=True)))
                 progress = bar.task(f"{target.name} ({vid})", len(checks))
                 try:
                     run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
@@ -233,6 +239,11 @@ def _print_summary(results, out: Path) -> None:  # noqa: ANN001
         for c in r.checks:
             if c.grade is Grade.FAIL:
                 click.echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+        if r.aborted:
+            click.echo(f"  INCOMPLETE: {r.aborted}")
+        for g in r.not_verified:
+            click.echo(f"  not verified: {g['count']} checks {g['reason']}"
+                       + (f" — enable with {g['how']}" if g["how"] else ""))
     if results.mutants:
         killed = sum(1 for m in results.mutants if m["killed"])
         click.echo(f"mutants: {killed}/{len(results.mutants)} killed")
