@@ -113,6 +113,18 @@ def test_dialect_overrides_and_rejects(spec):
 
 # --- malformed tables: one line naming file, row and field -------------------------------------
 
+def test_answer_times_come_from_the_tables(spec):
+    """H and W answer when their action ends (their rows say so); everything else at once."""
+    from conform.conformance.checks import generate
+
+    v = spec.variant("gve64-v19")
+    late = {cid: c.answer_within for cid, c in v.commands.items() if c.answer_within != 0.5}
+    assert late == {"H": 5.0, "W": 60.0, "G": 1.0}
+    steps = [st for ch in generate(spec, "gve64-v19") for st in ch.script
+             if st.line is not None and (st.line == b"!0H\r" or st.line.startswith(b"!0H,"))]
+    assert steps and {st.timeout for st in steps} == {5.0}
+
+
 def _broken(tmp_path: Path, file: str, old: str, new: str) -> Path:
     root = tmp_path / "specs"
     shutil.copytree(load_spec().root, root)
@@ -142,6 +154,10 @@ def _broken(tmp_path: Path, file: str, old: str, new: str) -> Path:
         ("commands.toml", "[[command]]\nid = \"Q\"", "[[command]]\nid = \"Q\"\nbogus = 1",
          r"command 'Q' \(row 2\): field 'bogus': unknown field"),
         ("status.toml", "queue_full_bit = 5", "queue_full_bit = [", r"status\.toml: "),
+        ("commands.toml", "answer_within = 5.0", "answer_within = nan",
+         r"command 'H' .*field 'answer_within': expected seconds"),
+        ("commands.toml", "answer_within = 60.0", "answer_within = 0",
+         r"command 'W' .*field 'answer_within': expected seconds"),
     ],
 )
 def test_malformed_table_gives_one_line(tmp_path, file, old, new, pattern):

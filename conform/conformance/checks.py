@@ -47,7 +47,6 @@ def answer_kind(cid: str) -> str:
 
 def answer_shape(cmd: Any) -> tuple[tuple[str, int | None], ...]:
     return tuple((f.radix, f.width) for f in cmd.answer)
-_TIMEOUTS = {"H": 5.0, "W": 60.0, "G": 1.0}
 _RANGE_QUESTIONS = {"velocity": ("A7",)}
 
 
@@ -157,6 +156,10 @@ class _Builder:
         line = (append_checksum(body) if cs else body) + b"\r"
         return Step(line=line, **kw)
 
+    def halt(self, cs: bool = False) -> Step:
+        """``H``, waited for as long as the table says (it answers when the brake ends)."""
+        return self.raw("!0H", cs, timeout=self.v.commands["H"].answer_within)
+
     def cmd_step(self, cid: str, args: Sequence[Any], cs: bool = False, address: int | None = None,
                  subject: bool = True, **kw: Any) -> Step:
         spec_cmd = self.v.commands.get(cid) or self._foreign(cid)
@@ -167,7 +170,7 @@ class _Builder:
             addr = self.v.interpolator_address
         line = encode_command(self.v, spec_cmd, args, address=addr, checksum_on=cs)
         kind = kw.pop("kind", answer_kind(cid))
-        kw.setdefault("timeout", _TIMEOUTS.get(cid, 0.5))
+        kw.setdefault("timeout", spec_cmd.answer_within)
         if cid == ">":
             kw.setdefault("lines", 2)
         shape = answer_shape(spec_cmd) if kind == ENVIRONMENT else ()
@@ -207,7 +210,7 @@ class _Builder:
 
     def inta(self, cs: bool = False) -> list[Step]:
         """INTA=1 by HALT during a move (GVE64 §13.5.9)."""
-        return [*self.running(cs), self.raw("!0H", cs, timeout=5.0)]
+        return [*self.running(cs), self.halt(cs)]
 
     def queue_fill(self, n: int) -> list[Step]:
         """``n`` C vectors at V10, alternating direction so the net travel stays small."""
@@ -418,7 +421,7 @@ def _edges(b: _Builder, cid: str, p: Any, args: list[Any], at: int, prefix: str,
             steps.append(b.cmd_step("*S", [], answer=False, subject=False))
             intent = intent if name != "hi" else SYNTAX  # count mismatch (A12)
         kind = answer_kind(cid) if intent == OK else ""
-        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5), kind=kind,
+        steps.append(Step(line=line, subject=True, timeout=cmd.answer_within, kind=kind,
                           shape=answer_shape(cmd) if kind == ENVIRONMENT else ()))
         b.add(cid, f"{prefix}/{name}",
               f"{cid} {p.name}={value} ({'inside' if intent == OK else 'outside'} "
@@ -486,7 +489,7 @@ def _semantic_checks(b: _Builder) -> None:
           [RESET, b.raw("!0SW6,80"), b.cmd_step("G", [])], intent=NOTHING_TO_GO)
     b.add("G", "resume", "G finishes the halted vector: the position reaches its end",
           [RESET, b.raw("!0V1000"), b.raw("!0C2000,0,0"), Step(wait=0.5),
-           b.raw("!0H", timeout=5.0), b.cmd_step("G", []), Step(wait=4.0),
+           b.halt(), b.cmd_step("G", []), Step(wait=4.0),
            b.cmd_step("PF", [], subject=False)], intent=OK)
     # HALT during a move: INTA on the answer and afterwards (GVE64 §13.5.9, §13.7)
     b.add("H", "running", "H brakes a move; the answer and the next carry INTA",
@@ -527,7 +530,7 @@ def _semantic_checks(b: _Builder) -> None:
     # K/R: the manual's recovery sequence (GVE64 §13.5.9)
     b.add("K", "recovery", "the manual's recovery example: H, K, L out and back, R, G",
           [RESET, b.raw("!0V1000"), b.raw(f"!0C{b.travel},0,0"), b.raw(f"!0C{b.travel},0,0"),
-           Step(wait=0.2), b.raw("!0H", timeout=5.0), b.raw("!0SR6"), b.raw("!0K", subject=True),
+           Step(wait=0.2), b.halt(), b.raw("!0SR6"), b.raw("!0K", subject=True),
            b.raw("!0L0,0,-1000"), Step(wait=3.0), b.raw("!0L0,0,1000"), Step(wait=3.0),
            b.raw("!0R", subject=True), b.raw("!0V500"), b.raw("!0XA"), b.raw("!0G"),
            b.raw("!0SR6"), b.cmd_step("PF", [], subject=False)], questions=("A4",))

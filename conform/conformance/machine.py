@@ -34,7 +34,6 @@ from conform.protocol.checksum import append_checksum
 
 PROFILES = {"quick": (100, 40), "full": (600, 80)}  # examples, steps per example
 SHRINK_SECONDS = {"quick": 8.0, "full": 60.0}  # wall-clock budget for shrinking a failure
-_TIMEOUTS = {"H": 5.0, "W": 60.0}
 _SPEEDS = (10, 100, 1000, 5000, 20000)
 
 
@@ -244,7 +243,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
                 return
             line = self._frame(line[:-1])
             kind = answer_kind(cmd.id)
-            self._send(Step(line=line, kind=kind, timeout=_TIMEOUTS.get(cmd.id, 0.5),
+            self._send(Step(line=line, kind=kind, timeout=cmd.answer_within,
                             lines=2 if cmd.id == ">" else 1,
                             shape=answer_shape(cmd) if kind == ENVIRONMENT else ()))
             if cmd.id == "J":

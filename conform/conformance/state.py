@@ -233,11 +233,17 @@ class StateKeeper:
             tg.checksum_on = not tg.checksum_on
         return f"{tg.name}: no answer to F in {tries} tries after the check met silence (link lost)"
 
+    def _answer_within(self, line: bytes) -> float:
+        """How long the table lets ``line``'s command take to answer (its longest mnemonic)."""
+        body = line[2:].decode("ascii", "replace")
+        rows = [c for c in self.v.commands.values() if body.startswith(c.mnemonic)]
+        return max(rows, key=lambda c: len(c.mnemonic)).answer_within if rows else 0.5
+
     def _tidy(self, lines: list[bytes]) -> bool:
         tg = self.target
         tg.resync()
         for line in lines:
-            reply = tg.exchange(line, 5.0 if line[2:3] == b"H" else 0.5)
+            reply = tg.exchange(line, self._answer_within(line))
             if not reply.lines:
                 return False
         tg.checksum_on = False

@@ -298,4 +298,4 @@ def _resolve_absent(base: CommandSpec, variant: Variant) -> CommandSpec:
     )
     return CommandSpec(base.id, base.mnemonic, base.addresses, base.family, params, base.answer,
                        base.modal, base.while_running, base.motion, base.effect, base.clauses,
-                       base.questions)
+                       base.questions, base.answer_within)

@@ -157,8 +157,9 @@ def _label(data: dict) -> str:
 
 COMMAND_KEYS = {
     "id", "mnemonic", "addresses", "family", "params", "answer", "modal", "while_running",
-    "motion", "effect", "clause", "questions",
+    "motion", "effect", "clause", "questions", "answer_within",
 }
+ANSWER_WITHIN_MAX = 600.0  # seconds; W's longest reference move answers well inside this
 PARAM_KEYS = {"name", "kind", "range", "choices", "sep", "per_axis", "min_count"}
 ANSWER_KEYS = {"name", "radix", "width", "per_axis"}
 
@@ -217,11 +218,15 @@ def _commands(path: Path, text: str, data: dict, questions: dict[str, Question])
         for q in qs:
             if q not in questions:
                 row.fail("questions", f"unknown open question {q!r}")
+        within = row.get("answer_within", (int, float), 0.5)
+        if not math.isfinite(within) or not 0 < within <= ANSWER_WITHIN_MAX:
+            row.fail("answer_within", f"expected seconds in (0, {ANSWER_WITHIN_MAX:g}], got {within!r}")
         out[cid] = CommandSpec(
             id=cid, mnemonic=mnemonic, addresses=addresses, family=family, params=tuple(params),
             answer=tuple(answer), modal=row.get("modal", bool, False),
             while_running=row.get("while_running", bool, True), motion=row.get("motion", bool, False),
             effect=row.get("effect", str), clauses=row.clauses(), questions=qs,
+            answer_within=float(within),
         )
     return out
 
@@ -420,6 +425,7 @@ def _variants(path: Path, text: str, data: dict, commands: dict[str, CommandSpec
             resolved[cid] = CommandSpec(
                 cmd.id, cmd.mnemonic, cmd.addresses, cmd.family, tuple(params), cmd.answer,
                 cmd.modal, cmd.while_running, cmd.motion, cmd.effect, cmd.clauses, cmd.questions,
+                cmd.answer_within,
             )
         if m["eeprom_map"] not in eeprom_maps:
             row.fail("eeprom_map", f"unknown EEPROM map {m['eeprom_map']!r}")

@@ -57,6 +57,7 @@ class CommandSpec:
     effect: str
     clauses: tuple[str, ...]
     questions: tuple[str, ...]
+    answer_within: float = 0.5  # seconds a host waits for the answer (H and W answer only when done)
 
     def clause_for(self, manual: str) -> str:
         """The clause of ``manual`` ("GVE64", "GVE124") this row cites, else its first clause."""
