@@ -277,6 +277,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     protocol_findings(ctx, host, unit, unsolicited, out)
     rec = recovery_analysis(ctx, out)
     pos = check_positions(ctx, unit, rec, out)
+    del ctx  # its motion units (a row per vector) are not needed by the replay
 
     say("queue replay")
     accepted = accepted_vectors(ex, rec["recovered"])
