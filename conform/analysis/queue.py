@@ -205,7 +205,11 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
         out = replay_vectors(ev_t[lo:hi], push, vec[sl], cont_v[sl], state[sl], tacc[sl],
                              *tables, float(variant.max_rate or 0.0),
                              variant.queue + 10_000 if hi == len(rows) else -1, F, I)
-        parts.append((out[0] + first, out[1], out[2], out[4], out[6]))  # v_in, rest: unused
+        # copies: the kernel's results are views of arrays as long as every queued vector,
+        # which would keep a queue-sized buffer alive per chunk (v_in, rest: not used)
+        parts.append((out[0] + first, out[1].copy(), out[2].copy(), out[4].copy(),
+                      out[6].copy()))
+        del out
     seq, starts, ends, v_out, starved = (np.concatenate(c) for c in zip(*parts, strict=True))
     return (seq, starts, ends, v_out, starved), [], notes
 
