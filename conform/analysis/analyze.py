@@ -501,7 +501,9 @@ def compute_metrics(ex: pd.DataFrame, host: fr.DecodedLines, unit: fr.DecodedLin
             lat[col] = {"median": float(q[0]), "p95": float(q[1]), "p99": float(q[2]),
                         "max": float(v.max()), "mean": float(v.mean())}
     m["latency"] = lat
-    by = ex.loc[answered].groupby("name", dropna=True)["rtt"]
+    # the two columns it needs, not a copy of the answered rows of the whole table
+    by = pd.Series(ex["rtt"].to_numpy()[answered]).groupby(
+        ex["name"].to_numpy()[answered], dropna=True)
     m["latency_by_command"] = {str(k): {"n": int(g.size), "median": float(g.median()),
                                         "max": float(g.max())} for k, g in by}
     nb = int(min(600, max(10, duration)))
