@@ -131,18 +131,20 @@ def analysis(path: str) -> dict:
     t = time.perf_counter()
     cpu0 = time.process_time()
     steps: dict[str, float] = {}
+    peaks: dict[str, float] = {}  # peak RSS (MB) reached by the end of each step
     last = [time.process_time(), "start"]
 
     def step(name: str) -> None:
         now = time.process_time()
         steps[last[1]] = now - last[0]
+        peaks[last[1]] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         last[:] = [now, name]
 
     a = analyze(path, step=step)
-    steps[last[1]] = time.process_time() - last[0]
+    step("end")
     return {"seconds": time.perf_counter() - t, "cpu_s": time.process_time() - cpu0,
             "exchanges": int(a.metrics["exchanges"]),
-            "vectors": int(a.metrics["vectors_accepted"]), "steps": steps,
+            "vectors": int(a.metrics["vectors_accepted"]), "steps": steps, "peaks": peaks,
             "findings": a.metrics["finding_counts"]}
 
 
@@ -188,6 +190,8 @@ def main() -> None:
     print(f"analysis: {ana['cpu_s']:.2f} s CPU ({ana['seconds']:.2f} s wall), "
           f"{ana['max_rss_mb']:.0f} MB peak")
     print("  CPU by step: " + ", ".join(f"{k} {v:.2f} s" for k, v in ana["steps"].items()))
+    print("  peak memory by the end of each step: "
+          + ", ".join(f"{k} {v:.0f} MB" for k, v in ana["peaks"].items()))
     print(f"  findings: {ana['findings']}")
     print(f"CPU     {ana['cpu_s']:.2f} s / {target_cpu:.2f} s target: ratio "
           f"{ana['cpu_s'] / target_cpu:.2f}")

@@ -71,8 +71,9 @@ def test_fleet_cli_exit_status_and_report(tmp_path, capsys):
 def test_fleet_on_a_dask_local_cluster(tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     root = fleet_dir(tmp_path)
+    # ":0": with None the scheduler still binds its HTTP server to the default port 8787
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         s = analyze_fleet([str(root)], parquet_dir=str(tmp_path / "pq"),
                           scheduler=cluster.scheduler_address)
     check(s, tmp_path / "pq")

@@ -234,12 +234,18 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     unit_mode = _step(ev_rank, ev_state, ur, init, strict=True)
     unit = fr.decode_unit(raw.unit, ul, ut, unit_mode)
     packets = exm.find_packets(host)
+    # what the per-read tables tell is taken now, and they are let go before the exchange
+    # table is built (the peak of the analysis); a baud that needs re-timing reads again
+    low = baud_evidence(raw)
+    gaps = _offset_gaps(raw)
+    unit_data = raw.unit.data
+    raw.release()
+    release_memory()
     ex, unsolicited = exm.build_exchanges(host, unit, packets, declared, (hr, ur))
     del hr, ur
 
     # is the baud the capture claims possible?
     used = declared
-    low = baud_evidence(raw)
     slope = slope_baud(ex)
     est = None
     if low is not None and low > declared * 1.3:
@@ -248,20 +254,22 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
         est = _round_baud(slope)
     if est is not None and est != declared:
         used = float(est)
+        raw = _reread(path, raw)
         ht, ut = timed(used, False)
+        raw.release()
         host.t_first, host.t_last = ht
         unit.t_first, unit.t_last = ut
         ex, unsolicited = exm.build_exchanges(host, unit, packets, used)
 
-    _check_answer_shapes(ex, unit, raw.unit.data, var)
+    _check_answer_shapes(ex, unit, unit_data, var)
+    del unit_data
 
     t_all = np.concatenate([host.t_first, unit.t_first])
     t_all = t_all[np.isfinite(t_all)]
     t0 = float(t_all.min()) if len(t_all) else 0.0
     t_end = float(np.concatenate([host.t_last, unit.t_last]).max()) if len(t_all) else 0.0
     out = Findings(t0)
-    _capture_findings(raw, out, t0, declared, used, source, low, slope)
-    raw.release()
+    _capture_findings(raw, gaps, out, t0, declared, used, source, low, slope)
 
     say("findings")
     ctx = Context(ex, lambda i: escape_bytes(host.raw(i)), lambda i: escape_bytes(unit.raw(i)),
@@ -269,6 +277,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     protocol_findings(ctx, host, unit, unsolicited, out)
     rec = recovery_analysis(ctx, out)
     pos = check_positions(ctx, unit, rec, out)
+    del ctx  # its motion units (a row per vector) are not needed by the replay
 
     say("queue replay")
     accepted = accepted_vectors(ex, rec["recovered"])
@@ -399,8 +408,30 @@ def accepted_vectors(ex: pd.DataFrame, recovered: np.ndarray | None = None) -> n
     return acc
 
 
-def _capture_findings(raw: RawCapture, out: Findings, t0: float, declared: float, used: float,
-                      source: str, low: float | None, slope: float | None) -> None:
+def _reread(path: str | os.PathLike[str], raw: RawCapture) -> RawCapture:
+    """The bytes and per-read tables again (they were let go before pairing)."""
+    again = read_raw(path)
+    return RawCapture(raw.status, raw.metadata, again.host, again.unit, raw.link_events,
+                      raw.topics)
+
+
+def _offset_gaps(raw: RawCapture) -> list[tuple[str, float, int]]:
+    """(direction, read time of the first, count) of the reads whose offset does not
+    follow the previous one."""
+    found = []
+    for d in (raw.host, raw.unit):
+        if d.chunks > 1:
+            claimed = d.offset
+            real = np.concatenate([[0], np.cumsum(d.length)[:-1]])
+            gaps = np.flatnonzero((claimed >= 0) & (claimed != real))
+            if len(gaps):
+                found.append((d.name, float(d.t_read[gaps[0]]), int(len(gaps))))
+    return found
+
+
+def _capture_findings(raw: RawCapture, gaps: list[tuple[str, float, int]], out: Findings,
+                      t0: float, declared: float, used: float, source: str,
+                      low: float | None, slope: float | None) -> None:
     st = raw.status
     if not st.complete:
         out.add("capture-damaged", t0, "warning",
@@ -408,15 +439,10 @@ def _capture_findings(raw: RawCapture, out: Findings, t0: float, declared: float
                 problem=st.problem)
     for note in st.notes[:5]:
         out.add("capture-damaged", t0, "warning", note)
-    for d in (raw.host, raw.unit):
-        if d.chunks > 1:
-            claimed = d.offset
-            real = np.concatenate([[0], np.cumsum(d.length)[:-1]])
-            gaps = np.flatnonzero((claimed >= 0) & (claimed != real))
-            if len(gaps):
-                out.add("capture-damaged", float(d.t_read[gaps[0]]), "warning",
-                        f"{d.name} stream: {len(gaps)} chunk(s) whose offset does not follow "
-                        "the previous one (bytes missing or repeated)", gaps=int(len(gaps)))
+    for name, t, count in gaps:
+        out.add("capture-damaged", t, "warning",
+                f"{name} stream: {count} chunk(s) whose offset does not follow "
+                "the previous one (bytes missing or repeated)", gaps=count)
     if used != declared:
         why = (f"bytes arrived faster than {int(declared)} baud allows (at least "
                f"{low:.0f} baud)" if low and low > declared * 1.3 else
@@ -475,7 +501,9 @@ def compute_metrics(ex: pd.DataFrame, host: fr.DecodedLines, unit: fr.DecodedLin
             lat[col] = {"median": float(q[0]), "p95": float(q[1]), "p99": float(q[2]),
                         "max": float(v.max()), "mean": float(v.mean())}
     m["latency"] = lat
-    by = ex.loc[answered].groupby("name", dropna=True)["rtt"]
+    # the two columns it needs, not a copy of the answered rows of the whole table
+    by = pd.Series(ex["rtt"].to_numpy()[answered]).groupby(
+        ex["name"].to_numpy()[answered], dropna=True)
     m["latency_by_command"] = {str(k): {"n": int(g.size), "median": float(g.median()),
                                         "max": float(g.max())} for k, g in by}
     nb = int(min(600, max(10, duration)))

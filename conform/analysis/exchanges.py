@@ -44,7 +44,7 @@ def merged_rank(host: DecodedLines, unit: DecodedLines) -> tuple[np.ndarray, np.
 @dataclass
 class Packets:
     member: np.ndarray  # bool per host line
-    packet: np.ndarray  # int64 packet number (-1 outside)
+    packet: np.ndarray  # int32 packet number (-1 outside)
     role: np.ndarray  # object: start/member/end/None
 
 
@@ -65,7 +65,7 @@ def find_packets(host: DecodedLines) -> Packets:
     role[is_s] = "start"
     role[member] = "member"
     role[is_e & open_before] = "end"
-    packet = np.where(is_s | member | (is_e & open_before), pid, -1)
+    packet = np.where(is_s | member | (is_e & open_before), pid, -1).astype(np.int32)
     return Packets(member, packet, role)
 
 
@@ -83,8 +83,8 @@ def pair(host: DecodedLines, unit: DecodedLines, packets: Packets,
     hr, ur = merged_rank(host, unit) if ranks is None else ranks
     # for each unit line, the last expecting command before it (index into exp_idx)
     c = np.searchsorted(hr[exp_idx], ur, side="left") - 1
-    answer = np.full(n, -1, np.int64)
-    extra = np.zeros(n, np.int64)
+    answer = np.full(n, -1, np.int32)  # line numbers and counts: int32 halves the columns
+    extra = np.zeros(n, np.int32)
     echo = np.flatnonzero(unit.kind == ECHO)
     if len(echo):
         # a line starting with `!` is an echo only right after `>` (A9); else it is noise
@@ -149,7 +149,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
     status[packets.member | (packets.role == "start")] = IN_PACKET
     status[host.kind == PARTIAL] = CUT
 
-    cmd_bytes = (host.lines.end - host.lines.start + host.lines.term).astype(np.int64)
+    cmd_bytes = (host.lines.end - host.lines.start + host.lines.term).astype(np.int32)
     ans_bytes = pick(unit.lines.end - unit.lines.start + unit.lines.term, 0)
     t_af = pick(unit.t_first, np.nan)
     t_al = pick(unit.t_last, np.nan)
@@ -166,7 +166,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
     inta = pick(unit.inta, False)
     ans_cs = pick(unit.checksum, 0).astype(np.int8)
     df = pd.DataFrame({
-        "frame": np.arange(n),
+        "frame": np.arange(n, dtype=np.int32),
         "name": pd.Series(host.name, dtype=object),
         "kind": pd.Series(host.kind, dtype=object),
         "status": pd.Series(STATUS_NAMES[status], dtype=object),
@@ -174,7 +174,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
         "cmd_checksum": host.checksum,
         "answer_frame": answer,
         "answer_kind": pd.Series(ans_kind, dtype=object),
-        "code": code.astype(np.int64),
+        "code": code.astype(np.int32),
         "inta": inta.astype(bool),
         "answer_checksum": ans_cs,
         "extra_answers": extra,
@@ -183,7 +183,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
         "t_ans_first": t_af.astype(float),
         "t_ans_last": t_al.astype(float),
         "cmd_bytes": cmd_bytes,
-        "ans_bytes": ans_bytes.astype(np.int64),
+        "ans_bytes": ans_bytes.astype(np.int32),
         "wire_cmd": wire_cmd,
         "wire_ans": wire_ans,
         "rtt": rtt.astype(float),

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.columns import isin, vectors
+from conform.analysis.columns import AXES, isin, vectors
 from conform.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
 
 MAX_LISTED = 50
@@ -160,24 +160,23 @@ def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
     single = isin(name, MOTION) & (packet < 0) & (ex["kind"].to_numpy() == "command")
     end = role == "end"
     rows = np.flatnonzero(single | end)
-    sig = np.zeros((len(rows), 6), np.int64)
-    sig[:, :4] = vectors(ex, rows)
-    sig[:, 4] = np.where(name[rows] == "L", 1, 0)
+    # column by column: no (units, 6) matrix and no consolidated copy of one
+    cols = {f"s{j}": ex[c].to_numpy()[rows].astype(np.int64, copy=False) for j, c in enumerate(AXES)}
+    cols["s4"] = np.where(name[rows] == "L", 1, 0)
+    cols["s5"] = np.zeros(len(rows), np.int64)
     if end.any():
         members = (role == "member") & isin(name, MOTION)
         vec = vectors(ex, np.flatnonzero(members))
         pk = packet[members]
         npk = int(packet.max()) + 1
-        sums = np.zeros((npk, 4), np.int64)
-        for j in range(4):
-            sums[:, j] = np.bincount(pk, weights=vec[:, j], minlength=npk)
         cnt = np.bincount(pk, minlength=npk)
         ends = np.flatnonzero(end[rows])
         p = packet[rows[ends]]
-        sig[ends, :4] = sums[p]
-        sig[ends, 5] = cnt[p] + 1000  # never equal to a single vector's signature
-    return pd.DataFrame({"row": rows, "s0": sig[:, 0], "s1": sig[:, 1], "s2": sig[:, 2],
-                         "s3": sig[:, 3], "s4": sig[:, 4], "s5": sig[:, 5]})
+        for j in range(4):
+            sums = np.bincount(pk, weights=vec[:, j], minlength=npk).astype(np.int64)
+            cols[f"s{j}"][ends] = sums[p]
+        cols["s5"][ends] = cnt[p] + 1000  # never equal to a single vector's signature
+    return pd.DataFrame({"row": rows, **cols}, copy=False)
 
 
 def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
@@ -199,10 +198,12 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
     if len(rows) == 0:
         _repeat_used(ctx, out, uncertain, is_rec)
         return res
-    sig = mu[["s0", "s1", "s2", "s3", "s4", "s5"]].to_numpy()
     nxt = np.concatenate([rows[1:], [-1]])
     same_next = np.zeros(len(rows), bool)
-    same_next[:-1] = (sig[1:] == sig[:-1]).all(axis=1)
+    same_next[:-1] = True
+    for c in ("s0", "s1", "s2", "s3", "s4", "s5"):  # the same signature, a column at a time
+        col = mu[c].to_numpy()
+        same_next[:-1] &= col[1:] == col[:-1]
     rec_between = np.zeros(len(rows), bool)
     rec_between[:-1] = cum_rec[rows[1:]] - cum_rec[rows[:-1]] > 0
     # after the last unit: any recovery at all later?
@@ -275,7 +276,7 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
         uses_at[j] = bool((seg == "@").any())
     out.many("index-checked", idx_checked[uses_at], "info", mk_checked)
     _repeat_used(ctx, out, uncertain, is_rec)
-    _queue_full(ctx, out, rows, sig, code, answered_clean)
+    _queue_full(ctx, out, rows, code, answered_clean)
 
     # what the sender meant to move: every unit once, except one replaced by a resend
     contrib = np.zeros(len(ex), bool)
@@ -337,8 +338,8 @@ def _repeat_used(ctx: Context, out: Findings, uncertain: np.ndarray, is_rec: np.
     out.many("repeat-used", rep[good], "info", mk)
 
 
-def _queue_full(ctx: Context, out: Findings, rows: np.ndarray, sig: np.ndarray,
-                code: np.ndarray, clean: np.ndarray) -> None:
+def _queue_full(ctx: Context, out: Findings, rows: np.ndarray, code: np.ndarray,
+                clean: np.ndarray) -> None:
     full = clean & (code == 1)
     if not full.any():
         return

@@ -225,7 +225,7 @@ def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
     code = np.full(n, -1, np.int64)
     detail = np.full(n, None, object)
     vec = np.zeros((n, 4), np.int64)
-    parsed_id = np.full(n, -1, np.int64)
+    parsed_id = np.full(n, -1, np.int32)
     parsed: list[Any] = []
     done = np.zeros(n, bool)
 
@@ -307,7 +307,7 @@ def decode_unit(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
     inta = np.zeros(n, bool)
     cs = np.zeros(n, np.int8)
     detail = np.full(n, None, object)
-    parsed_id = np.full(n, -1, np.int64)
+    parsed_id = np.full(n, -1, np.int32)
     parsed: list[Any] = []
     if n:
         enc = pc.dictionary_encode(pc.binary_join_element_wise(
@@ -358,10 +358,10 @@ def decode_unit(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
 
 def _term_order(d: Direction, lines: Lines) -> np.ndarray:
     if len(lines) == 0 or d.chunks == 0:
-        return np.zeros(len(lines), np.int64)
+        return np.zeros(len(lines), np.int32)
     idx = np.minimum(lines.end, len(d.data) - 1)
     k = np.searchsorted(d.start, idx, side="right") - 1
-    return d.order[np.maximum(k, 0)]
+    return d.order[np.maximum(k, 0)].astype(np.int32)  # read numbers: int32 is plenty
 
 
 def line_times(d: Direction, lines: Lines, t_first_chunks: np.ndarray

@@ -21,13 +21,36 @@ from conform.analysis.findings import Context, Findings
 POSITION = {"P": 2, "PF": 3, "P4": 4}
 
 
-def _motion_matrix(ctx: Context) -> np.ndarray:
-    """Per row, the motion it delivers: a vector's pulses, a packet's sum at its ``*E``."""
-    mu = ctx.motion_units()
-    out = np.zeros((len(ctx.ex), 4), np.int64)
-    rows = mu["row"].to_numpy()
-    out[rows] = mu[["s0", "s1", "s2", "s3"]].to_numpy()
-    return out
+CUM_BLOCK = 65_536  # motion units summed at a time (bounded temporaries)
+
+
+class _Motion:
+    """Per row, the motion it delivers (a vector's pulses, a packet's sum at its ``*E``),
+    looked up in the motion units: no (rows, 4) matrix of the whole table."""
+
+    def __init__(self, ctx: Context) -> None:
+        mu = ctx.motion_units()
+        self.rows = mu["row"].to_numpy()
+        self.cols = [mu[c].to_numpy() for c in ("s0", "s1", "s2", "s3")]
+
+    def __getitem__(self, r: int) -> np.ndarray:
+        i = int(np.searchsorted(self.rows, r))
+        if i < len(self.rows) and self.rows[i] == r:
+            return np.array([int(c[i]) for c in self.cols], np.int64)
+        return np.zeros(4, np.int64)
+
+    def cum_at(self, at: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """(len(at), 4): the motion of the rows ``<= at[j]`` that ``weight`` keeps, for
+        sorted ``at``, summed a block of units at a time."""
+        acc = np.zeros((len(at) + 1, 4), np.int64)
+        for lo in range(0, len(self.rows), CUM_BLOCK):
+            rows = self.rows[lo : lo + CUM_BLOCK]
+            w = weight[rows].astype(np.int64)
+            bucket = np.searchsorted(at, rows, side="left")
+            u, first = np.unique(bucket, return_index=True)
+            for j, c in enumerate(self.cols):
+                acc[u, j] += np.add.reduceat(c[lo : lo + CUM_BLOCK] * w, first)
+        return np.cumsum(acc[:-1], axis=0)
 
 
 def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
@@ -41,9 +64,7 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
                                "confirmed_double": 0, "confirmed_lost": 0}
     if len(pos_rows) == 0:
         return summary
-    mot_all = _motion_matrix(ctx)
-    motion = mot_all * rec["contrib"][:, None]
-    cum = np.cumsum(motion, axis=0)
+    mot_all = _Motion(ctx)
     reports: list[tuple[int, tuple[int, ...]]] = []
     for r in pos_rows.tolist():
         res = unit.result(int(ctx.answer[r]))
@@ -56,6 +77,9 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
     # segments between resets; unreliable after H / D / K (motion cut short on purpose)
     zero = np.flatnonzero(clean & isin(name, ("N", "J", "N<axis>")))
     cut = np.flatnonzero(clean & isin(name, ("H", "D", "K")))
+    at = np.union1d(pos_rows, zero)
+    cum_at = mot_all.cum_at(at, rec["contrib"])
+    cum = {int(r): cum_at[j] for j, r in enumerate(at.tolist())}
     doubles = np.concatenate([rec["doubles"], rec.get("checked_resends", np.zeros(0, np.int64))])
     checked_resends = set(rec.get("checked_resends", np.zeros(0, np.int64)).tolist())
     unclear = set(rec.get("unclear_resends", np.zeros(0, np.int64)).tolist())
@@ -94,8 +118,7 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
         if not delta.any():
             used.update(cand_d + cand_l)
             continue
-        mot = mot_all[:, : len(vals)]
-        found = _explain(delta, cand_d, cand_l, mot)
+        found = _explain(delta, cand_d, cand_l, mot_all, len(vals))
         if found is None:
             out.add("position-mismatch", ctx.t[r], "warning",
                     f"`{ctx.cmd(r)}` reports {vals}; the accepted vectors add up to "
@@ -150,9 +173,10 @@ def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
     return summary
 
 
-def _explain(delta: np.ndarray, doubles: list[int], lost: list[int], mot: np.ndarray
-             ) -> tuple[list[int], list[int]] | None:
+def _explain(delta: np.ndarray, doubles: list[int], lost: list[int], motion: _Motion,
+             naxes: int) -> tuple[list[int], list[int]] | None:
     """A small set of doubled and lost vectors whose sum is ``delta``, if there is one."""
+    mot = {r: motion[r][:naxes] for r in set(doubles) | set(lost)}
     items = [(r, 1) for r in doubles] + [(r, -1) for r in lost]
     if len(items) > 16:
         sign = [s for _, s in items]

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.columns import isin, vectors
+from conform.analysis.columns import AXES, isin
 from conform.spec.model import Variant
 
 MODAL = {"V", "A", "B", "$", "T", "VK", "VN"}
@@ -76,7 +76,7 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     rows = np.flatnonzero(accepted | ctrl)
     naxes = len(variant.axes)
     is_vec = accepted[rows]
-    vec = vectors(ex, rows[is_vec])[:, :naxes]  # the pushed vectors, in order
+    vec = _PushedVectors(ex, rows[is_vec], naxes)  # the pushed vectors, in order
     cont = names[rows] == "C"
     control = bool(isin(names[rows[~is_vec]], list(CONTROL)).any())
     if compiled is None:
@@ -100,6 +100,28 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     return rep
 
 
+class _PushedVectors:
+    """The pushed vectors, taken from the exchange table a slice at a time when sliced:
+    the compiled replay never holds the session's (vectors, axes) array at once."""
+
+    def __init__(self, ex: pd.DataFrame, rows: np.ndarray, naxes: int) -> None:
+        self.ex, self.rows, self.naxes = ex, rows, naxes
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, sl: slice) -> np.ndarray:
+        rows = self.rows[sl]
+        out = np.empty((len(rows), self.naxes), np.int64)
+        for j, c in enumerate(AXES[: self.naxes]):  # a column at a time: no (rows, 4) copies
+            out[:, j] = self.ex[c].to_numpy()[rows]
+        return out
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        out = self[:]
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+
 def queue_depth(pushes: np.ndarray, ends: np.ndarray, removals: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(time, depth after it) at every push (+1), end and removal (-1), by time; at equal
@@ -114,12 +136,12 @@ def queue_depth(pushes: np.ndarray, ends: np.ndarray, removals: np.ndarray
         t[at] = ends
         t[arrive] = pushes
         d[at] = -1
-        return t, np.cumsum(d, dtype=np.int64)
+        return t, np.cumsum(d, dtype=np.int32)
     ev_t = np.concatenate([pushes, ends, removals])
     ev_d = np.concatenate([np.ones(len(pushes), np.int8), -np.ones(len(ends), np.int8),
                            -np.ones(len(removals), np.int8)])
     order = np.lexsort((ev_d, ev_t))
-    return ev_t[order], np.cumsum(ev_d[order], dtype=np.int64)
+    return ev_t[order], np.cumsum(ev_d[order], dtype=np.int32)
 
 
 def _modal(p: Any, name: str, args: Any) -> Any:
@@ -167,7 +189,6 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
               col("pause", float), col("vk", bool))
     ev_t = t[rows].astype(float)
     tacc = ev_t[is_vec]
-    vec = np.ascontiguousarray(vec, np.int64)
     cont_v = cont[is_vec]
     pushed = np.cumsum(is_vec)  # vectors pushed up to and including each event
     F, I = new_state()  # noqa: E741
@@ -184,9 +205,12 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
         out = replay_vectors(ev_t[lo:hi], push, vec[sl], cont_v[sl], state[sl], tacc[sl],
                              *tables, float(variant.max_rate or 0.0),
                              variant.queue + 10_000 if hi == len(rows) else -1, F, I)
-        parts.append((out[0] + first,) + tuple(out[1:]))
-    seq, starts, ends, _v_in, v_out, _rest, starved = (
-        np.concatenate(c) for c in zip(*parts, strict=True))
+        # copies: the kernel's results are views of arrays as long as every queued vector,
+        # which would keep a queue-sized buffer alive per chunk (v_in, rest: not used)
+        parts.append((out[0] + first, out[1].copy(), out[2].copy(), out[4].copy(),
+                      out[6].copy()))
+        del out
+    seq, starts, ends, v_out, starved = (np.concatenate(c) for c in zip(*parts, strict=True))
     return (seq, starts, ends, v_out, starved), [], notes
 
 
@@ -197,6 +221,7 @@ def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.nda
     from conform.unit.motion import Completion, MotionExecutor, MotionStateError
 
     naxes = len(variant.axes)
+    vec = vec[:]  # the whole (vectors, axes) array: the Python replay takes small sessions
     log: list = []
 
     def executor() -> Any:
