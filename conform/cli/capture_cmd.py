@@ -8,6 +8,7 @@ from datetime import UTC, datetime
 import click
 
 from conform.capture.recover import capture_info, format_info, recover
+from conform.cli.params import INPUT_PATH, OUTPUT_FILE
 
 
 @click.group(name="capture")
@@ -16,10 +17,15 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
-@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@click.argument("file", type=INPUT_PATH)
+@click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
 def info(file: str, as_json: bool) -> None:
-    """Duration, bytes each way, messages per channel, clean or truncated."""
+    """Duration, bytes each way, messages per channel, clean or truncated.
+
+    \b
+    Example:
+      conform capture info captures/good-rs232.mcap --json
+    """
     result = capture_info(file)
     if as_json:
         s = result.status
@@ -37,12 +43,17 @@ def info(file: str, as_json: bool) -> None:
 
 
 @cli.command(name="recover")
-@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
+@click.argument("file", type=INPUT_PATH)
+@click.option("-o", "--output", type=OUTPUT_FILE, default=None,
               help="Where to write (default: FILE without .part, or FILE.recovered.mcap).")
 @click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
 def recover_cmd(file: str, output: str | None, force: bool) -> None:
-    """Rewrite the intact part of a killed or damaged recording as a complete MCAP."""
+    """Rewrite the intact part of a killed or damaged recording as a complete MCAP.
+
+    \b
+    Example:
+      conform capture recover session.mcap.part
+    """
     res = recover(file, output, force=force)
     s = res.status
     last = "-"

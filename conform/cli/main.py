@@ -29,6 +29,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "analyze",
     "send",
     "check-sender",
+    "ports",
 )
 
 

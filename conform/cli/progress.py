@@ -12,7 +12,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, TextIO
 
@@ -39,8 +39,9 @@ class Task:
     """One bar: a description, a count (or bytes) done of a total, and the current step."""
 
     def __init__(self, tracker: Tracker, description: str, total: float | None,
-                 unit: str) -> None:
+                 unit: str, poll: Callable[[], str] | None = None) -> None:
         self.tracker = tracker
+        self.poll = poll
         self.description = description
         self.total = total
         self.unit = unit
@@ -78,8 +79,10 @@ class Task:
 class Tracker:
     """The tasks of one command; shown as bars, as periodic lines, or not at all."""
 
-    def __init__(self, label: str, mode: str, stream: TextIO, interval: float) -> None:
+    def __init__(self, label: str, mode: str, stream: TextIO, interval: float,
+                 transient: bool = False) -> None:
         self.label = label
+        self.transient = transient
         self.mode = mode
         self.stream = stream
         self.interval = interval
@@ -88,9 +91,11 @@ class Tracker:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def task(self, description: str, total: float | None = None, *, unit: str = "items"
-             ) -> Task:
-        t = Task(self, description, total, unit)
+    def task(self, description: str, total: float | None = None, *, unit: str = "items",
+             poll: Callable[[], str] | None = None) -> Task:
+        """A new bar; ``poll`` (for open-ended work such as a recording) returns the current
+        step text and is asked before each refresh."""
+        t = Task(self, description, total, unit, poll)
         self.tasks.append(t)
         if self._bar is not None:
             t._id = self._bar.add_task(description, total=total, step="")
@@ -111,9 +116,15 @@ class Tracker:
                              step=task.step)
 
     def _tick(self) -> None:
-        while not self._stop.wait(self.interval):
-            for t in self.tasks:
-                if t.total is None or t.completed < t.total:
+        interval = self.interval if self.mode == "lines" else 0.5
+        while not self._stop.wait(interval):
+            for t in list(self.tasks):
+                if t.poll is not None:
+                    try:
+                        t.update(step=t.poll())
+                    except Exception:  # noqa: BLE001 - a display must never end a command
+                        pass
+                if self.mode == "lines" and (t.total is None or t.completed < t.total):
                     print(f"{self.label}: {t.line()}", file=self.stream, flush=True)
 
     def __enter__(self) -> Tracker:
@@ -130,9 +141,11 @@ class Tracker:
             self._bar = Progress(TextColumn("{task.description}"), BarColumn(),
                                  MofNCompleteColumn(), TextColumn("{task.fields[step]}"),
                                  TimeElapsedColumn(), console=Console(file=self.stream),
-                                 transient=False)
+                                 transient=self.transient,
+                                 # stdout into the live display only when both are the terminal
+                                 redirect_stdout=sys.stdout.isatty())
             self._bar.__enter__()
-        elif self.mode == "lines":
+        if self.mode != "off":
             self._thread = threading.Thread(target=self._tick, name="progress", daemon=True)
             self._thread.start()
         return self
@@ -157,9 +170,21 @@ def mode_for(stream: TextIO, quiet: bool = False) -> str:
 
 @contextmanager
 def progress(label: str, *, quiet: bool = False, stream: TextIO | None = None,
-             interval: float | None = None) -> Iterator[Tracker]:
-    """``with progress("conform run") as p: t = p.task("checks", 363); t.update(advance=1)``."""
+             interval: float | None = None, transient: bool = False) -> Iterator[Tracker]:
+    """``with progress("conform run") as p: t = p.task("checks", 363); t.update(advance=1)``;
+    ``transient`` bars vanish when done (for commands whose result is a few lines)."""
     out = stream if stream is not None else sys.stderr
     with Tracker(label, mode_for(out, quiet), out,
-                 interval if interval is not None else _interval()) as tracker:
+                 interval if interval is not None else _interval(), transient) as tracker:
         yield tracker
+
+
+def recording(tracker: Tracker, recorder: Any, what: str) -> Task:
+    """An open-ended task for a live recording: the bytes each way so far, polled."""
+    tracker.say(f"recording {what} to {recorder.path} (Ctrl-C to stop)")
+
+    def now() -> str:
+        b = getattr(recorder, "bytes", {})
+        return ", ".join(f"{d} {_size(n)}" for d, n in b.items()) or "waiting"
+
+    return tracker.task("recording", None, poll=now)

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Sequence
+from typing import Any
+
 import click
 from rich.console import Console
 from rich.table import Table
 
+from conform.cli.params import VARIANT
 from conform.spec import load_spec
 from conform.spec.diff import diff_variants
 from conform.spec.model import CommandSpec, Variant
@@ -13,6 +18,25 @@ from conform.spec.model import CommandSpec, Variant
 
 def _console() -> Console:
     return Console(soft_wrap=False, width=None if click.get_text_stream("stdout").isatty() else 160)
+
+
+_JSON = click.option("--json", "as_json", is_flag=True,
+                     help="One JSON document on stdout instead of the table.")
+
+
+def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json: bool,
+          key: str, **extra: Any) -> None:
+    """Print rows as a rich table, or as ``{key: [{column: value}], ...extra}`` JSON."""
+    if as_json:
+        doc = {**extra, key: [dict(zip(columns, row, strict=True)) for row in rows]}
+        click.echo(json.dumps(doc, indent=1, default=str))
+        return
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, overflow="fold")
+    for row in rows:
+        table.add_row(*(str(x) for x in row))
+    _console().print(table)
 
 
 def _params(cmd: CommandSpec, variant: Variant) -> str:
@@ -39,23 +63,35 @@ def cli() -> None:
 
 
 @cli.command("list")
-def list_cmd() -> None:
-    """List the modelled variants."""
+@_JSON
+def list_cmd(as_json: bool) -> None:
+    """List the modelled variants.
+
+    \b
+    Example:
+      conform spec list --json | jq -r '.variants[].variant'
+    """
     spec = load_spec()
-    table = Table(title="GVE variants")
-    for col in ("variant", "title", "firmware", "axes", "queue", "max rate", "commands", "base"):
-        table.add_column(col)
-    for v in spec.variants.values():
-        table.add_row(v.id, v.title, v.firmware, "".join(v.axes), str(v.queue), f"{v.max_rate:,}",
-                      str(len(v.commands)), v.base or "-")
-    _console().print(table)
+    rows = [(v.id, v.title, v.firmware, "".join(v.axes), v.queue, v.max_rate, len(v.commands),
+             v.base or "-") for v in spec.variants.values()]
+    if not as_json:
+        rows = [(*r[:5], f"{r[5]:,}", *r[6:]) for r in rows]
+    _emit("GVE variants", ("variant", "title", "firmware", "axes", "queue", "max rate",
+                           "commands", "base"), rows, as_json, "variants")
 
 
 @cli.command("show")
-@click.argument("variant")
+@click.argument("variant", type=VARIANT)
 @click.argument("command", required=False)
-def show_cmd(variant: str, command: str | None) -> None:
-    """Show a variant's commands (or one command) with ranges and manual clauses."""
+@_JSON
+def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
+    """Show a variant's commands (or one command) with ranges and manual clauses.
+
+    \b
+    Examples:
+      conform spec show gve64-v19
+      conform spec show gve124 V --json
+    """
     spec = load_spec()
     v = spec.variant(variant)
     console = _console()
@@ -66,9 +102,6 @@ def show_cmd(variant: str, command: str | None) -> None:
             if known is None:
                 raise click.ClickException(f"no command {command!r} in the tables")
             raise click.ClickException(f"{v.id} has no command {command!r} (absent in this version)")
-        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
-        table.add_column("field")
-        table.add_column("value")
         rows = [
             ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),
             ("family", cmd.family), ("parameters", _params(cmd, v)),
@@ -81,35 +114,45 @@ def show_cmd(variant: str, command: str | None) -> None:
             ("open questions", ", ".join(cmd.questions) or "-"),
             ("variants", ", ".join(x.id for x in spec.variants.values() if x.has(cmd.id))),
         ]
+        if as_json:
+            click.echo(json.dumps({"variant": v.id, "command": cmd.id, **dict(rows)}, indent=1))
+            return
+        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
+        table.add_column("field")
+        table.add_column("value")
         for k, val in rows:
             table.add_row(k, val)
         console.print(table)
         return
-    table = Table(title=f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
-                        f"max {v.max_rate:,} pulses/s")
-    for col in ("command", "addr", "parameters", "answer", "modal", "running", "clause"):
-        table.add_column(col, overflow="fold")
-    for cmd in v.commands.values():
-        table.add_row(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
-                      ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
-                      "" if cmd.while_running else "7", cmd.clause_for(v.manual))
-    console.print(table)
+    rows = [(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
+             ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
+             "" if cmd.while_running else "7", cmd.clause_for(v.manual))
+            for cmd in v.commands.values()]
+    _emit(f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
+          f"max {v.max_rate:,} pulses/s",
+          ("command", "addr", "parameters", "answer", "modal", "running", "clause"), rows,
+          as_json, "commands", variant=v.id, axes="".join(v.axes), queue=v.queue,
+          max_rate=v.max_rate)
 
 
 @cli.command("diff")
-@click.argument("a")
-@click.argument("b")
-def diff_cmd(a: str, b: str) -> None:
-    """What differs from variant A to variant B."""
+@click.argument("a", type=VARIANT)
+@click.argument("b", type=VARIANT)
+@_JSON
+def diff_cmd(a: str, b: str, as_json: bool) -> None:
+    """What differs from variant A to variant B.
+
+    \b
+    Example:
+      conform spec diff gve64-v19 gve124
+    """
     spec = load_spec()
     va, vb = spec.variant(a), spec.variant(b)
     diffs = diff_variants(va, vb)
-    table = Table(title=f"{va.id} → {vb.id}: {len(diffs)} differences")
-    for col in ("kind", "what", a, b, "clause"):
-        table.add_column(col, overflow="fold")
-    for d in diffs:
-        table.add_row(d.kind, d.what, str(d.a), str(d.b), d.clause)
-    _console().print(table)
+    rows = [(d.kind, d.what, d.a, d.b, d.clause) for d in diffs]
+    _emit(f"{va.id} → {vb.id}: {len(diffs)} differences", ("kind", "what", a, b, "clause"),
+          rows if as_json else [(*r[:2], str(r[2]), str(r[3]), r[4]) for r in rows], as_json,
+          "differences", a=a, b=b)
 
 
 @cli.command("questions")
