@@ -76,7 +76,7 @@ def probe(port: Port, spec: Any, baud: int, timeout: float) -> Port:
 def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_json: bool) -> None:
     """List serial ports with description and hardware id; with --probe, which answer as a GVE.
 
-    PATHs (a pty, a pyserial URL) are added to the listing: ptys are not listed by the system.
+    With PATHs (ports, ptys, pyserial URLs), only those: ptys are not in the system's listing.
 
     \b
     Examples:
@@ -84,9 +84,9 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
       conform ports --probe
       conform ports --probe /dev/pts/4 socket://localhost:5024
     """
-    ports = listed_ports()
-    known = {p.device for p in ports}
-    ports += [Port(p, "given on the command line") for p in paths if p not in known]
+    listed = {p.device: p for p in listed_ports()}
+    ports = [listed.get(p, Port(p, "given on the command line")) for p in paths] if paths \
+        else list(listed.values())
     if do_probe:
         from conform.cli.progress import progress
         from conform.spec import load_spec
