@@ -120,8 +120,9 @@ def test_html_leads_with_status_skips_and_failures_by_section(tmp_path):
     assert at("Incomplete run.") < at('id="failures"')
     assert "/dev/pts/9: link lost after 4 checks" in html[:at('id="failures"')]
     skipped = html[at('id="not-verified"'):at('id="failures"')]
-    assert "<b>2</b> checks that move axes" in skipped and "--allow-motion --max-steps N" in skipped
-    assert "<b>2</b> checks that write the EEPROM" in skipped and "--allow-eeprom" in skipped
+    assert "2 checks need motion (axes, outputs, spindle)" in skipped
+    assert "--allow-motion --max-steps N" in skipped
+    assert "2 checks need EEPROM writes" in skipped and "--allow-eeprom" in skipped
     assert "<b>MUST</b>" in html[:at('id="failures"')] and "<b>INFO</b>" in html[:at('id="failures"')]
     # failures before every matrix, grouped by section in the manual's (numeric) order
     assert at('id="failures"') < at('id="sections"') < at('id="matrix"')
@@ -144,7 +145,7 @@ def test_markdown_follows_the_same_order(tmp_path):
     assert at("**Incomplete run.** /dev/pts/9: link lost") < at("## Not verified") \
         < at("## Failures (6)") < at("## Manual sections × variants")
     assert at("### GVE64 §13.5 (") < at("### GVE64 §13.5.3 (") < at("### GVE64 §13.5.13 (")
-    assert "- 2 checks that write the EEPROM — to include them: `add --allow-eeprom`" in md
+    assert "- 2 checks need EEPROM writes — to include them: `add --allow-eeprom`" in md
     assert "0.002000 rx   4,60\\r" in md and "expected: `!0J# → 4`" in md
     assert "| GVE64 §13.5.2 | 1 PASS 1 SKIPPED | 1 PASS 1 SKIPPED |" in md
 

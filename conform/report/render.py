@@ -93,7 +93,7 @@ def not_verified_lines(results: RunResults) -> list[str]:
     """What a run did not verify and how to include it: for the terminal and the Markdown."""
     out = []
     for g in view.not_verified(results):
-        line = f"not verified: {len(g.checks)} checks that {g.reason}"
+        line = f"not verified: {g.sentence()}"
         out.append(line + (f" (to include them: {g.how})" if g.how else ""))
     return out
 
@@ -138,7 +138,7 @@ def render_markdown(results: RunResults) -> str:
     out += ["", "## Not verified", ""]
     if skipped:
         for g in skipped:
-            out.append(f"- {len(g.checks)} checks that {g.reason}"
+            out.append(f"- {g.sentence()}"
                        + (f" — to include them: `{g.how}`" if g.how else ""))
     else:
         out.append("Nothing skipped: every check this profile holds was run.")

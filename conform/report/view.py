@@ -45,6 +45,11 @@ class SkipGroup:
     def targets(self) -> list[str]:
         return sorted({c.target for c in self.checks})
 
+    def sentence(self) -> str:
+        """``"3 checks need EEPROM writes"``."""
+        n = len(self.checks)
+        return f"{n} check needs {self.reason}" if n == 1 else f"{n} checks need {self.reason}"
+
 
 @dataclass
 class Section:
@@ -109,13 +114,13 @@ def replay_command(c: CheckResult) -> str:
 
 
 _HOW = (
-    # (words in the reason, the group's name, how to include these checks)
-    (("inputs",), "drive the unit's inputs (only an emulator can)",
+    # (words in the reason, what the checks need, how to include them)
+    (("inputs",), "driven inputs (only an emulator can drive them)",
      "run against an emulator: --target emu:VARIANT, or `conform emulate serve VARIANT`"),
-    (("max-steps", "exceeds"), "would move further than --max-steps allows",
+    (("max-steps", "exceeds"), "moves longer than --max-steps allows",
      "raise --max-steps (the bound on every axis move, in pulses)"),
-    (("eeprom",), "write the EEPROM", "add --allow-eeprom"),
-    (("motion", "actuator"), "move axes, switch outputs or start the spindle",
+    (("eeprom",), "EEPROM writes", "add --allow-eeprom"),
+    (("motion", "actuator"), "motion (axes, outputs, spindle)",
      "add --allow-motion --max-steps N (with the machine clear to move)"),
 )
 
@@ -125,8 +130,8 @@ def _skip_group(detail: str) -> tuple[str, str]:
     for words, name, how in _HOW:
         if any(w in text for w in words):
             return name, how
-    reason = re.sub(r"b'[^']*'|\d+", "…", detail).strip() or "no reason given"
-    return reason, ""
+    reason = re.sub(r"b'[^']*'|\d+", "…", detail).strip()
+    return (f"what this run could not give: {reason}" if reason else "(no reason given)"), ""
 
 
 def not_verified(results: RunResults) -> list[SkipGroup]:

@@ -1,0 +1,141 @@
+"""The reports in a real browser: headless Chromium (Debian's ``chromium`` and
+``chromium-driver``) loads the conformance and the analysis report without a console error, and
+the first screen shows the summary and the first failure.
+
+Off CI the test skips only when Chromium is not installed; in CI (``CI=true``) a missing
+Chromium fails it (``.ci/run`` installs it). ``CONFORM_SCREENSHOTS=DIR`` keeps the screenshots.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+from conform.cli.main import main
+
+REPO = Path(__file__).resolve().parent.parent
+WIDTH, HEIGHT = 1280, 900  # a laptop's browser window: "the first screen"
+
+pytestmark = pytest.mark.slow
+
+
+def _find(*names: str) -> str | None:
+    for name in names:
+        found = shutil.which(name) or (name if os.path.exists(name) else None)
+        if found:
+            return found
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    chromium = _find("chromium", "chromium-browser", "/usr/lib/chromium/chromium")
+    driver_path = _find("chromedriver", "/usr/lib/chromium/chromedriver")
+    if chromium is None or driver_path is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("chromium/chromedriver missing in CI: .ci/run installs Debian's "
+                        "chromium and chromium-driver")
+        pytest.skip("chromium and chromium-driver are not installed")
+    from selenium import webdriver  # a dependency (pyproject.toml): never a reason to skip
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for arg in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync", "--no-first-run",
+                "--disable-dev-shm-usage", f"--window-size={WIDTH},{HEIGHT}",
+                f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}"):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    drv = webdriver.Chrome(service=Service(executable_path=driver_path), options=options)
+    drv.set_page_load_timeout(60)
+    try:
+        yield drv
+    finally:
+        drv.quit()
+
+
+def _load(browser, page: Path, name: str) -> list[dict]:
+    """Open ``page``; the console entries of level SEVERE (errors); keep a screenshot."""
+    browser.get_log("browser")  # drop what an earlier page left
+    browser.get(page.resolve().as_uri())
+    browser.execute_script("return document.readyState")
+    keep = os.environ.get("CONFORM_SCREENSHOTS")
+    if keep:
+        Path(keep).mkdir(parents=True, exist_ok=True)
+        browser.save_screenshot(str(Path(keep) / f"{name}.png"))
+    return [e for e in browser.get_log("browser") if e.get("level") == "SEVERE"]
+
+
+_ON_SCREEN = """
+const el = document.querySelector(arguments[0]);
+if (!el) return null;
+const r = el.getBoundingClientRect();
+return [r.top, r.bottom, window.innerHeight, el.innerText.slice(0, 200)];
+"""
+
+
+def _on_first_screen(browser, selector: str) -> str:
+    found = browser.execute_script(_ON_SCREEN, selector)
+    assert found is not None, f"no {selector} on the page"
+    top, bottom, height, text = found
+    assert 0 <= top and top < height, f"{selector} starts at {top}px, below the first screen"
+    return text
+
+
+def test_conformance_report_first_screen(browser, tmp_path, capsys):
+    out = tmp_path / "conformance"
+    with pytest.raises(SystemExit) as info:  # v10 firmware judged as v19: FAILs that cite §14.1
+        main(["run", "-q", "--target", "emu:gve64-v10", "--variant", "gve64-v19",
+              "--report", str(out)])
+    assert info.value.code == 1
+    capsys.readouterr()
+    errors = _load(browser, out / "index.html", "conformance")
+    assert errors == []
+    assert browser.title.startswith("conform — conformance report: FAIL")
+    summary = _on_first_screen(browser, "#summary")
+    assert "FAIL" in summary and "checks on 1 target" in summary
+    assert "Nothing skipped" in _on_first_screen(browser, "#not-verified")
+    assert "MUST" in _on_first_screen(browser, "#legend")
+    first = _on_first_screen(browser, ".detail.FAIL")
+    assert "expected" in first and "actual" in first and "conform run --target" in first
+
+
+def test_conformance_report_of_a_stopped_run_says_why_first(browser, tmp_path):
+    from conform.conformance.results import CheckResult, Grade, RunResults, TargetRun
+    from conform.report.render import write_reports
+
+    run = TargetRun("/dev/ttyUSB0", "gve64-v19", False, "quick", "t0",
+                    aborted="interrupted (Ctrl-C) after 2 checks; sent H, D, O0,FF")
+    common = dict(variant="gve64-v19", target="/dev/ttyUSB0")
+    run.checks = [CheckResult("gve64-v19/13.5.2/C/valid", Grade.SKIPPED, "GVE64 §13.5.2",
+                              detail="needs motion (not allowed in this run: --allow-motion)",
+                              **common),
+                  CheckResult("gve64-v19/13.5.3/V/valid", Grade.FAIL, "GVE64 §13.5.3",
+                              expected="!0V1000 → 0", actual="!0V1000 → 5", **common)]
+    out = write_reports(RunResults([run], "conform run --target /dev/ttyUSB0"), tmp_path / "r")
+    assert _load(browser, out / "index.html", "conformance-incomplete") == []
+    assert "Ctrl-C" in _on_first_screen(browser, ".abort")
+    assert "--allow-motion --max-steps N" in _on_first_screen(browser, "#not-verified")
+    assert "!0V1000 → 5" in _on_first_screen(browser, ".detail.FAIL")
+
+
+def test_analysis_report_first_screen(browser, tmp_path, capsys):
+    out = tmp_path / "analysis"
+    with pytest.raises(SystemExit) as info:
+        main(["analyze", str(REPO / "captures" / "careless-noisy.mcap"), "--no-progress",
+              "--report", str(out)])
+    assert info.value.code == 0
+    capsys.readouterr()
+    errors = _load(browser, out / "index.html", "analysis")
+    assert errors == []
+    summary = _on_first_screen(browser, "table")
+    assert "variant" in summary and "exchanges" in summary
+    first = _on_first_screen(browser, ".sev-hazard, .sev-error")
+    assert "hazard" in first or "error" in first
+    images = browser.execute_script(
+        "return [...document.images].filter(i => !(i.complete && i.naturalWidth > 0)).length")
+    assert images == 0, "a plot did not load"
