@@ -9,6 +9,7 @@ import click
 
 from conform.capture.recover import capture_info, format_info, recover
 from conform.cli.params import INPUT_PATH, OUTPUT_FILE
+from conform.cli.progress import progress
 
 
 @click.group(name="capture")
@@ -26,7 +27,9 @@ def info(file: str, as_json: bool) -> None:
     Example:
       conform capture info captures/good-rs232.mcap --json
     """
-    result = capture_info(file)
+    with progress("conform capture info", transient=True) as bar:
+        bar.task(f"reading {file}")
+        result = capture_info(file)
     if as_json:
         s = result.status
         click.echo(json.dumps({
@@ -54,7 +57,9 @@ def recover_cmd(file: str, output: str | None, force: bool) -> None:
     Example:
       conform capture recover session.mcap.part
     """
-    res = recover(file, output, force=force)
+    with progress("conform capture recover", transient=True) as bar:
+        bar.task(f"salvaging {file}")
+        res = recover(file, output, force=force)
     s = res.status
     last = "-"
     if res.last_ns is not None:

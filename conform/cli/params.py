@@ -104,6 +104,27 @@ class ProbabilityType(click.ParamType):
         return p
 
 
+class InputPathType(click.Path):
+    """An existing file (or folder, where allowed) the user named; missing or of the wrong kind
+    is the project's one line (``PATH: no such file``), as the readers say it."""
+
+    def __init__(self, dir_okay: bool = False) -> None:
+        super().__init__(exists=True, dir_okay=dir_okay, path_type=str)
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        import os
+
+        from conform.errors import UserError
+
+        path = os.fspath(value)
+        if not os.path.exists(path):
+            raise UserError(f"{path}: no such file")
+        if not self.dir_okay and os.path.isdir(path):
+            raise UserError(f"{path}: is a directory, not a file")
+        return super().convert(value, param, ctx)
+
+
 VARIANT = VariantType()
 TARGET = TargetType()
 BAUD = BaudType()
@@ -115,9 +136,9 @@ NON_NEGATIVE = click.FloatRange(min=0.0)
 POSITIVE = click.FloatRange(min=0.0, min_open=True)
 PORT_NUMBER = click.IntRange(0, 65535)
 #: an existing input file (a directory is refused by click with one line)
-INPUT_FILE = click.Path(exists=True, dir_okay=False, path_type=str)
+INPUT_FILE = InputPathType()
 #: an existing capture (a file, or a folder of a split capture)
-INPUT_PATH = click.Path(exists=True, path_type=str)
+INPUT_PATH = InputPathType(dir_okay=True)
 OUTPUT_DIR = click.Path(file_okay=False, path_type=str)
 OUTPUT_FILE = click.Path(dir_okay=False, path_type=str)
 
