@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-import json
 import os
 
 import click
 
-from conform.cli.params import FRACTIONAL_BAUD, INPUT_PATH, OUTPUT_DIR, VARIANT
+from conform.cli.params import (
+    FRACTIONAL_BAUD,
+    INPUT_PATH,
+    OUTPUT_DIR,
+    VARIANT,
+    echo_json,
+    json_option,
+)
 from conform.cli.progress import progress as show_progress
 from conform.errors import UserError
 
@@ -36,9 +42,8 @@ from conform.errors import UserError
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Several captures: run on this Dask distributed scheduler "
                    "(e.g. tcp://host:8786) instead of local processes.")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print findings.json's document (several captures: the fleet summary) on "
-                   "stdout; the summary goes to stderr.")
+@json_option("findings.json's document (several captures: the fleet summary), plus the paths "
+             "written")
 def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
         progress: bool | None, time_range: str | None, jobs: int | None,
@@ -111,7 +116,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     if parquet_dir:
         echo(f"tables: {parquet_dir}")
     if as_json:
-        click.echo(json.dumps(findings_document(a) | paths, indent=1))
+        echo_json(findings_document(a) | paths)
     if damage:
         raise SystemExit(1)
 
@@ -157,6 +162,6 @@ def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | No
         paths["parquet"] = parquet_dir
         echo(f"tables: {parquet_dir}/exchanges (one dataset, partitioned by machine)")
     if as_json:
-        click.echo(json.dumps(s | paths, indent=1, default=str))
+        echo_json(s | paths)
     if any(r["state"] != "clean" for r in s["sessions"]):
         raise SystemExit(1)  # some captures damaged or not analysed: listed above

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from datetime import UTC, datetime
 
 import click
 
 from conform.capture.recover import capture_info, format_info, recover
-from conform.cli.params import INPUT_PATH, OUTPUT_FILE
+from conform.cli.params import INPUT_PATH, OUTPUT_FILE, echo_json, json_option
 from conform.cli.progress import progress
 
 
@@ -19,7 +18,7 @@ def cli() -> None:
 
 @cli.command()
 @click.argument("file", type=INPUT_PATH)
-@click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
+@json_option()
 def info(file: str, as_json: bool) -> None:
     """Duration, bytes each way, messages per channel, clean or truncated.
 
@@ -32,13 +31,13 @@ def info(file: str, as_json: bool) -> None:
         result = capture_info(file)
     if as_json:
         s = result.status
-        click.echo(json.dumps({
+        echo_json({
             "file": str(result.path), "state": result.state, "problem": s.problem,
             "intact_bytes": s.valid_bytes, "size": s.size, "duration": result.duration,
             "bytes": result.bytes, "reads": result.reads, "gaps": result.gaps,
             "messages": dict(result.messages), "unreadable_messages": result.bad_messages,
             "metadata": result.metadata,
-        }, indent=2))
+        })
     else:
         click.echo(format_info(result))
     if result.state not in ("clean", "recovered"):

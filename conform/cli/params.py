@@ -142,5 +142,19 @@ INPUT_PATH = InputPathType(dir_okay=True)
 OUTPUT_DIR = click.Path(file_okay=False, path_type=str)
 OUTPUT_FILE = click.Path(dir_okay=False, path_type=str)
 
+def json_option(what: str = "") -> Any:
+    """``--json`` (``as_json``): one JSON document on stdout; human messages go to stderr."""
+    return click.option("--json", "as_json", is_flag=True,
+                        help=f"One JSON document on stdout{': ' + what if what else ''}; "
+                             "messages go to stderr.")
+
+
+def echo_json(doc: Any) -> None:
+    """The one JSON document of a ``--json`` command."""
+    import json
+
+    click.echo(json.dumps(doc, indent=1, default=str, ensure_ascii=False))
+
+
 #: exit statuses every command shares (README "Exit status")
 EXIT_OK, EXIT_FINDING, EXIT_USAGE = 0, 1, 2

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import click
 
-from conform.cli.params import BAUD, POSITIVE
+from conform.cli.params import BAUD, POSITIVE, echo_json, json_option
 from conform.errors import UserError
 
 
@@ -72,7 +71,7 @@ def probe(port: Port, spec: Any, baud: int, timeout: float) -> Port:
 @click.option("--baud", type=BAUD, default=115200, show_default=True, help="For --probe.")
 @click.option("--timeout", type=POSITIVE, default=1.0, show_default=True,
               help="Seconds to wait for each answer (--probe).")
-@click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
+@json_option()
 def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_json: bool) -> None:
     """List serial ports with description and hardware id; with --probe, which answer as a GVE.
 
@@ -99,7 +98,7 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
                 probe(p, spec, baud, timeout)
                 task.update(advance=1)
     if as_json:
-        click.echo(json.dumps({"ports": [asdict(p) for p in ports]}, indent=1))
+        echo_json({"ports": [asdict(p) for p in ports]})
         return
     if not ports:
         click.echo("no serial ports found (a pty or URL can be given: conform ports --probe PATH)")

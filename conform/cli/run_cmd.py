@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
-import json
 import shlex
 import sys
 from pathlib import Path
 
 import click
 
-from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE_INT, OUTPUT_DIR, POSITIVE_INT, TARGET, VARIANT
+from conform.cli.params import (
+    BAUD,
+    INPUT_FILE,
+    NON_NEGATIVE_INT,
+    OUTPUT_DIR,
+    POSITIVE_INT,
+    TARGET,
+    VARIANT,
+    echo_json,
+    json_option,
+)
 from conform.cli.progress import progress as show_progress
 from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
@@ -56,9 +65,7 @@ from conform.spec import load_spec
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
 @click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print the results (results.json's format, plus the report folder) on "
-                   "stdout; the summary goes to stderr.")
+@json_option("the results in results.json's format, plus the report folder")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
@@ -108,7 +115,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                 if not as_json:
                     click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
         if as_json:
-            click.echo(json.dumps({"checks": listed}, indent=1))
+            echo_json({"checks": listed})
         return
 
     runs: list[TargetRun] = []
@@ -165,7 +172,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         link_latest(out)
     code = 2 if aborted is not None else 1 if results.failed() else 0
     if as_json:
-        click.echo(json.dumps(results.to_json() | {"report": str(out), "exit": code}, indent=1))
+        echo_json(results.to_json() | {"report": str(out), "exit": code})
     _print_summary(results, out, err=as_json)
     if aborted is not None:
         raise UserError(f"run aborted: {aborted}", exit_code=2)

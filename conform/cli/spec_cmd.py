@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from typing import Any
 
@@ -10,7 +9,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from conform.cli.params import VARIANT
+from conform.cli.params import VARIANT, echo_json, json_option
 from conform.spec import load_spec
 from conform.spec.diff import diff_variants
 from conform.spec.model import CommandSpec, Variant
@@ -20,16 +19,14 @@ def _console() -> Console:
     return Console(soft_wrap=False, width=None if click.get_text_stream("stdout").isatty() else 160)
 
 
-_JSON = click.option("--json", "as_json", is_flag=True,
-                     help="One JSON document on stdout instead of the table.")
+_JSON = json_option("the table's rows")
 
 
 def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json: bool,
           key: str, **extra: Any) -> None:
     """Print rows as a rich table, or as ``{key: [{column: value}], ...extra}`` JSON."""
     if as_json:
-        doc = {**extra, key: [dict(zip(columns, row, strict=True)) for row in rows]}
-        click.echo(json.dumps(doc, indent=1, default=str))
+        echo_json({**extra, key: [dict(zip(columns, row, strict=True)) for row in rows]})
         return
     table = Table(title=title)
     for col in columns:
@@ -115,7 +112,7 @@ def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
             ("variants", ", ".join(x.id for x in spec.variants.values() if x.has(cmd.id))),
         ]
         if as_json:
-            click.echo(json.dumps({"variant": v.id, "command": cmd.id, **dict(rows)}, indent=1))
+            echo_json({"variant": v.id, "command": cmd.id, **dict(rows)})
             return
         table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
         table.add_column("field")
