@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shlex
 import sys
+from functools import partial
 from pathlib import Path
 
 import click
@@ -79,7 +80,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
       conform run                                   # the GVE64 v19 emulator, quick profile
       conform run --matrix --json > results.json    # all four variants, results on stdout
       conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
-      open reports/latest/index.html                # the last run's report
+      xdg-open reports/latest/index.html            # the last run's report
     """
     spec = load_spec()
     if variant is not None:
@@ -196,7 +197,7 @@ def _step(task, checks):  # noqa: ANN001, ANN202 - a progress Task, the checks i
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
-    echo = click.echo if not err else (lambda text: click.echo(text, err=True))
+    echo = partial(click.echo, err=err)
     for r in results.runs:
         counts = r.counts()
         shown = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
