@@ -95,12 +95,16 @@ def _clause_key(clause: str) -> tuple:
 
 
 def by_section(checks: list[CheckResult]) -> list[Section]:
-    """Checks grouped by manual section, sections in the manual's order."""
+    """Checks grouped by manual section: manuals in the order the checks first cite them,
+    sections in each manual's numeric order (§13.5.3 before §13.5.13)."""
     groups: dict[str, Section] = {}
+    manuals: dict[str, int] = {}
     for c in checks:
         key = section_of(c.clause)
         groups.setdefault(key, Section(key)).checks.append(c)
-    return sorted(groups.values(), key=lambda s: _clause_key(s.clause))
+        manuals.setdefault(_clause_key(key)[0], len(manuals))
+    return sorted(groups.values(),
+                  key=lambda s: (manuals[_clause_key(s.clause)[0]], _clause_key(s.clause)))
 
 
 def replay_command(c: CheckResult) -> str:
