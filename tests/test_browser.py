@@ -74,7 +74,7 @@ _ON_SCREEN = """
 const el = document.querySelector(arguments[0]);
 if (!el) return null;
 const r = el.getBoundingClientRect();
-return [r.top, r.bottom, window.innerHeight, el.innerText.slice(0, 200)];
+return [r.top, r.bottom, window.innerHeight, el.innerText.slice(0, 1000)];
 """
 
 
@@ -104,23 +104,62 @@ def test_conformance_report_first_screen(browser, tmp_path, capsys):
     assert "expected" in first and "actual" in first and "conform run --target" in first
 
 
+def _crowded_first_screen():
+    """The most a first screen must hold: four targets, a stopped run, notes, four reasons
+    for skipped checks."""
+    from conform.conformance.results import CheckResult, Grade, LogEntry, RunResults, TargetRun
+
+    runs = []
+    for i, (target, variant) in enumerate((("/dev/ttyUSB0", "gve64-v19"),
+                                           ("emu:gve64-v10", "gve64-v10"),
+                                           ("emu:gve64-phantom", "gve64-phantom"),
+                                           ("socket://10.0.0.5:4000", "gve124"))):
+        real = not target.startswith("emu")
+        run = TargetRun(target, variant, not real, "quick", "t0",
+                        aborted="interrupted (Ctrl-C) after 120 checks; sent H, D, O0,FF"
+                        if i == 0 else None,
+                        notes=["variant: firmware 'IP64MPG v19 10.9.2010' is gve64-v19",
+                               "motion-bearing checks SKIPPED (no --allow-motion)"] if real else [])
+        common = dict(variant=variant, target=target)
+        run.checks = [
+            CheckResult(f"{variant}/13.5.2/C/valid", Grade.SKIPPED, "GVE64 §13.5.2",
+                        detail="needs motion (not allowed in this run: --allow-motion)", **common),
+            CheckResult(f"{variant}/13.5.12/EW/valid", Grade.SKIPPED, "GVE64 §13.5.12",
+                        detail="needs eeprom (not allowed in this run: --allow-motion)", **common),
+            CheckResult(f"{variant}/13.5.11/I1/inputs", Grade.SKIPPED, "GVE64 §13.5.11",
+                        detail="needs inputs driven, which only the emulator allows", **common),
+            CheckResult(f"{variant}/13.5.2/L/valid", Grade.SKIPPED, "GVE64 §13.5.2",
+                        detail="refused to send b'!0L2000,0,0': a move of 2000 steps exceeds "
+                               "--max-steps 1000", **common),
+            CheckResult(f"{variant}/13.5.3/V/valid", Grade.FAIL, "GVE64 §13.5.3",
+                        expected="!0V1000 → 0", actual="!0V1000 → 5", detail="answer differs",
+                        log=[LogEntry(0.0, "tx", b"!0V1000\r"), LogEntry(0.002, "rx", b"5\r")],
+                        **common)]
+        runs.append(run)
+    return RunResults(runs, "conform run --target /dev/ttyUSB0 --target ... --matrix")
+
+
+_FULLY_ON_SCREEN = """
+const rows = document.querySelector(arguments[0]).querySelectorAll("tr");
+return [...rows].map(r => r.getBoundingClientRect().bottom <= window.innerHeight);
+"""
+
+
 def test_conformance_report_of_a_stopped_run_says_why_first(browser, tmp_path):
-    from conform.conformance.results import CheckResult, Grade, RunResults, TargetRun
     from conform.report.render import write_reports
 
-    run = TargetRun("/dev/ttyUSB0", "gve64-v19", False, "quick", "t0",
-                    aborted="interrupted (Ctrl-C) after 2 checks; sent H, D, O0,FF")
-    common = dict(variant="gve64-v19", target="/dev/ttyUSB0")
-    run.checks = [CheckResult("gve64-v19/13.5.2/C/valid", Grade.SKIPPED, "GVE64 §13.5.2",
-                              detail="needs motion (not allowed in this run: --allow-motion)",
-                              **common),
-                  CheckResult("gve64-v19/13.5.3/V/valid", Grade.FAIL, "GVE64 §13.5.3",
-                              expected="!0V1000 → 0", actual="!0V1000 → 5", **common)]
-    out = write_reports(RunResults([run], "conform run --target /dev/ttyUSB0"), tmp_path / "r")
+    out = write_reports(_crowded_first_screen(), tmp_path / "r")
     assert _load(browser, out / "index.html", "conformance-incomplete") == []
+    assert browser.title.endswith("INCOMPLETE")
     assert "Ctrl-C" in _on_first_screen(browser, ".abort")
-    assert "--allow-motion --max-steps N" in _on_first_screen(browser, "#not-verified")
+    skipped = _on_first_screen(browser, "#not-verified")
+    for how in ("--allow-motion --max-steps N", "--allow-eeprom", "raise --max-steps",
+                "--target emu:VARIANT"):
+        assert how in skipped
     assert "!0V1000 → 5" in _on_first_screen(browser, ".detail.FAIL")
+    # the first failure whole: expected, actual, detail, replay and its tx/rx
+    assert browser.execute_script(_FULLY_ON_SCREEN, ".detail.FAIL") \
+        == [True] * 5
 
 
 def test_analysis_report_first_screen(browser, tmp_path, capsys):

@@ -132,13 +132,12 @@ def render_markdown(results: RunResults) -> str:
                    + " | ".join(str(counts[g.value]) for g in GRADE_ORDER)
                    + f" | {r.duration:.1f} |")
     out.append("")
-    for r in results.runs:
-        out += [f"- {r.target}: {note}" for note in r.notes]
+    out += [f"- {r.target}: {'; '.join(r.notes)}" for r in results.runs if r.notes]
     skipped = view.not_verified(results)
     out += ["", "## Not verified", ""]
     if skipped:
         for g in skipped:
-            out.append(f"- {g.sentence()}"
+            out.append(f"- {g.sentence()}" + (f" (on {', '.join(g.only)})" if g.only else "")
                        + (f" — to include them: `{g.how}`" if g.how else ""))
     else:
         out.append("Nothing skipped: every check this profile holds was run.")

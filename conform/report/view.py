@@ -18,18 +18,17 @@ from conform.conformance.results import GRADE_ORDER, INFO, MUST, CheckResult, Gr
 PROBLEMS = (Grade.FAIL, Grade.ERROR)
 
 LEVELS = {
-    MUST: "the expected answer follows from what the manual states: a FAIL is a defect",
-    INFO: "the check probes an open question (A1–A29) or random sequences: a FAIL means no "
-          "listed reading of the manual explains the answer; it counts (exit 1), but read the "
-          "question before calling it a defect",
+    MUST: "follows from what the manual states: a FAIL is a defect of the unit",
+    INFO: "probes an open question (A1–A29) or random sequences: a FAIL counts (exit 1), but "
+          "read the question before calling it a defect",
 }
 GRADES = {
-    "PASS": "answered as the tables and the reference model say",
-    "FAIL": "answered differently from what the manual states",
-    "ERROR": "the harness or the link failed: nothing is known about the unit",
-    "DEVIATION": "differs on an open question (A1–A29): recorded, not a failure",
-    "SKIPPED": "not run in this run (see 'Not verified')",
-    "NOT-APPLICABLE": "the variant lacks what the check is about",
+    "PASS": "as the tables and the reference model say",
+    "FAIL": "differs from what the manual states",
+    "ERROR": "the harness or the link failed",
+    "DEVIATION": "differs on an open question (recorded, not a failure)",
+    "SKIPPED": "not run (see Not verified)",
+    "NOT-APPLICABLE": "the variant lacks it",
 }
 
 
@@ -40,6 +39,7 @@ class SkipGroup:
     reason: str
     how: str
     checks: list[CheckResult] = field(default_factory=list)
+    only: list[str] = field(default_factory=list)  # the targets, when not all of the run's
 
     @property
     def targets(self) -> list[str]:
@@ -120,9 +120,8 @@ def replay_command(c: CheckResult) -> str:
 _HOW = (
     # (words in the reason, what the checks need, how to include them)
     (("inputs",), "driven inputs (only an emulator can drive them)",
-     "run against an emulator: --target emu:VARIANT, or `conform emulate serve VARIANT`"),
-    (("max-steps", "exceeds"), "moves longer than --max-steps allows",
-     "raise --max-steps (the bound on every axis move, in pulses)"),
+     "--target emu:VARIANT (or the pty of conform emulate serve VARIANT)"),
+    (("max-steps", "exceeds"), "moves longer than --max-steps allows", "raise --max-steps"),
     (("eeprom",), "EEPROM writes", "add --allow-eeprom"),
     (("motion", "actuator"), "motion (axes, outputs, spindle)",
      "add --allow-motion --max-steps N (with the machine clear to move)"),
@@ -139,12 +138,16 @@ def _skip_group(detail: str) -> tuple[str, str]:
 
 
 def not_verified(results: RunResults) -> list[SkipGroup]:
-    """SKIPPED checks grouped by reason, the largest group first."""
+    """SKIPPED checks grouped by reason, the largest group first; a group names its targets
+    when it does not hold for all of them."""
     groups: dict[str, SkipGroup] = {}
     for c in results.checks:
         if c.grade is Grade.SKIPPED:
             reason, how = _skip_group(c.detail)
             groups.setdefault(reason, SkipGroup(reason, how)).checks.append(c)
+    every = {r.target for r in results.runs}
+    for g in groups.values():
+        g.only = [] if set(g.targets) >= every else g.targets
     return sorted(groups.values(), key=lambda g: -len(g.checks))
 
 
@@ -214,10 +217,17 @@ def section_matrix(results: RunResults) -> tuple[list[str], list[tuple[Section, 
     return columns, rows
 
 
+def _run_index(results: RunResults) -> dict[tuple[str, str], int]:
+    return {(r.target, r.variant): i for i, r in enumerate(results.runs)}
+
+
 def problems(results: RunResults) -> list[Section]:
-    """FAIL and ERROR checks by manual section (FAIL before ERROR within a section)."""
+    """FAIL and ERROR checks by manual section: FAIL before ERROR, MUST before INFO, then in the
+    order of the run's targets."""
+    order = _run_index(results)
     chosen = [c for c in results.checks if c.grade in PROBLEMS]
-    chosen.sort(key=lambda c: (PROBLEMS.index(c.grade), c.level != MUST, c.variant, c.id))
+    chosen.sort(key=lambda c: (PROBLEMS.index(c.grade), c.level != MUST,
+                               order.get((c.target, c.variant), 0), c.id))
     return by_section(chosen)
 
 
