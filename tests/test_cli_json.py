@@ -30,6 +30,7 @@ def test_run_json(tmp_path, capsys):
     grades = {c["id"]: c["grade"] for c in doc["checks"]}
     assert grades == {"gve64-v19/13.5.3/V/valid": "PASS", "gve64-v19/13.5.3/VL/valid": "FAIL"}
     assert doc["exit"] == 1 and doc["report"] == str(tmp_path / "r")
+    assert doc["command"].startswith("conform run -q --json --target emu:gve64-v10 --variant ")
     assert doc["runs"][0]["counts"]["FAIL"] == 1
     assert "FAIL gve64-v19/13.5.3/VL/valid" in err and "report:" in err
 

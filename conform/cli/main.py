@@ -54,8 +54,9 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> None:
-    try:
-        cli.main(args=argv, prog_name="conform", standalone_mode=False)
+    args = sys.argv[1:] if argv is None else list(argv)
+    try:  # obj["argv"]: the command line as given, for the reports' "how to run it again"
+        cli.main(args=args, prog_name="conform", standalone_mode=False, obj={"argv": args})
     except click.exceptions.Abort:
         click.echo("conform: aborted", err=True)
         sys.exit(130)

@@ -89,7 +89,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
     if max_steps is not None and max_steps <= 0:
         raise UserError("--max-steps must be a positive number of pulses")
-    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    argv = (click.get_current_context().find_root().obj or {}).get("argv", sys.argv[1:])
+    command = "conform " + " ".join(shlex.quote(a) for a in argv)
     exact = None
     if replay:
         check_id, replay_seed = parse_replay(replay)
