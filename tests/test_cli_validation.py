@@ -30,6 +30,8 @@ MISTAKES = [
     (["capture", "recover", "no-such.mcap.part"], "no-such.mcap.part"),
     (["spec", "show", "nonsense"], "nonsense"),
     (["spec", "diff", "gve64-v19", "gve64-v91"], "gve64-v91"),
+    (["spec", "show", "gve64-v19", "NOPE"], "'NOPE'"),
+    (["spec", "show", "gve64-v10", "VL"], "absent in this version"),
     (["proxy", "--unit", "/dev/null", "-o", "x.mcap", "--variant", "gve64-v91"], "gve64-v91"),
     (["proxy", "--unit", "/dev/null", "-o", "x.mcap", "--baud", "0"], "--baud"),
     (["sniff", "--host-port", "a", "--unit-port", "b", "-o", "x.mcap", "--variant", "v"], "'v'"),

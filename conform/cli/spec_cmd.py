@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from conform.cli.params import VARIANT, echo_json, json_option
+from conform.errors import UserError
 from conform.spec import load_spec
 from conform.spec.diff import diff_variants
 from conform.spec.model import CommandSpec, Variant
@@ -97,8 +98,8 @@ def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
         if cmd is None:
             known = spec.commands.get(command)
             if known is None:
-                raise click.ClickException(f"no command {command!r} in the tables")
-            raise click.ClickException(f"{v.id} has no command {command!r} (absent in this version)")
+                raise UserError(f"no command {command!r} in the tables")
+            raise UserError(f"{v.id} has no command {command!r} (absent in this version)")
         rows = [
             ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),
             ("family", cmd.family), ("parameters", _params(cmd, v)),
