@@ -84,9 +84,7 @@ def _leaf_commands(group: click.Group, prefix: tuple[str, ...] = ()):
             yield (*prefix, name), cmd
 
 
-LEAVES = [c for c in _leaf_commands(cli) if c[0] not in (("spec", "questions"),
-                                                          ("spec", "check"),
-                                                          ("emulate", "control"))]
+LEAVES = list(_leaf_commands(cli))
 
 
 @pytest.mark.parametrize("path, cmd", LEAVES, ids=[" ".join(p) for p, _ in LEAVES])

@@ -215,7 +215,13 @@ def _open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, An
 @click.argument("words", nargs=-1, required=True)
 def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
     """Send a control command to a running emulator, e.g. `press stop`, `input 1 7 off`,
-    `release sensor`, `state`, `help`."""
+    `release sensor`, `state`, `help`.
+
+    \b
+    Example:
+      conform emulate gve64-v19 --control /tmp/emu.sock &
+      conform emulate control /tmp/emu.sock press stop
+    """
     from conform.unit.control import send_control
 
     try:

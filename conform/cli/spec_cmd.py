@@ -155,7 +155,12 @@ def diff_cmd(a: str, b: str, as_json: bool) -> None:
 
 @cli.command("questions")
 def questions_cmd() -> None:
-    """The open questions the manuals leave, with the assumed default."""
+    """The open questions the manuals leave, with the assumed default.
+
+    \b
+    Example:
+      conform spec questions
+    """
     spec = load_spec()
     table = Table(title="Open questions (A-register)")
     for col in ("id", "question", "default", "alternatives", "settled"):
@@ -168,7 +173,12 @@ def questions_cmd() -> None:
 @cli.command("check")
 @click.option("--specs", "root", type=click.Path(), default=None, help="A spec folder to validate.")
 def check_cmd(root: str | None) -> None:
-    """Load and validate the tables; one line per problem, non-zero exit."""
+    """Load and validate the tables; one line per problem, non-zero exit.
+
+    \b
+    Example:
+      conform spec check --specs specs
+    """
     spec = load_spec(root)
     n = sum(len(v.commands) for v in spec.variants.values())
     click.echo(f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
