@@ -77,6 +77,7 @@ def test_readme_command_parses(line, tmp_path, monkeypatch):
 
 
 def _leaf_commands(group: click.Group, prefix: tuple[str, ...] = ()):
+    yield prefix, group
     for name, cmd in sorted(group.commands.items()):
         if isinstance(cmd, click.Group):
             yield from _leaf_commands(cmd, (*prefix, name))

@@ -13,7 +13,12 @@ from conform.cli.progress import progress
 
 @click.group(name="capture")
 def cli() -> None:
-    """Inspect and repair MCAP capture files."""
+    """Inspect and repair MCAP capture files.
+
+    \b
+    Example:
+      conform capture info captures/good-rs232.mcap
+    """
 
 
 @cli.command()

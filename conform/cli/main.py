@@ -36,7 +36,18 @@ SUBCOMMANDS: tuple[str, ...] = (
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="conform")
 def cli() -> None:
-    """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators."""
+    """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators.
+
+    Exit status: 0 done, 1 something failed (a FAIL, a failed send), 2 a usage or input
+    mistake, a link that cannot be opened, or a run that stopped early; 130 interrupted.
+
+    \b
+    Examples:
+      conform run                                   # conformance against the emulator
+      conform ports --probe                         # which serial port has a unit
+      conform analyze captures/careless-noisy.mcap  # what went wrong in a session
+      conform COMMAND --help                        # each command, with examples
+    """
 
 
 def _register() -> None:

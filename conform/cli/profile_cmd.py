@@ -13,7 +13,12 @@ from conform.spec import load_spec
 
 @click.group(name="profile")
 def cli() -> None:
-    """Characterisation profiles (from ``conform characterize``)."""
+    """Characterisation profiles (from ``conform characterize``).
+
+    \b
+    Example:
+      conform profile diff unit.toml unit-v10.toml
+    """
 
 
 @cli.command()

@@ -57,7 +57,13 @@ def _params(cmd: CommandSpec, variant: Variant) -> str:
 
 @click.group()
 def cli() -> None:
-    """The protocol tables: variants, commands, ranges and differences."""
+    """The protocol tables: variants, commands, ranges and differences.
+
+    \b
+    Examples:
+      conform spec list
+      conform spec diff gve64-v10 gve64-v19
+    """
 
 
 @cli.command("list")
