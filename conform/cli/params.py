@@ -12,9 +12,17 @@ MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware
 
 
 def _variant_ids() -> list[str]:
+    """The GVE tables' variants, then those of any other protocol family (conform.families)."""
     from conform.spec import load_spec
 
-    return list(load_spec().variants)
+    ids = list(load_spec().variants)
+    try:
+        from conform.families import families  # type: ignore[attr-defined]
+    except ImportError:
+        return ids
+    for fam in families():
+        ids += [v.id for v in fam.variants() if v.id not in ids]
+    return ids
 
 
 class VariantType(click.ParamType):
