@@ -30,8 +30,8 @@ def _find(*names: str) -> str | None:
     return None
 
 
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory):
+def _chromium() -> tuple[str, str]:
+    """Chromium and its driver; skip when they are not installed, fail when in CI."""
     chromium = _find("chromium", "chromium-browser", "/usr/lib/chromium/chromium")
     driver_path = _find("chromedriver", "/usr/lib/chromium/chromedriver")
     if chromium is None or driver_path is None:
@@ -39,6 +39,23 @@ def browser(tmp_path_factory):
             pytest.fail("chromium/chromedriver missing in CI: .ci/run installs Debian's "
                         "chromium and chromium-driver")
         pytest.skip("chromium and chromium-driver are not installed")
+    return chromium, driver_path
+
+
+def test_missing_chromium_skips_here_and_fails_in_ci(monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.setattr(os.path, "exists", lambda path: False)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception):
+        _chromium()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="missing in CI"):
+        _chromium()
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    chromium, driver_path = _chromium()
     from selenium import webdriver  # a dependency (pyproject.toml): never a reason to skip
     from selenium.webdriver.chrome.service import Service
 
