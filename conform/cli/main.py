@@ -38,8 +38,9 @@ SUBCOMMANDS: tuple[str, ...] = (
 def cli() -> None:
     """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators.
 
-    Exit status: 0 done, 1 something failed (a FAIL, a failed send), 2 a usage or input
-    mistake, a link that cannot be opened, or a run that stopped early; 130 interrupted.
+    Exit status: 0 done, 1 something failed (a FAIL, a failed send, a damaged capture), 2 a
+    usage or input mistake, a link that cannot be opened, or a run that stopped early; 130
+    interrupted.
 
     \b
     Examples:
