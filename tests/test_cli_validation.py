@@ -52,6 +52,9 @@ MISTAKES = [
     (["report", "no-such-results.json"], "no-such-results.json"),
     (["ports", "--baud", "0"], "--baud"),
     (["ports", "--probe", "--timeout", "0"], "--timeout"),
+    (["check-sender", "--variant", "nope", "--", "true"], "nope"),
+    (["check-sender", "--job", "no-such-job.txt", "--", "true"], "no-such-job.txt"),
+    (["check-sender", "--seed", "-2", "--", "true"], "--seed"),
     (["no-such-command"], "no-such-command"),
 ]
 
