@@ -170,7 +170,7 @@ def test_conformance_report_of_a_stopped_run_says_why_first(browser, tmp_path):
     assert browser.title.endswith("INCOMPLETE")
     assert "Ctrl-C" in _on_first_screen(browser, ".abort")
     skipped = _on_first_screen(browser, "#not-verified")
-    for how in ("--allow-motion --max-steps N", "--allow-eeprom", "raise --max-steps",
+    for how in ("--allow-motion --max-steps N", "--allow-eeprom", "a larger --max-steps",
                 "--target emu:VARIANT"):
         assert how in skipped
     assert "!0V1000 → 5" in _on_first_screen(browser, ".detail.FAIL")

@@ -121,7 +121,7 @@ def test_html_leads_with_status_skips_and_failures_by_section(tmp_path):
     assert "/dev/pts/9: link lost after 4 checks" in html[:at('id="failures"')]
     skipped = html[at('id="not-verified"'):at('id="failures"')]
     assert "2 checks need motion (axes, outputs, spindle)" in skipped
-    assert "--allow-motion --max-steps N" in skipped
+    assert "enable with <span class=\"mono\">--allow-motion --max-steps N</span>" in skipped
     assert "2 checks need EEPROM writes" in skipped and "--allow-eeprom" in skipped
     assert "<b>MUST</b>" in html[:at('id="failures"')] and "<b>INFO</b>" in html[:at('id="failures"')]
     # failures before every matrix, grouped by section in the manual's (numeric) order
@@ -145,7 +145,7 @@ def test_markdown_follows_the_same_order(tmp_path):
     assert at("**Incomplete run.** /dev/pts/9: link lost") < at("## Not verified") \
         < at("## Failures (6)") < at("## Manual sections × variants")
     assert at("### GVE64 §13.5 (") < at("### GVE64 §13.5.3 (") < at("### GVE64 §13.5.13 (")
-    assert "- 2 checks need EEPROM writes — to include them: `add --allow-eeprom`" in md
+    assert "- 2 checks need EEPROM writes — enable with `--allow-eeprom`" in md
     assert "0.002000 rx   4,60\\r" in md and "expected: `!0J# → 4`" in md
     assert "| GVE64 §13.5.2 | 1 PASS 1 SKIPPED | 1 PASS 1 SKIPPED |" in md
 
@@ -166,3 +166,37 @@ def test_latest_link_follows_the_last_report(tmp_path):
     assert (link / "index.html").resolve() == (tmp_path / "20260101-000100" / "index.html")
     (tmp_path / "x" / "latest").mkdir(parents=True)
     assert link_latest(tmp_path / "x" / "r") is None  # a real folder of that name is kept
+
+
+def test_not_verified_groups_the_runners_reasons():
+    from conform.report.view import not_verified
+
+    def skipped(i, detail, target="/dev/ttyUSB0"):
+        return CheckResult(f"gve64-v19/13.5.2/C/x{i}", Grade.SKIPPED, "GVE64 §13.5.2",
+                           detail=detail, variant="gve64-v19", target=target)
+
+    run = TargetRun("/dev/ttyUSB0", "gve64-v19", False, "quick", "t0")
+    run.checks = [
+        skipped(1, "needs actuator, motion (not allowed in this run: enable with --allow-motion "
+                   "--max-steps N)"),
+        skipped(2, "needs motion (not allowed in this run: --allow-motion)"),  # older wording
+        skipped(3, "needs eeprom, motion (not allowed in this run: enable with --allow-motion "
+                   "--max-steps N --allow-eeprom)"),
+        skipped(4, "outside the envelope (a move of 4000 pulses cannot be done inside "
+                   "--max-steps 1000: enable with --max-steps 4000)"),
+        skipped(5, "outside the envelope (a move of 9000 pulses cannot be done inside "
+                   "--max-steps 1000: enable with --max-steps 9000)"),
+        skipped(6, "refused to send b'!0L2000,0,0': a move of 2000 steps exceeds --max-steps 1000"),
+        skipped(7, "needs inputs driven (a real unit's inputs are switched by hand; with `conform "
+                   "emulate serve` behind the link: enable with --inputs-control PATH)"),
+        skipped(8, "the moon is not full"),
+    ]
+    groups = {g.reason: (len(g.checks), g.how) for g in not_verified(RunResults([run]))}
+    assert groups == {
+        "motion (axes, outputs, spindle)": (2, "--allow-motion --max-steps N"),
+        "EEPROM writes and motion (axes, outputs, spindle)":
+            (1, "--allow-motion --max-steps N --allow-eeprom"),
+        "moves longer than --max-steps allows": (3, "--max-steps 9000"),
+        "driven inputs (only an emulator can drive them)": (1, "--inputs-control PATH"),
+        "the moon is not full": (1, ""),
+    }

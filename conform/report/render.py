@@ -94,7 +94,7 @@ def not_verified_lines(results: RunResults) -> list[str]:
     out = []
     for g in view.not_verified(results):
         line = f"not verified: {g.sentence()}"
-        out.append(line + (f" (to include them: {g.how})" if g.how else ""))
+        out.append(line + (f" (enable with {g.how})" if g.how else ""))
     return out
 
 
@@ -138,7 +138,7 @@ def render_markdown(results: RunResults) -> str:
     if skipped:
         for g in skipped:
             out.append(f"- {g.sentence()}" + (f" (on {', '.join(g.only)})" if g.only else "")
-                       + (f" — to include them: `{g.how}`" if g.how else ""))
+                       + (f" — enable with `{g.how}`" if g.how else ""))
     else:
         out.append("Nothing skipped: every check this profile holds was run.")
     out += ["", f"MUST: {view.LEVELS[MUST]}. INFO: {view.LEVELS[INFO]}.", ""]

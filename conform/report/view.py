@@ -118,36 +118,50 @@ def replay_command(c: CheckResult) -> str:
 
 
 _HOW = (
-    # (words in the reason, what the checks need, how to include them)
+    # (words in the reason, what the checks need, how to include them when the reason does not
+    # say it; the runner's reasons end in "enable with OPTIONS)")
     (("inputs",), "driven inputs (only an emulator can drive them)",
-     "--target emu:VARIANT (or the pty of conform emulate serve VARIANT)"),
-    (("max-steps", "exceeds"), "moves longer than --max-steps allows", "raise --max-steps"),
-    (("eeprom",), "EEPROM writes", "add --allow-eeprom"),
-    (("motion", "actuator"), "motion (axes, outputs, spindle)",
-     "add --allow-motion --max-steps N (with the machine clear to move)"),
+     "--target emu:VARIANT, or --inputs-control with `conform emulate serve` behind the link"),
+    (("max-steps", "envelope"), "moves longer than --max-steps allows", "a larger --max-steps"),
+    (("eeprom",), "EEPROM writes", "--allow-eeprom"),
+    (("motion", "actuator"), "motion (axes, outputs, spindle)", "--allow-motion --max-steps N"),
 )
+_ENABLE = re.compile(r"enable with (.+?)\)?$")
 
 
 def _skip_group(detail: str) -> tuple[str, str]:
-    text = detail.lower()
-    for words, name, how in _HOW:
-        if any(w in text for w in words):
-            return name, how
-    reason = re.sub(r"b'[^']*'|\d+", "…", detail).strip()
-    return (f"what this run could not give: {reason}" if reason else "(no reason given)"), ""
+    """(what the checks need, how to include them) for one SKIPPED check's detail."""
+    said = _ENABLE.search(detail)
+    reason = detail.split(" (", 1)[0]
+    found = [(name, how) for words, name, how in _HOW if any(w in reason.lower() for w in words)]
+    if found:
+        names = " and ".join(dict.fromkeys(name for name, _ in found))
+        return names, said.group(1) if said else " ".join(dict.fromkeys(h for _, h in found))
+    reason = re.sub(r"b'[^']*'|\d+", "…", reason).strip()
+    return (reason or "(no reason given)"), said.group(1) if said else ""
+
+
+def _largest_steps(hows: list[str]) -> str:
+    """``--max-steps 4000`` of several: the largest, which enables them all."""
+    numbers = [int(m.group(1)) for h in hows if (m := re.search(r"--max-steps (\d+)", h))]
+    return f"--max-steps {max(numbers)}" if numbers else hows[0]
 
 
 def not_verified(results: RunResults) -> list[SkipGroup]:
     """SKIPPED checks grouped by reason, the largest group first; a group names its targets
     when it does not hold for all of them."""
     groups: dict[str, SkipGroup] = {}
+    hows: dict[str, list[str]] = {}
     for c in results.checks:
         if c.grade is Grade.SKIPPED:
             reason, how = _skip_group(c.detail)
             groups.setdefault(reason, SkipGroup(reason, how)).checks.append(c)
+            hows.setdefault(reason, []).append(how)
     every = {r.target for r in results.runs}
     for g in groups.values():
         g.only = [] if set(g.targets) >= every else g.targets
+        g.how = _largest_steps(hows[g.reason]) if "--max-steps " in g.how and \
+            "--allow" not in g.how else g.how
     return sorted(groups.values(), key=lambda g: -len(g.checks))
 
 
