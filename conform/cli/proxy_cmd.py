@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import click
@@ -43,10 +44,14 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
     sys.setswitchinterval(0.0002)
     proxy = ProxyCapture(unit_url, output, baud=baud, variant=variant, decode=not no_decode,
                          reconnect=reconnect, link=link)
-    sys.stdout.write(proxy.host_path + "\n")
-    sys.stdout.flush()
+    # a sender may start on the pty and stop us before run_until_signal is reached: from the
+    # moment the path is out, SIGINT/SIGTERM end the recording cleanly
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda _signum, _frame: proxy.stop())
     with progress("conform proxy", quiet=quiet) as bar:
         recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")
+        sys.stdout.write(proxy.host_path + "\n")
+        sys.stdout.flush()
         failure = run_until_signal(proxy)
     click.echo(f"conform proxy: recorded {proxy.recorder.path}", err=True)
     if failure:
