@@ -263,3 +263,47 @@ def test_lost_link_ends_the_run(spec):
     run = Runner(spec, target, "gve64-v19").run(checks)
     assert run.aborted and "link lost" in run.aborted
     assert [c.grade for c in run.checks] == [Grade.ERROR] * 3
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_every_error_code_has_a_directed_check(spec, variant):
+    """Each code 0–7 a command of the variant can give (errors.toml `raised_by`) is the intent of
+    at least one directed check, which the reference answers with exactly that code (above)."""
+    v = spec.variant(variant)
+    applicable = {code for code, e in spec.errors.items()
+                  if "*" in e.raised_by or any(c in v.commands for c in e.raised_by)}
+    intents = {c.intent for c in generate(spec, variant) if c.na is None}
+    assert applicable == set(range(8))
+    assert applicable <= intents
+
+
+def test_timing_words_are_checks(spec):
+    """An answer that comes late fails "at once"; a watchdog of 1 s is the A13 deviation."""
+    v = spec.variant("gve64-v19")
+    checks = suite(spec, "gve64-v19", patterns=["*/timing/*"], machine=False)
+    late = EmuTarget(lambda: unit_class()(v, spec.dialect(), answer_delay=0.2), "late")
+    grades = {c.key: c.grade for c in Runner(spec, late, "gve64-v19").run(checks).checks}
+    assert grades == {"timing/at-once": Grade.FAIL, "timing/watchdog": Grade.FAIL}
+    d = spec.dialect({"A13": "1s"})
+    slow_wd = EmuTarget(lambda: unit_class()(v, d), "wd")
+    run = Runner(spec, slow_wd, "gve64-v19").run(checks)
+    assert {c.key: (c.grade, c.question) for c in run.checks} == {
+        "timing/at-once": (Grade.PASS, None), "timing/watchdog": (Grade.DEVIATION, "A13")}
+
+
+def test_firmware_string_and_eeprom_read_back_are_exact(spec):
+    """`?` is compared byte for byte with the variant's firmware string on a real unit too, and
+    an EEPROM byte the script wrote is read back exactly (not just by shape)."""
+    by_key = {c.key: c for c in generate(spec, "gve64-v19")}
+    ref = Reference(spec, "gve64-v19")
+    from conform.conformance.expect import judge
+
+    for key, good, bad in [("?/valid", b"0,IP64MPG v19 10.9.2010", b"0,IP64MPG v19 10.9.2011"),
+                           ("EW/read-back", b"0,5A", b"0,5B")]:
+        script = by_key[key].script
+        expected = ref.transcript(script)
+        for text, grade in ((good, "PASS"), (bad, "FAIL")):
+            actual = list(expected)
+            last = actual[-1]
+            actual[-1] = type(last)(last.tx, last.t_tx, [text], t_rx=last.t_rx)
+            assert judge(ref, script, actual, loose=True).grade == grade, (key, text)

@@ -274,6 +274,11 @@ class Recorder:
 
 def _make_decoder(variant: str, baud: int | None) -> tuple[Decoder | None, str]:
     """A frame decoder for ``variant``, or ``None`` and the reason it is unavailable."""
+    from conform.families import family_for_variant
+
+    if family_for_variant(variant).name != "gve":  # e.g. grbl: paired from the raw bytes later
+        return None, f"frames not decoded while recording: {variant} traffic is decoded by " \
+                     "conform analyze from the raw bytes"
     try:
         from conform.capture.decode import make_decoder
     except ImportError as exc:

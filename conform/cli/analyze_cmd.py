@@ -74,6 +74,10 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                    echo, as_json)
         return
     file = files[0]
+    from conform.families.capture_hook import analyze_other_family
+
+    if analyze_other_family(file, variant, report_dir, parquet_dir):  # grbl or unknown traffic
+        return
     window = _time_range(time_range)
 
     try:

@@ -32,6 +32,13 @@ def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: 
       conform characterize emu:gve64-v19 -o unit.toml
       conform characterize /dev/ttyUSB0 -o unit.toml --allow-motion --max-steps 2000
     """
+    from conform.families import is_family_variant
+
+    if is_family_variant(variant or parse_target(target)[1], "grbl"):
+        from conform.families.grbl.characterize import run
+
+        run(target, output, variant, baud, echo=click.echo)
+        return
     spec = load_spec()
     if allow_motion and max_steps is None:
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")

@@ -42,6 +42,13 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
       conform check-sender --scenario list
       conform check-sender --scenario clean -- python tests/senders/careful.py {port} {job}
     """
+    from conform.families import is_family_variant
+
+    if is_family_variant(variant, "grbl"):  # grbl senders: that family's scenarios and rules
+        from conform.families.grbl.sendercheck import run_cli
+
+        sys.exit(run_cli(list(command), variant or "", list(scenarios), report_dir, timeout,
+                         job_file, as_json, echo=click.echo))
     import json
     from pathlib import Path
 

@@ -108,6 +108,16 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
       conform emulate serve gve64-v19 --baud 115200
       conform emulate serve gve64-v19 --faults "corrupt=1e-3,latency=1-16" --seed 1
     """
+    from conform.families import family_for_variant
+
+    fam = family_for_variant(variant)
+    if fam.name != "gve":  # another protocol family serves its own unit through the same adapter
+        if dialect_pairs or profile or switch_pairs or control_path or truth_path:
+            raise UserError("--dialect, --profile, --switch, --control and --truth apply to GVE "
+                            "units only")
+        fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
+                  link_path=link_path, record_path=record_path, answer_delay=answer_delay)
+        return
     from conform.link.faults import FaultConfig, FaultInjector
     from conform.unit.model import Unit
     from conform.unit.serve import ControlServer, Emulator

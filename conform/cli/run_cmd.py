@@ -24,7 +24,7 @@ from conform.cli.progress import progress as show_progress
 from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.safety import Guard
+from conform.conformance.safety import run_guard
 from conform.conformance.suite import (
     PROFILE_NAMES,
     parse_replay,
@@ -65,13 +65,16 @@ from conform.spec import load_spec
 @click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
 @click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
+@click.option("--inputs-control", default=None, metavar="PATH",
+              help="Drive the inputs of an emulator behind the link through its control socket "
+                   "(`conform emulate serve` prints it), for the checks that need inputs.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 @json_option("the results in results.json's format, plus the report folder")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        quiet: bool, as_json: bool) -> None:
+        inputs_control: str | None, quiet: bool, as_json: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
     usage or link error (or a run that stopped early).
 
@@ -82,6 +85,12 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
       conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
       xdg-open reports/latest/index.html            # the last run's report
     """
+    if _other_family(targets, variant):
+        if mutants or matrix or replay or dialect_file:
+            raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
+        _run_family(targets, variant, baud, profile, report_dir, patterns, list_only,
+                    allow_motion, allow_eeprom)
+        return
     spec = load_spec()
     if variant is not None:
         spec.variant(variant)
@@ -125,9 +134,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     with show_progress("conform run", quiet=quiet) as bar:
         for t in plan:
             kind, what, _ = parse_target(t)
-            guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps,
-                                                                 allow_eeprom)
+            guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
             target, implied = open_target(t, spec, baud=baud, guard=guard)
+            if inputs_control and not target.emulated:
+                target.inputs = inputs_control  # type: ignore[attr-defined]
             notes = []
             try:
                 vid = variant or implied
@@ -143,7 +153,9 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     raise UserError(f"no check of {vid} matches {wanted} (see --list)")
                 if not target.emulated and not allow_motion:
                     notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
-                options = RunOptions(profile=profile, seed=seed, notes=notes)
+                options = RunOptions(profile=profile, seed=seed, notes=notes,
+                                     announce=None if quiet else
+                                     (lambda text: click.echo(text, err=True)))
                 progress = _step(bar.task(f"{target.name} ({vid})", len(checks)), checks)
                 try:
                     run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
@@ -197,6 +209,37 @@ def _step(task, checks):  # noqa: ANN001, ANN202 - a progress Task, the checks i
     return step
 
 
+def _other_family(targets: tuple[str, ...], variant: str | None) -> bool:
+    """Does this run address a non-GVE protocol family (conform.families)?"""
+    from conform.families import is_family_variant
+
+    wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
+    return any(is_family_variant(v, "grbl") for v in wanted)
+
+
+def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
+                report_dir: str | None, patterns: tuple[str, ...], list_only: bool,
+                allow_motion: bool, allow_eeprom: bool) -> None:
+    """grbl targets: the family's checks, the engine's results, reports and exit codes."""
+    from conform.families.grbl.checks import run_targets
+
+    runs = run_targets(list(targets) or [f"emu:{variant}"], variant, baud=baud,
+                       patterns=patterns, profile=profile, allow_motion=allow_motion,
+                       allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo)
+    if list_only:
+        return
+    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    results = results_of(runs, command)
+    out = Path(report_dir) if report_dir else default_dir()
+    write_reports(results, out)
+    _print_summary(results, out)
+    aborted = next((r.aborted for r in runs if r.aborted), None)
+    if aborted is not None:
+        raise UserError(f"run aborted: {aborted}", exit_code=2)
+    if results.failed():
+        sys.exit(1)
+
+
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
     echo = partial(click.echo, err=err)
     for r in results.runs:
@@ -206,6 +249,8 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
         for c in r.checks:
             if c.grade is Grade.FAIL:
                 echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+        if r.aborted:
+            echo(f"  INCOMPLETE: {r.aborted}")
     if results.mutants:
         killed = sum(1 for m in results.mutants if m["killed"])
         echo(f"mutants: {killed}/{len(results.mutants)} killed")

@@ -80,8 +80,32 @@ def list_cmd(as_json: bool) -> None:
              v.base or "-") for v in spec.variants.values()]
     if not as_json:
         rows = [(*r[:5], f"{r[5]:,}", *r[6:]) for r in rows]
+    others = {}
+    if as_json:
+        from conform.families import families
+
+        others = {f.name: [{"variant": v.id, "title": v.title, "firmware": v.firmware,
+                            "axes": v.axes, "buffers": v.buffer, "notes": v.notes}
+                           for v in f.variants()] for f in families() if f.name != "gve"}
     _emit("GVE variants", ("variant", "title", "firmware", "axes", "queue", "max rate",
-                           "commands", "base"), rows, as_json, "variants")
+                           "commands", "base"), rows, as_json, "variants", other_families=others)
+    if not as_json:
+        _other_families()
+
+
+def _other_families() -> None:
+    """Variants of the other protocol families (conform.families), one table each."""
+    from conform.families import families
+
+    for fam in families():
+        if fam.name == "gve":
+            continue
+        table = Table(title=f"{fam.name} variants")
+        for col in ("variant", "title", "firmware", "axes", "buffers", "notes"):
+            table.add_column(col)
+        for v in fam.variants():
+            table.add_row(v.id, v.title, v.firmware, v.axes, v.buffer, v.notes)
+        _console().print(table)
 
 
 @cli.command("show")
@@ -96,6 +120,13 @@ def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
       conform spec show gve64-v19
       conform spec show gve124 V --json
     """
+    from conform.families import family_for_variant
+
+    if family_for_variant(variant).name == "grbl":
+        from conform.families.grbl.show import show
+
+        show(variant, command, _console())
+        return
     spec = load_spec()
     v = spec.variant(variant)
     console = _console()
@@ -189,3 +220,10 @@ def check_cmd(root: str | None) -> None:
     n = sum(len(v.commands) for v in spec.variants.values())
     click.echo(f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
                f"({n} variant commands), {len(spec.questions)} open questions, {len(spec.examples)} examples")
+    if root is None:
+        from conform.families.grbl.tables import load_grbl
+
+        g = load_grbl()
+        click.echo(f"ok: grbl: {len(g.variants)} variant, {len(g.errors)} error codes, "
+                   f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
+                   f"{len(g.commands)} $ commands, {len(g.examples)} examples")

@@ -173,7 +173,7 @@ def _characterize(spec: Any, target: Target, variant_id: str,
                 findings[q] = Finding(q, "not-probed", belief[q], [], [], [],
                                       f"{variant_id} has nothing to probe {q} with")
                 continue
-            why = skip_reason(script, target.guard, target.emulated)
+            why = skip_reason(script, target.guard, target.drives_inputs)
             if why is not None:
                 findings[q] = Finding(q, "not-probed", belief[q], [], [], [], why)
                 continue

@@ -21,7 +21,8 @@ from conform.protocol import encode_command
 from conform.protocol.checksum import append_checksum, checksum
 
 RESET = Step(reset=True)
-OK, QUEUE_FULL, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = 0, 1, 3, 4, 5, 6, 7
+OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = 0, 1, 2, 3, 4, 5, 6, 7
+AT_ONCE_S = 0.05  # tolerance of "the answer is sent at once" (GVE64 §13.7) on a link
 
 # a typical valid value per range name
 _TYPICAL = {"velocity": 1000, "pause": 5, "short": 512, "accel": 20, "percent": 100,
@@ -34,7 +35,18 @@ _VALID_ARGS: dict[str, list[Any]] = {
     "W": ["X", -100, 1000, 100, 500], "N<axis>": ["X", 100], "7V": [0], "*E": [1],
 }
 _POSITION_CMDS = {"P", "PF", "P4"}
-_ENV_CMDS = {"?", "Q", "ER", "EFR", "EUR", "I1", "I2"}
+# answers that depend on the unit at hand (its processor id, EEPROM contents, inputs): compared
+# by the table's shape on a real unit. `?` is not among them: the firmware string is the
+# variant's (tables), compared byte for byte.
+_ENV_CMDS = {"Q", "ER", "EFR", "EUR", "I1", "I2"}
+
+
+def answer_kind(cid: str) -> str:
+    return POSITION if cid in _POSITION_CMDS else ENVIRONMENT if cid in _ENV_CMDS else ""
+
+
+def answer_shape(cmd: Any) -> tuple[tuple[str, int | None], ...]:
+    return tuple((f.radix, f.width) for f in cmd.answer)
 _TIMEOUTS = {"H": 5.0, "W": 60.0, "G": 1.0}
 _RANGE_QUESTIONS = {"velocity": ("A7",)}
 
@@ -154,11 +166,12 @@ class _Builder:
         elif addr == 0:
             addr = self.v.interpolator_address
         line = encode_command(self.v, spec_cmd, args, address=addr, checksum_on=cs)
-        kind = POSITION if cid in _POSITION_CMDS else ENVIRONMENT if cid in _ENV_CMDS else ""
+        kind = kw.pop("kind", answer_kind(cid))
         kw.setdefault("timeout", _TIMEOUTS.get(cid, 0.5))
         if cid == ">":
             kw.setdefault("lines", 2)
-        return Step(line=line, subject=subject, kind=kind, **kw)
+        shape = answer_shape(spec_cmd) if kind == ENVIRONMENT else ()
+        return Step(line=line, subject=subject, kind=kind, shape=shape, **kw)
 
     def _foreign(self, cid: str) -> Any:
         """A command this variant lacks, resolved by a variant that has it (for its ranges)."""
@@ -334,9 +347,11 @@ def _valid_setup(b: _Builder, cid: str, cs: bool = False) -> tuple[list[Step], i
 def _valid_steps(b: _Builder, cid: str, cs: bool = False) -> list[Step]:
     if cid in ("*S", "*E"):
         c = b.cmd_step("C", [100, 0, 0], cs, answer=False, subject=False)
-        return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs)]
+        # the vector the packet carried is accounted for by the position it reached
+        return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs),
+                Step(wait=1.0), b.cmd_step("PF", [], cs, subject=False)]
     if cid == "J":
-        return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, kind=ENVIRONMENT)]
+        return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, ready=True)]
     step = b.cmd_step(cid, b.valid_args(cid), cs)
     if cid in ("L", "C", "W"):
         return [step, Step(wait=1.5), b.cmd_step("PF", [], cs, subject=False)]
@@ -402,7 +417,9 @@ def _edges(b: _Builder, cid: str, p: Any, args: list[Any], at: int, prefix: str,
         if cid == "*E":  # the count closes a packet
             steps.append(b.cmd_step("*S", [], answer=False, subject=False))
             intent = intent if name != "hi" else SYNTAX  # count mismatch (A12)
-        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5)))
+        kind = answer_kind(cid) if intent == OK else ""
+        steps.append(Step(line=line, subject=True, timeout=_TIMEOUTS.get(cid, 0.5), kind=kind,
+                          shape=answer_shape(cmd) if kind == ENVIRONMENT else ()))
         b.add(cid, f"{prefix}/{name}",
               f"{cid} {p.name}={value} ({'inside' if intent == OK else 'outside'} "
               f"{p.lo}..{p.hi})", steps, intent=intent, questions=questions)
@@ -449,7 +466,7 @@ def _semantic_checks(b: _Builder) -> None:
     fill = b.queue_fill(v.queue)
     b.add("C", "queue-full", f"the queue holds {v.queue} C vectors; the next answers 1",
           [RESET, *fill, b.raw(f"!0C{b.travel},20,0", subject=True),
-           b.cmd_step("F", [], subject=False)],
+           b.cmd_step("F", [], subject=False), b.cmd_step("PF", [], subject=False)],
           clause=f"{b.clause('C')}, {v.clause('queue')}", intent=QUEUE_FULL, questions=("A5",))
     # the @ index (GVE64 §13.5.13; A10)
     b.add("@", "advance", "@ counts the commands received",
@@ -474,7 +491,7 @@ def _semantic_checks(b: _Builder) -> None:
     # HALT during a move: INTA on the answer and afterwards (GVE64 §13.5.9, §13.7)
     b.add("H", "running", "H brakes a move; the answer and the next carry INTA",
           [RESET, *b.running(), b.cmd_step("H", []), b.cmd_step("SR", [6], subject=False),
-           b.raw("!0V1000")], questions=("A24",))
+           b.raw("!0V1000"), b.cmd_step("PF", [], subject=False)], questions=("A24",))
     # position read-back after moves, every axis separately (GVE64 §13.5.6)
     moves = [(1, -2, 3, 4)[: len(v.axes)], (300, 0, -200, 0)[: len(v.axes)]]
     for i, m in enumerate(moves):
@@ -506,25 +523,26 @@ def _semantic_checks(b: _Builder) -> None:
               questions=("A20",) if w not in v.status_words else ())
     # EEPROM byte written and read back (GVE64 §13.5.10)
     b.add("EW", "read-back", "EW10,5A then ER10 reads 5A",
-          [RESET, b.raw("!0EW10,5A"), b.cmd_step("ER", [0x10], subject=True)])
+          [RESET, b.raw("!0EW10,5A"), b.cmd_step("ER", [0x10], subject=True, kind="")])
     # K/R: the manual's recovery sequence (GVE64 §13.5.9)
     b.add("K", "recovery", "the manual's recovery example: H, K, L out and back, R, G",
           [RESET, b.raw("!0V1000"), b.raw(f"!0C{b.travel},0,0"), b.raw(f"!0C{b.travel},0,0"),
            Step(wait=0.2), b.raw("!0H", timeout=5.0), b.raw("!0SR6"), b.raw("!0K", subject=True),
            b.raw("!0L0,0,-1000"), Step(wait=3.0), b.raw("!0L0,0,1000"), Step(wait=3.0),
            b.raw("!0R", subject=True), b.raw("!0V500"), b.raw("!0XA"), b.raw("!0G"),
-           b.raw("!0SR6")], questions=("A4",))
+           b.raw("!0SR6"), b.cmd_step("PF", [], subject=False)], questions=("A4",))
     # inputs: an enabled interrupt brakes and sets INTA (GVE64 §13.5.12)
     b.add("SR", "interrupt", "an enabled input interrupt stops the move and sets INTA and ST4",
           [RESET, b.raw("!0SW0,01"), *b.running(), Step(wait=0.2),
            Step(input=(1, 0, True)), Step(wait=1.0), b.cmd_step("SR", [4]),
-           b.raw("!0SR6"), b.raw("!0V1000")], questions=("A24",))
+           b.raw("!0SR6"), b.raw("!0V1000"), Step(input=(1, 0, False))], questions=("A24",))
     b.add("I1", "inputs", "I1 shows an active input",
-          [RESET, Step(input=(1, v.input_bits["port1"][-1], True)), b.cmd_step("I1", [])])
+          [RESET, Step(input=(1, v.input_bits["port1"][-1], True)), b.cmd_step("I1", []),
+           Step(input=(1, v.input_bits["port1"][-1], False))])  # inputs are physical: released
     # reset (GVE64 §13.4)
     b.add("J", "reset-state", "J restores the reset state: position, checksum off, V",
           [RESET, *b.position(10, 20, 30), b.raw("!0%+"), b.raw("!0J", cs=True),
-           b.raw("!0PF", wait=2.2, kind=POSITION, subject=True), b.raw("!0@")],
+           b.raw("!0PF", wait=2.2, ready=True, kind=POSITION, subject=True), b.raw("!0@")],
           questions=("A17", "A10"))
     # spindle: address 7 V is not address 0 V (GVE64 §13.6)
     if "7V" in v.commands:
@@ -535,6 +553,25 @@ def _semantic_checks(b: _Builder) -> None:
     b.add(None, "unknown-address", "a line for another address gets no answer",
           [RESET, b.raw("!3V100", subject=True), b.raw("!0V100")], questions=("A23",),
           clause=next((c for c in a23 if c.startswith(b.manual)), a23[0]))
+    # the manual's timing words (GVE64 §13.7, GVE124 §12.6): answers are sent at once (HALT's
+    # once the unit has stopped); a line that does not arrive complete is answered 2 when the
+    # watchdog runs out (A13). Tolerance: the USB converter latency the manuals name (1–16 ms
+    # each way) and the unit's own time, ±AT_ONCE_S.
+    words = b.spec.questions["A13"].clauses
+    timing = next((c for c in words if c.startswith(b.manual)), words[0])
+    # a mnemonic no firmware has: unknown command (3)
+    b.add(None, "unknown-command", "a mnemonic no firmware has is an unknown command (3)",
+          [RESET, b.raw("!0ZZ", subject=True)], clause=timing, intent=UNKNOWN,
+          questions=("A21",))
+    b.add(None, "timing/at-once", "answers come at once (HALT's too when nothing moves)",
+          [RESET, b.cmd_step("V", [1000], tolerance=AT_ONCE_S),
+           b.cmd_step("F", [], tolerance=AT_ONCE_S),
+           b.cmd_step("?", [], tolerance=AT_ONCE_S),
+           b.cmd_step("H", [], tolerance=AT_ONCE_S)], clause=timing)
+    b.add(None, "timing/watchdog", "a line without its CR is answered 2 when the watchdog runs "
+          "out", [RESET, Step(line=b"!0V100", subject=True, timeout=1.5, tolerance=AT_ONCE_S),
+                  b.raw("!0V100")],
+          clause=timing, intent=WATCHDOG, questions=("A13",))
     # checksum missing while on (A11)
     b.add("%", "missing-checksum", "with checksums on, a line without one is refused",
           [RESET, b.raw("!0%+"), b.raw("!0V1000", subject=True)], intent=SYNTAX,

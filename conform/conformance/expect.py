@@ -105,11 +105,24 @@ def _split(line: bytes) -> tuple[bytes, bool]:
     return line, False
 
 
-def _field_shape_ok(expected: str, actual: str) -> bool:
+_FLOAT = r"-?(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?|-?inf|nan"
+_RADIX = {"dec": r"-?\d+", "float": _FLOAT, "hex": r"[0-9A-F]{%d}", "text": r".{%d}"}
+
+
+def _field_shape_ok(expected: str, actual: str, shape: tuple[str, int | None] | None = None
+                    ) -> bool:
+    """Does ``actual`` have the shape of the table's answer field (radix, width; upper-case
+    hex), or without a table entry the shape of ``expected``?"""
+    if shape is not None:
+        radix, width = shape
+        pattern = _RADIX.get(radix, r".+")
+        if "%d" in pattern:
+            pattern = pattern % width if width else pattern.replace("{%d}", "+")
+        return re.fullmatch(pattern, actual) is not None
     if re.fullmatch(r"-?\d+", expected):
         return re.fullmatch(r"-?\d+", actual) is not None
     if re.fullmatch(r"[0-9A-F]+", expected):
-        return re.fullmatch(r"[0-9A-Fa-f]{%d}" % len(expected), actual) is not None
+        return re.fullmatch(r"[0-9A-F]{%d}" % len(expected), actual) is not None
     return bool(actual) or not expected
 
 
@@ -128,14 +141,14 @@ def line_mismatch(step: Step, expected: bytes, actual: bytes, loose: bool,
         return "answer code differs"
     if len(e_f) != len(a_f):
         return f"{len(a_f) - 1} fields where {len(e_f) - 1} were expected"
-    for e, a in zip(e_f[1:], a_f[1:], strict=True):
+    for i, (e, a) in enumerate(zip(e_f[1:], a_f[1:], strict=True)):
         if step.kind == POSITION:
             try:
                 if abs(int(e) - int(a)) > tol:
                     return f"position {a} is not within {tol:g} of {e}"
             except ValueError:
                 return f"position field {a!r} is not an integer"
-        elif not _field_shape_ok(e, a):
+        elif not _field_shape_ok(e, a, step.shape[i] if i < len(step.shape) else None):
             return f"field {a!r} does not have the shape of {e!r}"
     return None
 
@@ -159,6 +172,11 @@ def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loo
         why = line_mismatch(step, e, a, loose, tol if expected.moving else 0.0)
         if why:
             return why
+    if step.tolerance is not None and expected.t_rx is not None and actual.t_rx is not None:
+        d_e, d_a = expected.t_rx - expected.t_tx, actual.t_rx - actual.t_tx
+        if abs(d_a - d_e) > step.tolerance:
+            return (f"answered after {d_a * 1000:.0f} ms where the reference answers after "
+                    f"{d_e * 1000:.0f} ms (tolerance ±{step.tolerance * 1000:.0f} ms)")
     return None
 
 

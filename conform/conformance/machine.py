@@ -22,12 +22,12 @@ from hypothesis import strategies as st
 from hypothesis.errors import HypothesisException
 from hypothesis.stateful import RuleBasedStateMachine, get_state_machine_test, rule
 
-from conform.conformance.checks import Check, clause_number
+from conform.conformance.checks import Check, answer_kind, answer_shape, clause_number
 from conform.conformance.expect import first_mismatch, reply_mismatch, show
 from conform.conformance.results import INFO, CheckResult, Grade, LogEntry
-from conform.conformance.safety import hazards
-from conform.conformance.script import ENVIRONMENT, POSITION, Step
-from conform.conformance.target import EmuTarget, HarnessError, Reply
+from conform.conformance.safety import SafetyRefusal, hazards
+from conform.conformance.script import ENVIRONMENT, Step
+from conform.conformance.target import POLL_LINE, EmuTarget, HarnessError, Reply
 from conform.errors import LinkError
 from conform.protocol import encode_command
 from conform.protocol.checksum import append_checksum
@@ -56,6 +56,8 @@ class _Shared:
     failure: dict[str, Any] | None = None
     examples: int = 0
     steps: int = 0
+    deadline: float | None = None  # perf_counter() after which examples send nothing (a link)
+    cut: int = 0  # examples left out by the deadline
 
 
 def _arg_strategy(p: Any, v: Any, max_travel: int) -> st.SearchStrategy[list[Any]]:
@@ -69,6 +71,8 @@ def _arg_strategy(p: Any, v: Any, max_travel: int) -> st.SearchStrategy[list[Any
     lo, hi = p.lo, p.hi
     if p.range_name == "pulses":
         one = st.integers(-max_travel, max_travel)
+    elif p.range_name == "travel":  # W's travels: inside the envelope (issue: --max-steps)
+        one = st.integers(0, max_travel)
     elif p.range_name == "velocity":
         one = st.one_of(st.sampled_from([s for s in _SPEEDS if lo <= s <= hi]),
                         st.sampled_from([lo, hi, lo - 1, hi + 1]))
@@ -81,6 +85,21 @@ def _arg_strategy(p: Any, v: Any, max_travel: int) -> st.SearchStrategy[list[Any
         need = p.min_count or n
         return st.lists(one, min_size=need, max_size=n)
     return one.map(lambda x: [x])
+
+
+W_SECONDS = 2.0  # the longest leg of a generated reference move (W answers when it is done)
+
+
+def _short_reference_move(args: list[Any]) -> list[Any]:
+    """W's travels cut to what its speeds cover in W_SECONDS: a unit answers nothing else until
+    W is done, so a slow, long move would stall a run on a link for minutes."""
+    axis, to_switch, speed_to, from_switch, speed_from = args
+    if isinstance(speed_to, int) and isinstance(to_switch, int) and speed_to > 0:
+        cap = int(speed_to * W_SECONDS)
+        to_switch = max(-cap, min(cap, to_switch))
+    if isinstance(speed_from, int) and isinstance(from_switch, int) and speed_from > 0:
+        from_switch = min(int(speed_from * W_SECONDS), from_switch)
+    return [axis, to_switch, speed_to, from_switch, speed_from]
 
 
 def _families(v: Any, allowed: set[str], emulated: bool) -> dict[str, list[Any]]:
@@ -112,12 +131,22 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
     class Sequences(RuleBasedStateMachine):
         def __init__(self) -> None:
             super().__init__()
-            target.reset()
-            target.begin_log()
             d = shared.dialect
             self.ref = EmuTarget(lambda: unit_cls(v, d), "reference")
             self.script: list[Step] = [Step(reset=True)]
             self.actual: list[Reply | None] = [None]
+            self.off = (shared.deadline is not None and shared.failure is None
+                        and time.perf_counter() > shared.deadline)
+            if self.off:
+                shared.cut += 1
+                return
+            # J and its readiness polled with @ (on a link the unit's deaf time is measured,
+            # never guessed); the reference gets the same @
+            poll = target.reset_polled()
+            target.begin_log()
+            self.script.append(Step(line=POLL_LINE))
+            self.actual.append(poll)
+            self.ref.exchange(POLL_LINE)
             shared.examples += 1
 
         # -- sending -------------------------------------------------------------------------
@@ -126,18 +155,20 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             return (append_checksum(body) if on else body) + b"\r"
 
         def _send(self, step: Step) -> None:
+            if self.off:
+                return
             risks = hazards(step.line)
             if risks - allowed:
                 return
             if step.line and guard.max_steps is not None:
                 try:
                     guard.check(step.line)
-                except LinkError:
-                    return
+                except SafetyRefusal:
+                    return  # drawn outside the envelope: not sent (the draws stay inside)
             self.script.append(step)
             shared.steps += 1
             if step.wait:
-                target.wait(step.wait)
+                target.wait(target.ready_wait(step.wait) if step.ready else step.wait)
                 self.ref.wait(step.wait)
             if not target.emulated:  # keep the reference on the target's timeline
                 lag = (target.now() - target.t_log0) - self.ref.now()
@@ -212,12 +243,12 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             except ValueError:
                 return
             line = self._frame(line[:-1])
-            kind = POSITION if cmd.id in ("P", "PF", "P4") else (
-                ENVIRONMENT if cmd.id in ("?", "Q", "ER", "EFR", "EUR", "I1", "I2") else "")
+            kind = answer_kind(cmd.id)
             self._send(Step(line=line, kind=kind, timeout=_TIMEOUTS.get(cmd.id, 0.5),
-                            lines=2 if cmd.id == ">" else 1))
+                            lines=2 if cmd.id == ">" else 1,
+                            shape=answer_shape(cmd) if kind == ENVIRONMENT else ()))
             if cmd.id == "J":
-                self._send(Step(line=self._frame(b"!0F"), wait=2.2))
+                self._send(Step(line=self._frame(b"!0F"), wait=2.2, ready=True))
 
         # -- rules: one per family, added below -----------------------------------------------
         @rule(seconds=st.sampled_from([0.01, 0.1, 0.5, 2.0]))
@@ -257,6 +288,8 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
                 args += data.draw(_arg_strategy(p, v, max_travel), label=p.name)
             if cmd.id == "Y" and "motion" not in allowed:
                 args = ["-"]
+            if cmd.id == "W":
+                args = _short_reference_move(args)
             if cmd.id in ("EW", "EFW", "EUW") and "eeprom" not in allowed:
                 return
             self._command(cmd, args)
@@ -295,6 +328,9 @@ def run_machine(runner: Any, check: Check) -> CheckResult:
     steps = opts.steps or steps
     seed = int(opts.seed)
     shared = _Shared(runner.ref.dialect)
+    budget = runner.machine_budget() if hasattr(runner, "machine_budget") else None
+    if budget is not None:
+        shared.deadline = time.perf_counter() + budget
     machine = build_machine(runner, shared, examples, steps)
     machine.TestCase.settings = settings(max_examples=examples, stateful_step_count=steps)
     conf = settings(max_examples=examples, stateful_step_count=steps, deadline=None,
@@ -330,6 +366,9 @@ def run_machine(runner: Any, check: Check) -> CheckResult:
                            **base)
     summary = (f"{shared.examples} sequences, {shared.steps} commands "
                f"({examples} examples × up to {steps} steps)")
+    if shared.cut:
+        summary += (f"; {shared.cut} examples left out by the link's time budget of "
+                    f"{budget:g} s")
     if shared.deviations:
         (q, alt), seq = next(iter(shared.deviations.items()))
         others = ", ".join(f"{a}={b}" for a, b in list(shared.deviations)[1:])

@@ -105,6 +105,17 @@ class TargetRun:
     checks: list[CheckResult] = field(default_factory=list)
     aborted: str | None = None        # why the run stopped early (and what was sent to stop it)
     notes: list[str] = field(default_factory=list)
+    # a link's costs: how the checks' states were reached (conform.conformance.state), the
+    # estimate printed before starting and the state machine's wall-time budget (s)
+    state: dict[str, Any] = field(default_factory=dict)
+    estimate_s: float | None = None
+    machine_budget_s: float | None = None
+    # what this run did not verify and how to enable it (conform.conformance.safety)
+    not_verified: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def complete(self) -> bool:
+        return self.aborted is None
 
     def counts(self) -> dict[str, int]:
         out = {g.value: 0 for g in GRADE_ORDER}
@@ -136,7 +147,8 @@ class RunResults:
             "created": self.created,
             "checks": [c.to_json() for c in self.checks],
             "runs": [
-                {k: v for k, v in asdict(r).items() if k != "checks"} | {"counts": r.counts()}
+                {k: v for k, v in asdict(r).items() if k != "checks"}
+                | {"counts": r.counts(), "complete": r.complete}
                 for r in self.runs
             ],
             "mutants": self.mutants,
@@ -154,7 +166,9 @@ class RunResults:
                 target=r["target"], variant=r["variant"], emulated=bool(r.get("emulated")),
                 profile=r.get("profile", ""), started=r.get("started", ""),
                 duration=float(r.get("duration", 0.0)), aborted=r.get("aborted"),
-                notes=list(r.get("notes", [])),
+                notes=list(r.get("notes", [])), state=dict(r.get("state") or {}),
+                estimate_s=r.get("estimate_s"), machine_budget_s=r.get("machine_budget_s"),
+                not_verified=list(r.get("not_verified") or []),
             )
             run.checks = [c for c in checks if c.target == run.target and c.variant == run.variant]
             runs.append(run)

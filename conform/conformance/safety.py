@@ -10,7 +10,9 @@ move by ``max_steps``.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from conform.errors import UserError
 
@@ -33,8 +35,18 @@ def _bodies(body: str) -> list[str]:
     return [body, body[: m.start()]] if m else [body]
 
 
-def hazards(line: bytes) -> set[str]:
-    """The risks a command line carries for a real machine (empty for a harmless line)."""
+def _zero_vector(body: str) -> bool:
+    """``L0,0,0`` / ``C0,0``: a vector of no pulses (whatever a unit makes of it, nothing moves)."""
+    v = _VECTOR.match(body)
+    return v is not None and v.end() == len(body) and all(
+        int(x) == 0 for x in v.group(1).split(","))
+
+
+def hazards(line: bytes, idle: bool = False) -> set[str]:
+    """The risks a command line carries for a real machine (empty for a harmless line).
+
+    ``idle``: the host knows the queue is empty and nothing moves (read back with F after the
+    state was reached, nothing that moves sent since), so ``G`` has nothing to start."""
     m = _LINE.match(line)
     if m is None:
         return set()
@@ -49,7 +61,11 @@ def hazards(line: bytes) -> set[str]:
             if body.startswith("V") and body[1:].lstrip("0") != "":
                 out.add("actuator")
         elif address == 0:
-            if body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
+            if body[:1] in ("L", "C") and _zero_vector(body):
+                pass
+            elif body[:1] == "G" and idle:
+                pass
+            elif body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
                 out.add("motion")
             elif body.startswith("O") and body.upper() != "O0,FF":
                 out.add("actuator")
@@ -103,8 +119,8 @@ class Guard:
             allowed.add("eeprom")
         return risks - allowed
 
-    def check(self, line: bytes) -> None:
-        bad = self.blocked(hazards(line))
+    def check(self, line: bytes, idle: bool = False) -> None:
+        bad = self.blocked(hazards(line, idle))
         if bad:
             raise SafetyRefusal(f"refused to send {line!r}: {', '.join(sorted(bad))} not allowed "
                                 "(use --allow-motion with --max-steps)")
@@ -113,3 +129,52 @@ class Guard:
                 if abs(n) > self.max_steps:
                     raise SafetyRefusal(f"refused to send {line!r}: a move of {abs(n)} steps "
                                         f"exceeds --max-steps {self.max_steps}")
+
+
+# why a check was not run on this target; the text before " (" groups them (not_verified)
+INPUTS_SKIP = ("needs inputs driven (a real unit's inputs are switched by hand; with `conform "
+               "emulate serve` behind the link: enable with --inputs-control PATH)")
+_ENABLE = {"motion": "--allow-motion --max-steps N", "actuator": "--allow-motion --max-steps N",
+           "eeprom": "--allow-eeprom"}
+
+
+def blocked_reason(blocked: set[str]) -> str:
+    how = " ".join(dict.fromkeys(_ENABLE.get(r, r) for r in sorted(blocked)))
+    return f"needs {', '.join(sorted(blocked))} (not allowed in this run: enable with {how})"
+
+
+def envelope_reason(pulses: int, max_steps: int) -> str:
+    return (f"outside the envelope (a move of {pulses} pulses cannot be done inside "
+            f"--max-steps {max_steps}: enable with --max-steps {pulses})")
+
+
+def not_verified(results: Iterable[Any]) -> list[dict[str, Any]]:
+    """SKIPPED checks grouped by why, with how to enable them: what a run did not verify."""
+    groups: dict[str, dict[str, Any]] = {}
+    for r in results:
+        if getattr(r.grade, "value", r.grade) != "SKIPPED":
+            continue
+        reason, _, rest = r.detail.partition(" (")
+        how = rest.rsplit("enable with ", 1)[-1].rstrip(")") if "enable with" in rest else ""
+        if reason.startswith("outside the envelope"):
+            g = groups.setdefault("outside the envelope (--max-steps)", {
+                "reason": "outside the envelope (--max-steps)", "how": "", "count": 0,
+                "checks": [], "needs_pulses": 0})
+            pulses = int(rest.split(" pulses", 1)[0].rsplit(" ", 1)[-1])
+            g["needs_pulses"] = max(g["needs_pulses"], pulses)
+            g["how"] = f"--max-steps {g['needs_pulses']}"
+        else:
+            g = groups.setdefault(reason, {"reason": reason, "how": how, "count": 0,
+                                           "checks": []})
+        g["count"] += 1
+        g["checks"].append(r.id)
+    return sorted(groups.values(), key=lambda g: -g["count"])
+
+
+def run_guard(emulated: bool, allow_motion: bool, max_steps: int | None,
+              allow_eeprom: bool) -> Guard:
+    """The guard of a run: a real unit gets what the options allow; the emulator everything,
+    inside ``--max-steps`` when given (so it plans the same checks as a real unit would)."""
+    if emulated:
+        return Guard(True, max_steps, True)
+    return Guard(allow_motion, max_steps, allow_eeprom)

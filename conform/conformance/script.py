@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from conform.conformance.safety import Guard, hazards
+from conform.conformance.safety import (
+    INPUTS_SKIP,
+    Guard,
+    axis_moves,
+    blocked_reason,
+    envelope_reason,
+    hazards,
+)
 from conform.conformance.target import Reply, Target
 
 # answer kinds whose fields are compared loosely on a real unit
@@ -28,6 +35,12 @@ class Step:
     reset: bool = False  # return to the power-up state first
     subject: bool = False  # the step the check is about
     kind: str = ""  # POSITION | ENVIRONMENT | ""
+    shape: tuple[tuple[str, int | None], ...] = ()  # (radix, width) of each answer field: how
+    #                      an ENVIRONMENT answer is compared on a real unit
+    tolerance: float | None = None  # the answer's delay must be the reference's within ± this
+    #                      (the manual's timing words: at once, the watchdog)
+    ready: bool = False  # the wait lets the unit come back after J (a link waits at least the
+    #                      readiness it measured, plus a margin)
 
     def describe(self) -> str:
         if self.reset:
@@ -47,53 +60,66 @@ Script = tuple[Step, ...]
 def script_needs(script: Script) -> set[str]:
     """What a script asks of the machine: motion, actuator, eeprom, reset, inputs."""
     out: set[str] = set()
+    idle = True  # the runner starts every script with the queue empty (read back)
     for step in script:
         if step.line:
-            out |= hazards(step.line)
+            risks = hazards(step.line, idle)
+            out |= risks
+            idle = idle and "motion" not in hazards(step.line)
         if step.input is not None:
             out.add("inputs")
     return out
 
 
-def skip_reason(script: Script, guard: Guard, emulated: bool) -> str | None:
-    """Why a script may not run on this target, or None."""
+def skip_reason(script: Script, guard: Guard, drives_inputs: bool) -> str | None:
+    """Why a script may not run on this target, or None (see :func:`safety.not_verified`)."""
     needs = script_needs(script)
-    if "inputs" in needs and not emulated:
-        return "needs inputs driven, which only the emulator allows"
+    if "inputs" in needs and not drives_inputs:
+        return INPUTS_SKIP
     blocked = guard.blocked(needs - {"inputs"})
     if blocked:
-        return f"needs {', '.join(sorted(blocked))} (not allowed in this run: --allow-motion)"
+        return blocked_reason(blocked)
     if guard.max_steps is not None:
-        from conform.conformance.safety import SafetyRefusal
-
-        for step in script:
-            if step.line:
-                try:
-                    guard.check(step.line)
-                except SafetyRefusal as exc:
-                    return str(exc)
+        worst = max((abs(n) for step in script if step.line for n in axis_moves(step.line)),
+                    default=0)
+        if worst > guard.max_steps:
+            return envelope_reason(worst, guard.max_steps)
     return None
 
 
 def run_script(target: Target, script: Script) -> list[Reply | None]:
-    """Run every step; a reply per step (None for steps that send nothing or expect nothing)."""
-    out: list[Reply | None] = []
+    """Run every step; a reply per step (None for steps that send nothing or expect nothing).
+
+    A reset step brings the target to the state the script starts from (the emulator: a new
+    unit; a link: see :mod:`conform.conformance.state`)."""
     target.begin_log()
+    out: list[Reply | None] = []
     for step in script:
         if step.reset:
-            target.reset()
-            if target.emulated:
-                target.begin_log()
-        if step.wait:
-            target.wait(step.wait)
-        if step.input is not None:
-            target.set_input(*step.input)
-        if not step.line:
-            out.append(None)
-            continue
-        if step.answer:
-            out.append(target.exchange(step.line, step.timeout, step.lines))
-        else:
-            t, stray = target.send(step.line)
-            out.append(Reply(step.line, t - target.t_log0, stray=stray))
+            target.prepare(script)
+            target.begin_log(keep=not target.emulated)
+        out.append(run_step(target, step))
     return out
+
+
+def run_steps(target: Target, steps: Script) -> list[Reply | None]:
+    """Run steps on the target as it is (reset steps included)."""
+    out: list[Reply | None] = []
+    for step in steps:
+        if step.reset:
+            target.reset()
+        out.append(run_step(target, step))
+    return out
+
+
+def run_step(target: Target, step: Step) -> Reply | None:
+    if step.wait:
+        target.wait(target.ready_wait(step.wait) if step.ready else step.wait)
+    if step.input is not None:
+        target.set_input(*step.input)
+    if not step.line:
+        return None
+    if step.answer:
+        return target.exchange(step.line, step.timeout, step.lines)
+    t, stray = target.send(step.line)
+    return Reply(step.line, t - target.t_log0, stray=stray)

@@ -16,16 +16,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from conform.conformance.results import LogEntry
-from conform.conformance.safety import STOP_SEQUENCE, Guard
+from conform.conformance.safety import STOP_SEQUENCE, Guard, hazards
 from conform.errors import LinkError, UserError
 from conform.protocol.checksum import append_checksum
 
 DEFAULT_VARIANT = "gve64-v19"
 DEFAULT_TIMEOUT = 0.5
+POLL_LINE = b"!0@\r"  # readiness after J: answered once the unit hears; not counted (A10)
 
 
 class HarnessError(Exception):
     """The harness or the link failed (graded ERROR, never the unit's fault)."""
+
+
+class LinkSilent(HarnessError):
+    """Nothing comes back any more: the link is lost (a unit would answer something)."""
 
 
 @dataclass
@@ -68,6 +73,10 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
         self.t_log0 = 0.0
+        self.keeper: Any = None  # a link's StateKeeper (conform.conformance.state)
+        # the host knows nothing moves and the queue is empty (read back after reaching a
+        # check's state; nothing that moves sent since): G has nothing to start
+        self.idle = False
 
     # -- what subclasses provide ------------------------------------------------------------
     @abstractmethod
@@ -104,9 +113,38 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
 
-    def begin_log(self) -> None:
-        self.log = []
-        self.t_log0 = self.now()
+    def reset_polled(self) -> Reply:
+        """J, then ``!0@`` until the unit answers (its readiness); the answer. What follows
+        starts from power-up and one ``@`` (which A10 does not count)."""
+        self.reset()
+        return self.exchange(POLL_LINE)
+
+    @property
+    def drives_inputs(self) -> bool:
+        """Can the harness switch this unit's inputs (``set_input``)?"""
+        return self.emulated
+
+    def prepare(self, script: Any) -> None:
+        """Reach the state ``script`` starts from (its reset step): by default a reset."""
+        self.reset()
+
+    def ready_wait(self, seconds: float) -> float:
+        """How long to wait for the unit to hear again after J (a script asked ``seconds``)."""
+        return seconds
+
+    def resync(self) -> bytes:
+        """Drop whatever is pending so the next exchange starts clean; returns it."""
+        return self.drain()
+
+    def begin_log(self, keep: bool = False) -> None:
+        """Times from now on count from here; ``keep`` the entries so far (negative times)."""
+        t = self.now()
+        if keep:
+            for e in self.log:
+                e.t -= t - self.t_log0
+        else:
+            self.log = []
+        self.t_log0 = t
 
     def _note(self, direction: str, data: bytes) -> None:
         self.log.append(LogEntry(self.now() - self.t_log0, direction, data))
@@ -122,7 +160,9 @@ class Target(ABC):
 
     def send(self, data: bytes) -> tuple[float, bytes]:
         """Send bytes without waiting for an answer; returns the time and what came unasked."""
-        self.guard.check(data)
+        self.guard.check(data, idle=self.idle)
+        if "motion" in hazards(data):
+            self.idle = False
         stray = self.drain()
         t = self.now()
         self._note("tx", data)
@@ -164,10 +204,13 @@ class Target(ABC):
         return reply
 
     def _track_checksum(self, line: bytes, reply: Reply) -> None:
+        """What the host believes about checksums changes only with a command the unit took:
+        ``%±`` answered 0, or ``J`` not refused (silence or 0: A17)."""
+        accepted = not reply.lines or reply.lines[0][:1] in (b"0", b"8")
         m = _CHECKSUM_CMD.match(line)
-        if m and reply.lines and reply.lines[0][:1] in (b"0", b"8"):
+        if m and reply.lines and accepted:
             self.checksum_on = m.group(1) == b"+"
-        elif line[2:3] == b"J" and line[:2] in (b"!0", b"!7"):
+        elif line[2:3] == b"J" and line[:2] in (b"!0", b"!7") and accepted and not reply.partial:
             self.checksum_on = False
 
     def frame(self, body: str, checksum: bool | None = None) -> bytes:
@@ -176,28 +219,69 @@ class Target(ABC):
         use = self.checksum_on if checksum is None else checksum
         return (append_checksum(raw) if use else raw) + b"\r"
 
-    def safe_stop(self) -> str:
-        """Halt, delete the queue and switch every output off: H, D, O0,FF (GVE64 §13.5.9)."""
+    def safe_stop(self, h_bound: float = 7.0, h_every: float = 0.25) -> str:
+        """Halt, delete the queue and switch every output off: H, D, O0,FF (GVE64 §13.5.9).
+
+        H is sent again every ``h_every`` s until the unit is known to have heard one (it may
+        be deaf after a J, or an answer lost) — an answer to H, then F answered, then H once
+        more answered — for at most ``h_bound`` s (the deaf time, the longest brake and a
+        margin); a line refused as a syntax error is tried in the other checksum framing."""
         sent = []
         for body in STOP_SEQUENCE:
-            line = self.frame("!0" + body)
             try:
-                self._note("note", b"abort: " + line)
-                self._write(line)
-                timeout = 30.0 if body == "H" else 1.0
-                reply = Reply(line, self.now())
-                deadline = self.now() + timeout
-                buf = b""
-                while b"\r" not in buf and self.now() < deadline:
-                    chunk = self._read(deadline)
-                    if chunk:
-                        self._note("rx", chunk)
-                        buf += chunk
-                reply.lines = [buf.partition(b"\r")[0]] if b"\r" in buf else []
-                sent.append(f"{body} → {reply.text()}")
+                self.drain()  # answers still on their way (J's, a held line's) are not these
+                self._note("note", b"abort: " + self.frame("!0" + body))
+                if body == "H":
+                    answer = self._halt(h_bound, h_every)
+                else:
+                    answer = self._stop_line(body, 1.0)
+                sent.append(f"{body} → {answer}")
             except (LinkError, OSError, HarnessError) as exc:
                 sent.append(f"{body} → not sent ({exc})")
         return "sent " + ", ".join(sent)
+
+    def _line_within(self, line: bytes, seconds: float) -> bytes | None:
+        """Send ``line``; the first answer line within ``seconds``, or None."""
+        self._note("tx", line)
+        self._write(line)
+        until = self.now() + seconds
+        buf = self._buffer
+        self._buffer = b""
+        while b"\r" not in buf and self.now() < until:
+            chunk = self._read(until)
+            if chunk:
+                self._note("rx", chunk)
+                buf += chunk
+        if b"\r" not in buf:
+            return None
+        answer, _, self._buffer = buf.partition(b"\r")
+        if answer[:1] in (b"4", b"C"):  # a syntax error: the other checksum framing
+            self.checksum_on = not self.checksum_on
+        return answer
+
+    def _halt(self, bound: float, every: float) -> str:
+        deadline = self.now() + bound
+        tries = 0
+        while self.now() < deadline:
+            tries += 1
+            if self._line_within(self.frame("!0H"), every) is None:
+                continue  # deaf, braking or lost: again
+            if self._line_within(self.frame("!0F"), every) is None:
+                continue
+            tries += 1  # the unit hears: this H is executed, its answer comes after the brake
+            answer = self._line_within(self.frame("!0H"), max(0.5, deadline - self.now()))
+            if answer is not None:
+                return f"{answer.decode('latin-1')} (after {tries} tries)"
+        return f"no answer after {tries} tries in {bound:g} s"
+
+    def _stop_line(self, body: str, timeout: float) -> str:
+        for _ in range(2):
+            answer = self._line_within(self.frame("!0" + body), timeout)
+            if answer is None:
+                return f"no answer in {timeout:g} s"
+            if answer[:1] not in (b"4", b"C"):
+                break
+        return answer.decode("latin-1")
 
 
 class EmuTarget(Target):
@@ -288,13 +372,77 @@ class LinkTarget(Target):
     emulated = False
 
     def __init__(self, endpoint: Any, name: str, guard: Guard, baud: int,
-                 ready_after: float = 2.2) -> None:
+                 ready_after: float = 2.0) -> None:
         super().__init__(guard)
         self.endpoint = endpoint
         self.name = name
         self.baud = baud
         self.ready_after = ready_after
         self._t0 = time.monotonic()
+        self.reset_stats: Any = None  # J's readiness measured (conform.conformance.state)
+        self.inputs: str | None = None  # an emulator's control socket that drives its inputs
+
+    @property
+    def drives_inputs(self) -> bool:
+        return self.inputs is not None
+
+    def set_input(self, port: int, bit: int, active: bool) -> None:
+        """Inputs of an emulator behind the link, through its control socket (``inputs``)."""
+        if self.inputs is None:
+            super().set_input(port, bit, active)
+        from conform.unit.control import send_control
+
+        word = "press" if active else "release"
+        try:
+            reply = send_control(self.inputs, f"{word} {port}.{bit}")
+        except OSError as exc:
+            raise HarnessError(f"--inputs-control {self.inputs}: {exc}") from None
+        self._note("note", f"input {port}.{bit} {word}: {reply}".encode())
+        if not reply.startswith("ok"):
+            raise HarnessError(f"--inputs-control {self.inputs}: {reply}")
+
+    def prepare(self, script: Any) -> None:
+        if self.keeper is not None:
+            self.keeper.prepare(script)
+        else:
+            self.reset()
+
+    def reset(self) -> None:
+        if self.keeper is not None:  # J with the readiness measured (nothing else shows)
+            self.keeper.power_up(quiet=True)
+            self._buffer = b""
+        else:
+            super().reset()
+
+    def reset_polled(self) -> Reply:
+        if self.keeper is None:
+            return super().reset_polled()
+        reply = self.keeper.power_up(quiet=False)
+        assert reply is not None
+        self._buffer = b""
+        return reply
+
+    def ready_wait(self, seconds: float) -> float:
+        from conform.conformance.state import QUIET_MARGIN
+
+        ready = self.keeper.stats.readiness if self.keeper is not None else None
+        return seconds if ready is None else max(seconds, ready + QUIET_MARGIN)
+
+    def resync(self, quiet: float = 0.03, bound: float = 1.0) -> bytes:
+        """End any line in progress (an empty line gets no answer) and drain until the link has
+        been quiet for ``quiet`` s (at most ``bound`` s)."""
+        got = self.drain()
+        if got:
+            self._write(b"\r")
+            self._note("tx", b"\r")
+            end = self.now() + bound
+            while self.now() < end:
+                chunk = self._read(min(end, self.now() + quiet))
+                if not chunk:
+                    break
+                self._note("rx", chunk)
+                got += chunk
+        return got
 
     def now(self) -> float:
         return time.monotonic() - self._t0
@@ -321,11 +469,13 @@ class LinkTarget(Target):
                 self._buffer += data
 
     def _fresh(self) -> None:
-        """J, then the ~2 s the unit needs (GVE64 §13.4)."""
-        line = self.frame("!0J")
-        self._note("tx", line)
-        self._write(line)
-        self.wait(self.ready_after)
+        """J, then the ~2 s the unit needs (GVE64 §13.4): polled the first time, then the
+        readiness measured (what follows may be about @ or >, which a poll would change)."""
+        from conform.conformance.state import StateStats, power_up
+
+        if self.reset_stats is None:
+            self.reset_stats = StateStats()
+        power_up(self, self.reset_stats, self.ready_after, quiet=True)
         self._buffer = b""
 
     def close(self) -> None:
@@ -376,7 +526,8 @@ def open_target(text: str, spec: Any, *, baud: int = 115200, guard: Guard | None
     if kind == "emu":
         variant_id = what or DEFAULT_VARIANT
         factory = emulator_factory(spec, variant_id, dialect, mutant)
-        return EmuTarget(factory, text if what else f"emu:{variant_id}", baud=baud), variant_id
+        return EmuTarget(factory, text if what else f"emu:{variant_id}", guard,
+                         baud=baud), variant_id
     from conform.link import open_port
 
     assert what is not None

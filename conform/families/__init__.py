@@ -1,0 +1,151 @@
+"""Protocol families: what is specific to one firmware family, behind one small interface.
+
+The engine (spec tooling, emulator adapter, conformance results and reports, capture,
+analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
+checks, a detector for its traffic and its analysis. ``gve`` wraps the original modules
+(conform.spec, conform.unit, conform.conformance, conform.analysis) without moving them;
+``grbl`` lives in conform.families.grbl with its tables in specs/grbl/. See
+docs/architecture.md.
+
+    family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
+    detect_family(host_bytes, unit_bytes, metadata)   # -> ("grbl", "why") or ("unknown", ...)
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from conform.errors import UserError
+
+
+@dataclass(frozen=True)
+class VariantInfo:
+    """One row of ``conform spec list`` for any family."""
+
+    id: str
+    family: str
+    title: str
+    firmware: str
+    axes: str
+    buffer: str
+    notes: str = ""
+
+
+@dataclass(frozen=True)
+class Detection:
+    """How much a family recognises a stretch of traffic (0: not at all, 1: certainly)."""
+
+    family: str
+    score: float
+    why: str
+
+
+@runtime_checkable
+class Family(Protocol):
+    """What a protocol family provides to the engine."""
+
+    name: str
+
+    def variants(self) -> Sequence[VariantInfo]:
+        """The variants this family serves."""
+
+    def load_tables(self, root: str | None = None) -> Any:
+        """Its tables, validated (one-line ``UserError`` on a bad row)."""
+
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+        """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
+        ``now``."""
+
+    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
+        """Run its checks on an open target; a ``conform.conformance.results.TargetRun``."""
+
+    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+        """Does this traffic look like this family's?"""
+
+    def analyze(self, path: str, **options: Any) -> Any:
+        """Analyse a capture of this family's traffic."""
+
+    def serve(self, variant: str, **options: Any) -> None:
+        """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
+
+
+FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
+_loaded: dict[str, Family] = {}
+
+
+def family(name: str) -> Family:
+    """The registered family called ``name``."""
+    if name not in FAMILY_MODULES:
+        raise UserError(f"unknown protocol family {name!r} (known: {', '.join(FAMILY_MODULES)})")
+    if name not in _loaded:
+        _loaded[name] = importlib.import_module(FAMILY_MODULES[name]).FAMILY
+    return _loaded[name]
+
+
+def families() -> list[Family]:
+    return [family(n) for n in FAMILY_MODULES]
+
+
+def family_for_variant(variant: str) -> Family:
+    """The family serving ``variant`` (GVE when nobody claims it, so GVE errors stay as they
+    were)."""
+    for f in families():
+        if f.name != "gve" and any(v.id == variant for v in f.variants()):
+            return f
+    return family("gve")
+
+
+def is_family_variant(variant: str | None, name: str) -> bool:
+    return variant is not None and family_for_variant(variant).name == name
+
+
+def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = None
+                  ) -> Detection:
+    """The family whose traffic this is: the capture's declared variant first, then the bytes.
+
+    Returns family ``unknown`` when no family scores at least 0.5.
+    """
+    meta = metadata or {}
+    declared = str(meta.get("variant", "") or "")
+    if declared:
+        f = family_for_variant(declared)
+        if f.name != "gve" or any(v.id == declared for v in f.variants()):
+            return Detection(f.name, 1.0, f"the capture names variant {declared}")
+    best = Detection("unknown", 0.0, "no family recognises the traffic")
+    for f in families():
+        d = f.detect(host, unit, meta)
+        if d.score > best.score:
+            best = d
+    if best.score < 0.5:
+        return Detection("unknown", best.score, best.why if best.score else
+                         "no family recognises the traffic")
+    return best
+
+
+UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the GVE analyser, as before
+
+
+def divert(host: bytes, unit: bytes, metadata: dict[str, Any], variant: str | None
+           ) -> Detection | None:
+    """Which non-GVE family should analyse this traffic (None: the GVE analyser, as always).
+
+    An explicit ``--variant`` or the capture's own variant decides; otherwise the bytes do.
+    Traffic no family recognises is diverted as ``unknown`` only when there is enough of it
+    and it holds no GVE command line at all, so damaged or tiny GVE captures keep their
+    GVE findings.
+    """
+    named = variant or str(metadata.get("variant", "") or "")
+    if named:
+        fam = family_for_variant(named)
+        return None if fam.name == "gve" else Detection(fam.name, 1.0, f"variant {named}")
+    d = detect_family(host, unit, metadata)
+    if d.family == "gve":
+        return None
+    if d.family != "unknown":
+        return d
+    if len(host) + len(unit) >= UNKNOWN_MIN_BYTES and family("gve").detect(host, unit, metadata).score == 0:
+        return d
+    return None

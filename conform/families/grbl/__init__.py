@@ -1,0 +1,59 @@
+"""grbl 1.1f as a protocol family: tables in specs/grbl/, a sans-I/O reference unit, the
+conformance checks generated from the tables, traffic detection and capture analysis.
+
+Modules: ``tables`` (load and validate specs/grbl), ``codec`` (split a byte stream into lines
+and realtime bytes, classify what grbl sends), ``gcode`` (the parser and its modal state),
+``planner`` (motion in virtual time), ``unit`` + ``system`` + ``report`` (the reference unit),
+``serve`` (the emulator on a pty/TCP), ``checks`` (conformance), ``analysis`` (captures).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from conform.families import Detection, VariantInfo
+
+
+class GrblFamily:
+    name = "grbl"
+
+    def load_tables(self, root: str | None = None) -> Any:
+        from conform.families.grbl.tables import load_grbl
+
+        return load_grbl(root)
+
+    def variants(self) -> Sequence[VariantInfo]:
+        spec = self.load_tables()
+        return [VariantInfo(v.id, self.name, v.title, f"Grbl {v.version} ({v.build})",
+                            "".join(v.axes), f"rx {v.rx_buffer} B, planner {v.planner_blocks}",
+                            f"line {v.line_max} chars") for v in spec.variants.values()]
+
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+        from conform.families.grbl.unit import GrblUnit
+
+        spec = self.load_tables()
+        return GrblUnit(spec.variant(variant), spec, t0=t0, **options)
+
+    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
+        from conform.families.grbl.checks import run_checks
+
+        return run_checks(target, variant, **options)
+
+    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+        from conform.families.grbl.codec import detect
+
+        return detect(host, unit)
+
+    def analyze(self, path: str, **options: Any) -> Any:
+        from conform.families.grbl.analysis import analyze_capture
+
+        return analyze_capture(path, **options)
+
+    def serve(self, variant: str, **options: Any) -> None:
+        from conform.families.grbl.serve import serve
+
+        serve(variant, **options)
+
+
+FAMILY = GrblFamily()

@@ -1,0 +1,373 @@
+"""Analysis of grbl traffic: lines paired with their ok/error:N, realtime bytes out of band,
+the streaming method, receive-buffer overflow hazards, errors, alarms, status polling and
+planner starvation.
+
+The core, :func:`analyze_streams`, takes the two directions as timed chunks (sans-I/O, testable
+in-process); :func:`analyze_capture` reads them from a capture file. Pairing follows the
+protocol (interface.md): every line the sender ends with LF or CR gets exactly one ``ok`` or
+``error:N``, in order; realtime bytes never do and never occupy the receive buffer. The bytes
+in flight are what a character-counting sender must keep within the receive buffer: the bytes
+of every line sent and not yet answered (grbl's own streaming example counts the same). When
+they could exceed the buffer, a byte may be lost on the hardware: a hazard.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from conform.families.grbl.codec import split_host, split_unit
+from conform.families.grbl.tables import GrblSpec, load_grbl
+
+MAX_LISTED = 50
+DEFAULT_VARIANT = "grbl-1.1f"
+Chunk = tuple[float, bytes]
+
+
+@dataclass
+class Finding:
+    kind: str
+    t: float
+    severity: str         # info | warning | error | hazard
+    message: str
+    clause: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class Exchange:
+    line: int
+    text: str
+    size: int
+    t_sent: float
+    answer: str | None = None
+    t_answer: float | None = None
+    lines_in_flight: int = 0
+    bytes_in_flight: int = 0
+
+
+@dataclass
+class GrblAnalysis:
+    path: str
+    family: str
+    variant: str
+    detected: str
+    exchanges: list[Exchange]
+    findings: list[Finding]
+    metrics: dict[str, Any]
+    notes: list[str] = field(default_factory=list)
+
+    def kinds(self) -> dict[str, int]:
+        return dict(self.metrics.get("finding_counts", {}))
+
+    def hazards(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == "hazard"]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"format": "conform-grbl-analysis/1", "path": self.path, "family": self.family,
+                "variant": self.variant, "detected": self.detected, "metrics": self.metrics,
+                "findings": [asdict(f) for f in self.findings], "notes": self.notes}
+
+
+class _Out:
+    def __init__(self) -> None:
+        self.items: list[Finding] = []
+        self.counts: dict[str, int] = {}
+
+    def add(self, kind: str, t: float, severity: str, message: str, clause: str = "",
+            **extra: Any) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if self.counts[kind] <= MAX_LISTED:
+            self.items.append(Finding(kind, round(t, 6), severity, message, clause, extra))
+
+
+def _byte_times(chunks: list[tuple[float, float, bytes]]) -> tuple[bytes, Any]:
+    """All bytes of a direction and each byte's arrival time (spread from first to last)."""
+    import numpy as np
+
+    chunks = [c for c in chunks if c[2]]
+    if not chunks:
+        return b"", np.zeros(0)
+    n = np.array([len(c[2]) for c in chunks], np.int64)
+    t_read = np.array([c[1] for c in chunks], float)
+    t_first = np.array([c[0] for c in chunks], float)
+    t_first = np.where(np.isnan(t_first), t_read, t_first)
+    step = np.where((n > 1) & (t_read > t_first), (t_read - t_first) / np.maximum(n - 1, 1), 0.0)
+    first = np.concatenate([[0], np.cumsum(n)[:-1]])
+    k = np.arange(int(n.sum())) - np.repeat(first, n)
+    return b"".join(c[2] for c in chunks), np.repeat(t_first, n) + np.repeat(step, n) * k
+
+def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
+                    unit: list[Chunk] | list[tuple[float, float, bytes]], *,
+                    variant: str = DEFAULT_VARIANT, spec: GrblSpec | None = None,
+                    path: str = "", detected: str = "") -> GrblAnalysis:
+    """Analyse grbl traffic given as (t, bytes) or (t_first, t_read, bytes) chunks."""
+    spec = spec or load_grbl()
+    v = spec.variant(variant)
+    hb, ht = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in host])
+    ub, ut = _byte_times([c if len(c) == 3 else (c[0], c[0], c[1]) for c in unit])
+    lines, realtime = split_host(hb, spec)
+    ht, ut = ht.tolist(), ut.tolist()
+    ulines, _rest = split_unit(ub, spec)
+    out = _Out()
+    t0 = min([*ht[:1], *ut[:1]], default=0.0)
+
+    def rel(t: float) -> float:
+        return t - t0
+
+    # pair answers with lines, in order
+    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end])
+                 for i, ln in enumerate(lines)]
+    answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error")]
+    k = 0
+    for t_ans, u in answers:
+        if k >= len(exchanges):
+            out.add("unsolicited-answer", rel(t_ans), "warning",
+                    f"{u.text!r} answers no line the sender wrote",
+                    "interface.md §Grbl Response Messages")
+            continue
+        if exchanges[k].t_sent > t_ans + 1e-9:
+            out.add("unsolicited-answer", rel(t_ans), "warning",
+                    f"{u.text!r} came before line {k} ({exchanges[k].text!r}) was complete",
+                    "interface.md §Grbl Response Messages")
+            continue
+        exchanges[k].answer, exchanges[k].t_answer = u.text, t_ans
+        k += 1
+
+    # bytes and lines in flight when each line was complete: everything sent so far minus
+    # the lines answered strictly before it (vectorised: answers sorted by time)
+    import numpy as np
+
+    sizes = np.fromiter((e.size for e in exchanges), np.int64, len(exchanges))
+    t_sent = np.fromiter((e.t_sent for e in exchanges), float, len(exchanges))
+    done = [(e.t_answer, e.size) for e in exchanges if e.t_answer is not None]
+    done.sort()
+    t_done = np.fromiter((d[0] for d in done), float, len(done))
+    cum = np.concatenate([[0], np.cumsum([d[1] for d in done], dtype=np.int64)])
+    j = np.searchsorted(t_done, t_sent, side="left")
+    in_bytes = (np.cumsum(sizes) - cum[j]).tolist()
+    in_lines = (np.arange(1, len(exchanges) + 1) - j).tolist()
+    for e, b, n in zip(exchanges, in_bytes, in_lines, strict=True):
+        e.bytes_in_flight, e.lines_in_flight = b, n
+
+    # overflow hazards: episodes where what is in flight could exceed the receive buffer
+    limit = v.rx_buffer
+    episode: list[Exchange] = []
+    for e in [*exchanges, None]:
+        if e is not None and e.bytes_in_flight > limit:
+            episode.append(e)
+            continue
+        if episode:
+            worst = max(episode, key=lambda x: x.bytes_in_flight)
+            out.add("rx-overflow-hazard", rel(episode[0].t_sent), "hazard",
+                    f"{worst.bytes_in_flight} bytes in flight (receive buffer {limit}) from line "
+                    f"{episode[0].line} {episode[0].text!r}; {len(episode)} lines sent over the "
+                    "limit: grbl loses what does not fit",
+                    v.cite.get("rx_buffer", ""), first_line=episode[0].line,
+                    max_bytes=worst.bytes_in_flight, lines=len(episode))
+            episode = []
+
+    # errors, alarms, resets
+    meaning = {n: c.name for n, c in spec.errors.items()}
+    last_sent = exchanges[-1].t_sent if exchanges else 0.0
+    for e in exchanges:
+        if e.answer and e.answer.startswith("error:"):
+            code = int(e.answer[6:])
+            later = last_sent > (e.t_answer or e.t_sent)    # lines go out in time order
+            goes_on = "the sender went on" if later else "the sender stopped after it"
+            out.add("error-response", rel(e.t_answer or e.t_sent), "error",
+                    f"line {e.line} {e.text!r}: error:{code} "
+                    f"({meaning.get(code, 'unknown code')}); {goes_on}",
+                    spec.errors[code].cite if code in spec.errors else "", code=code)
+    for u in ulines:
+        t = ut[u.end]
+        if u.kind == "alarm":
+            name = spec.alarms[u.code].name if u.code in spec.alarms else "unknown alarm"
+            out.add("alarm", rel(t), "error", f"ALARM:{u.code} ({name})",
+                    spec.alarms[u.code].cite if u.code in spec.alarms else "", code=u.code,
+                    t_abs=t)
+        elif u.kind == "banner" and rel(t) > 0.5:
+            asked = any(0 <= t - ht[r.offset] < 0.5 for r in realtime if r.byte == 0x18)
+            out.add("reset", rel(t), "info" if asked else "warning",
+                    "soft reset by the sender (Ctrl-X)" if asked else
+                    f"grbl restarted unasked: {u.text!r}", "interface.md §Start Up Message")
+    unanswered = [e for e in exchanges if e.answer is None]
+    if unanswered:
+        out.add("unanswered-lines", rel(unanswered[0].t_sent), "error",
+                f"{len(unanswered)} lines got no ok/error, the first line {unanswered[0].line} "
+                f"{unanswered[0].text!r} (lost bytes, a reset, or the capture ended)",
+                "interface.md §Grbl Response Messages", count=len(unanswered))
+
+    # streaming method
+    max_lines = max((e.lines_in_flight for e in exchanges), default=0)
+    max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
+    over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
+    # a sender that counts waits for an answer before it sends more once the buffer is full:
+    # most of its lines follow an answer that came after its previous line. One that does not
+    # count sends in bursts, whatever comes back. (Counting bytes in flight alone would
+    # mislead: after a byte is lost, its line is never answered and every later count looks
+    # inflated.)
+    n_done = np.searchsorted(t_done, t_sent, side="right")
+    paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
+    share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
+    if not exchanges:
+        method = "none"
+    elif max_lines <= 1:
+        method = "send-response"
+    elif share >= 0.5:
+        method = "character-counting"
+    else:
+        method = "unbounded"
+    if method == "unbounded":
+        out.add("streaming-method", 0.0, "warning",
+                f"lines were sent without waiting for answers and without keeping within the "
+                f"{limit}-byte receive buffer (at most {max_bytes} bytes in flight)",
+                v.cite.get("rx_buffer", ""))
+    elif method == "character-counting" and over:
+        out.add("streaming-method", 0.0, "warning",
+                f"character counting that overshot the {limit}-byte receive buffer at {over} "
+                f"lines (at most {max_bytes} bytes): something is sent outside the count, such "
+                "as a polling thread's $G or a realtime byte followed by a newline",
+                v.cite.get("rx_buffer", ""))
+
+    # status polling and the reports
+    polls = [ht[r.offset] for r in realtime if r.byte == 0x3F]
+    reports = [(ut[u.end], u.text) for u in ulines if u.kind == "status"]
+    intervals = [b - a for a, b in zip(polls, polls[1:], strict=False)]
+    rate = (len(polls) - 1) / (polls[-1] - polls[0]) if len(polls) > 1 and polls[-1] > polls[0] else 0.0
+    _starvation(exchanges, reports, v.planner_blocks, rel, out)
+
+    duration = max([*ht[-1:], *ut[-1:]], default=t0) - t0
+    rt_counts: dict[str, int] = {}
+    for r in realtime:
+        name = spec.realtime[r.byte].name if r.byte in spec.realtime else f"0x{r.byte:02X}"
+        rt_counts[name] = rt_counts.get(name, 0) + 1
+    findings = sorted(out.items, key=lambda f: f.t)
+    metrics = {
+        "family": "grbl", "variant": v.id, "lines": len(exchanges),
+        "answered": len(exchanges) - len(unanswered),
+        "ok": sum(1 for e in exchanges if e.answer == "ok"),
+        "errors": sum(1 for e in exchanges if e.answer and e.answer.startswith("error:")),
+        "alarms": out.counts.get("alarm", 0), "duration_s": duration,
+        "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
+        "streaming_method": method, "paced_share": round(share, 3),
+        "max_lines_in_flight": max_lines,
+        "max_bytes_in_flight": max_bytes, "rx_buffer": limit,
+        "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
+        "poll_rate_hz": rate,
+        "poll_interval_median_s": statistics.median(intervals) if intervals else None,
+        "finding_counts": dict(sorted(out.counts.items())),
+        "hazards": out.counts.get("rx-overflow-hazard", 0),
+    }
+    return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics)
+
+
+def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blocks: int,
+                rel: Any, out: _Out) -> None:
+    """The planner ran dry mid-job: a report says Idle (or Bf: shows every block free while
+    running) after the first motion line and before the sender's last line."""
+    motion = [e for e in exchanges if e.text[:2].upper() in ("G0", "G1", "G2", "G3")
+              or e.text[:3].upper() in ("$J=",)]
+    if len(motion) < 2:
+        return
+    t_first, t_last = motion[0].t_answer or motion[0].t_sent, motion[-1].t_sent
+    for t, text in reports:
+        if not (t_first < t < t_last):
+            continue
+        fields = text.strip("<>").split("|")
+        state = fields[0]
+        bf = next((f[3:] for f in fields if f.startswith("Bf:")), None)
+        free = int(bf.split(",")[0]) if bf else None
+        if state == "Idle" or (state == "Run" and free is not None and free >= blocks):
+            out.add("planner-starved", rel(t), "warning",
+                    f"the planner ran dry mid-job ({text}): the sender did not keep it fed",
+                    "interface.md §Buffer State; planner.h BLOCK_BUFFER_SIZE")
+
+
+def analyze_capture(path: str, *, variant: str | None = None, detected: str = "",
+                    **_ignored: Any) -> GrblAnalysis:
+    """Analyse a capture file of grbl traffic."""
+    from conform.analysis.rawread import read_raw
+
+    return analyze_raw(read_raw(path), path, variant=variant, detected=detected)
+
+
+def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: str = ""
+                ) -> GrblAnalysis:
+    """Analyse the raw directions of a capture already read (conform.analysis.rawread)."""
+    session = raw.metadata.get("conform.session", {})
+    spec = load_grbl()
+    vid = variant or str(session.get("variant", "") or "")
+    notes = []
+    if vid not in spec.variants:
+        if vid:
+            notes.append(f"variant {vid!r} is not a grbl variant; analysed as {DEFAULT_VARIANT}")
+        vid = DEFAULT_VARIANT
+
+    def chunks(d: Any) -> list[tuple[float, float, bytes]]:
+        data = d.data.tobytes()
+        return [(float(f), float(r), data[s:s + n]) for s, n, f, r in
+                zip(d.start.tolist(), d.length.tolist(), d.t_first.tolist(), d.t_read.tolist(),
+                    strict=True)]
+
+    a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, spec=spec, path=path,
+                        detected=detected)
+    a.notes += notes
+    if not raw.status.complete:
+        a.notes.append(f"capture incomplete: {raw.status.problem}")
+    return a
+
+
+def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
+    """findings.json and summary.md in ``directory``."""
+    from conform.errors import UserError
+
+    d = Path(directory)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "findings.json").write_text(json.dumps(a.to_json(), indent=1, default=str),
+                                         encoding="utf-8")
+        lines = [f"# grbl capture analysis: {a.path}", "", f"family: grbl ({a.detected})", ""]
+        lines += [f"- {k}: {v}" for k, v in a.metrics.items() if k != "finding_counts"]
+        lines += ["", "## Findings", ""]
+        lines += [f"- {f.t:.4f} s {f.severity} {f.kind}: {f.message} [{f.clause}]"
+                  for f in a.findings] or ["none"]
+        (d / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
+    return {"json": d / "findings.json", "md": d / "summary.md"}
+
+
+def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:
+    """exchanges.parquet (one row per line sent) and findings.parquet in ``directory``."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from conform.errors import UserError
+
+    d = Path(directory)
+    ex = a.exchanges
+    t0 = min((e.t_sent for e in ex), default=0.0)
+    tables = {
+        "exchanges": pa.table({
+            "line": [e.line for e in ex], "text": [e.text for e in ex],
+            "bytes": [e.size for e in ex], "t_sent": [e.t_sent - t0 for e in ex],
+            "answer": [e.answer for e in ex],
+            "t_answer": [None if e.t_answer is None else e.t_answer - t0 for e in ex],
+            "lines_in_flight": [e.lines_in_flight for e in ex],
+            "bytes_in_flight": [e.bytes_in_flight for e in ex]}),
+        "findings": pa.table({
+            "t": [f.t for f in a.findings], "kind": [f.kind for f in a.findings],
+            "severity": [f.severity for f in a.findings],
+            "message": [f.message for f in a.findings], "clause": [f.clause for f in a.findings]}),
+    }
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        for name, table in tables.items():
+            pq.write_table(table, d / f"{name}.parquet")
+    except OSError as exc:
+        raise UserError(f"{d}: cannot write the tables: {exc.strerror or exc}") from None
+    return {name: d / f"{name}.parquet" for name in tables}

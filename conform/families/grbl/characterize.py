@@ -1,0 +1,111 @@
+"""``conform characterize`` for grbl: what this build does where builds differ.
+
+grbl's compile-time options change what a sender must assume: the receive buffer and planner
+sizes (reported by ``$I`` in ``[OPT:…,blocks,bytes]``), the version and build date, and
+whether CR LF is one line end or two. The probes read them, check the line-length limit, and
+write a profile: the observed value next to the table's, with the evidence. Nothing moves and
+nothing is written to the EEPROM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from conform.errors import UserError
+from conform.families.grbl.checks import Session
+from conform.families.grbl.tables import load_grbl
+
+
+@dataclass
+class Observation:
+    name: str
+    table: Any
+    observed: Any
+    evidence: str
+
+    @property
+    def same(self) -> bool:
+        return self.observed == self.table
+
+
+def characterize(target: Any, vid: str) -> list[Observation]:
+    spec = load_grbl()
+    v = spec.variant(vid)
+    s = Session(target, spec, v)
+    s.fresh()
+    out = []
+    got = s.talk(b"\x18")
+    banner = next((x for x in got.lines if x.startswith("Grbl ")), "")
+    version = banner.split()[1] if banner else None
+    out.append(Observation("version", v.version, version, banner or "(no banner after Ctrl-X)"))
+    info = s.talk(b"$I\n")
+    ver = next((x for x in info.lines if x.startswith("[VER:")), "")
+    opt = next((x for x in info.lines if x.startswith("[OPT:")), "")
+    build = ver[5:-1].split(":")[0].split(".")[-1] if ver else None
+    out.append(Observation("build", v.build, build, ver or "(no [VER:])"))
+    fields = opt[5:-1].split(",") if opt else []
+    out.append(Observation("options", v.options, fields[0] if fields else None, opt or "(no [OPT:])"))
+    for name, idx in (("planner_blocks", 1), ("rx_buffer", 2)):
+        value = int(fields[idx]) if len(fields) > idx and fields[idx].isdigit() else None
+        out.append(Observation(name, getattr(v, name), value, opt or "(no [OPT:])"))
+    crlf = s.talk(b"\r\n", answers=2, timeout=0.5, linger=0.1)
+    oks = sum(1 for x in crlf.lines if x == "ok")
+    out.append(Observation("crlf_is_two_lines", v.crlf_is_two_lines, oks == 2,
+                           f"CR LF answered {' | '.join(crlf.lines) or '(silence)'}"))
+    n = v.line_max
+    longest = None
+    for length in (n, n + 1):
+        line = b"N" + b"0" * (length - 2) + b"1\n"
+        if s.talk(line).lines == ["ok"]:
+            longest = length
+    out.append(Observation("line_max", n, longest,
+                           f"a line of {n} characters and one of {n + 1}"))
+    return out
+
+
+def write_profile(obs: list[Observation], path: str, *, target: str, variant: str) -> None:
+    def val(x: Any) -> str:
+        if isinstance(x, bool):
+            return "true" if x else "false"
+        if isinstance(x, int):
+            return str(x)
+        return '"' + str(x).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+    lines = ["# what this grbl build does, probed by conform characterize",
+             f"target = {val(target)}", f"variant = {val(variant)}", "", "[observed]"]
+    lines += [f"{o.name} = {val(o.observed)}" for o in obs if o.observed is not None]
+    lines += ["", "[table]"] + [f"{o.name} = {val(o.table)}" for o in obs]
+    lines += ["", "[evidence]"] + [f"{o.name} = {val(o.evidence)}" for o in obs]
+    try:
+        Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def run(target_text: str, output: str, variant: str | None, baud: int,
+        echo: Any = print) -> None:
+    """The command: open the target, probe, print one line per item, write the profile."""
+    from conform.conformance.target import EmuTarget, open_target, parse_target
+    from conform.families import family
+
+    kind, what, _ = parse_target(target_text)
+    spec = load_grbl()
+    vid = variant or (what if kind == "emu" else None) or next(iter(spec.variants))
+    spec.variant(vid)
+    if kind == "emu":
+        target: Any = EmuTarget(lambda: family("grbl").make_unit(vid), f"emu:{vid}", baud=baud)
+    else:
+        target, _ = open_target(target_text, None, baud=baud)
+    try:
+        obs = characterize(target, vid)
+    finally:
+        target.close()
+    for o in obs:
+        mark = "=" if o.same else "!"
+        echo(f"{o.name:>18} {mark} {o.observed!s:<12} (table: {o.table}) — {o.evidence}")
+    write_profile(obs, output, target=target_text, variant=vid)
+    differ = [o.name for o in obs if not o.same]
+    echo(f"{output}: {len(differ)} item(s) differ from the tables"
+         + (": " + ", ".join(differ) if differ else ""))

@@ -1,0 +1,550 @@
+"""grbl conformance checks, generated from specs/grbl and graded per clause.
+
+The checks produce the engine's own result objects (:class:`CheckResult` in a
+:class:`TargetRun`), so ``conform run`` writes the same reports (results.json, index.html,
+summary.md, junit.xml) for grbl as for GVE. A check id reads
+``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
+
+Groups: ``example`` (the documented exchanges, specs/grbl/examples.toml), ``error`` (every
+code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x accepts its
+default and prints it back), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
+``buffer`` (the line limit and the receive ring), ``state`` (check mode, unlock, sleep).
+
+A real unit is driven only as far as it is allowed: checks that move the machine need
+``allow_motion``, checks that write settings (EEPROM) need ``allow_eeprom``; otherwise they are
+SKIPPED. An interrupted run sends feed hold and a soft reset.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import re
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
+from conform.families.grbl.codec import split_unit
+from conform.families.grbl.tables import GrblSpec, Variant, load_grbl
+
+STOP = (b"!", b"\x18")
+_SETTING = re.compile(r"^\$(\d+)=(.*)$")
+_NUM = re.compile(r"-?\d+\.\d+")
+_WRITE = re.compile(rb"\$(\d+|RST)=")
+
+
+class HarnessError(Exception):
+    """The link or the harness failed (ERROR, never the unit's fault)."""
+
+
+@dataclass
+class Talk:
+    lines: list[str]
+    t: float
+
+    def kinds(self, spec: GrblSpec) -> list[str]:
+        return [spec.classify(x)[0] if x else "blank" for x in self.lines]
+
+
+class Session:
+    """Drives one target for the checks: fresh state, send and collect grbl lines."""
+
+    def __init__(self, target: Any, spec: GrblSpec, v: Variant) -> None:
+        self.target = target
+        self.spec = spec
+        self.v = v
+        self.original: dict[int, str] | None = None   # a real unit's settings before the run
+        self.dirty = False
+
+    def settings(self) -> dict[int, str]:
+        out = {}
+        for x in self.talk(b"$$\n").lines:
+            m = _SETTING.match(x)
+            if m:
+                out[int(m.group(1))] = m.group(2)
+        return out
+
+    def restore(self) -> None:
+        """Put back every setting a check changed on a real unit (they live in EEPROM)."""
+        if not self.dirty or self.original is None:
+            return
+        self.dirty = False
+        self.talk(b"\x18", banner=True)
+        now = self.settings()
+        for n, value in self.original.items():
+            if now.get(n) != value:
+                self.talk(f"${n}={value}\n".encode())
+
+    def fresh(self) -> None:
+        t = self.target
+        if t.emulated:
+            t.reset()
+            t.begin_log()
+            self.collect(banner=True, timeout=0.5)
+            return
+        t.begin_log()
+        got = self.talk(b"\x18", banner=True, timeout=3.0)
+        if not any(x.startswith("Grbl ") for x in got.lines):
+            raise HarnessError("no banner after a soft reset (Ctrl-X)")
+        if any("unlock" in x for x in got.lines):
+            self.talk(b"$X\n")
+        if self.original is None:
+            self.original = self.settings()
+
+    def talk(self, data: bytes, *, answers: int | None = None, banner: bool = False,
+             status: int | None = None, timeout: float = 2.0, linger: float = 0.05) -> Talk:
+        if answers is None:
+            answers = data.count(b"\n")
+        if _WRITE.search(data):
+            self.dirty = True
+        if status is None:
+            status = data.count(b"?") if not answers else 0
+        t = self.target
+        try:
+            t.send(data)
+        except Exception as exc:  # noqa: BLE001 - any link failure is the harness's
+            raise HarnessError(str(exc)) from None
+        return self.collect(answers=answers, banner=banner or b"\x18" in data, status=status,
+                            timeout=timeout, linger=linger)
+
+    def collect(self, *, answers: int = 0, banner: bool = False, status: int = 0,
+                timeout: float = 2.0, linger: float = 0.05) -> Talk:
+        t = self.target
+        buf = b""
+        lines: list[str] = []
+        deadline = t.now() + timeout
+        done_at: float | None = None
+        while True:
+            seen = _count(lines, self.spec)
+            done = (seen["answers"] >= answers and seen["status"] >= status
+                    and (seen["banner"] >= 1 or not banner))
+            if done and done_at is None:
+                done_at = t.now()
+            end = min(deadline, done_at + linger) if done_at is not None else deadline
+            if t.now() >= end:
+                break
+            try:
+                chunk = t._read(end)
+            except Exception as exc:  # noqa: BLE001
+                raise HarnessError(str(exc)) from None
+            if chunk:
+                t._note("rx", chunk)
+                buf += chunk
+                got, buf = split_unit(buf, self.spec)
+                lines += [g.text for g in got]
+        return Talk(lines, t.now())
+
+    def wait(self, seconds: float) -> list[str]:
+        return self.collect(timeout=seconds, linger=seconds).lines
+
+
+def _count(lines: list[str], spec: GrblSpec) -> dict[str, int]:
+    out = {"answers": 0, "status": 0, "banner": 0}
+    for x in lines:
+        kind = spec.classify(x)[0] if x else "blank"
+        if kind in ("ok", "error"):
+            out["answers"] += 1
+        elif kind == "status":
+            out["status"] += 1
+        elif kind == "banner":
+            out["banner"] += 1
+    return out
+
+
+Outcome = tuple[bool | None, str, str]     # passed (None: not applicable), expected, actual
+
+
+@dataclass
+class GrblCheck:
+    id: str
+    clause: str
+    title: str
+    run: Callable[[Session], Outcome]
+    level: str = MUST
+    motion: bool = False
+    eeprom: bool = False
+
+
+def _setup(s: Session, setup: Sequence[bytes]) -> None:
+    for item in setup:
+        s.talk(item, timeout=1.0)
+
+
+def _example(ex: Any) -> Callable[[Session], Outcome]:
+    def run(s: Session) -> Outcome:
+        _setup(s, ex.setup)
+        got = s.talk(ex.send)
+        want = list(ex.expect)
+        passed: bool | None = got.lines == want
+        if not passed and ex.power_up and not s.target.emulated and (
+                [_NUM.sub("#", x) for x in got.lines] == [_NUM.sub("#", x) for x in want]):
+            passed = None   # only positions/offsets differ: the unit is not at power-up state
+        return passed, " | ".join(want), " | ".join(got.lines) or "(silence)"
+    return run
+
+
+def _error(code: int, send: bytes, setup: Sequence[bytes]) -> Callable[[Session], Outcome]:
+    def run(s: Session) -> Outcome:
+        _setup(s, setup)
+        got = s.talk(send)
+        answers = [x for x in got.lines if x == "ok" or x.startswith("error:")]
+        actual = answers[-1] if answers else "(no answer)"
+        return actual == f"error:{code}", f"error:{code}", actual
+    return run
+
+
+def _setting(number: int, text: str) -> Callable[[Session], Outcome]:
+    def run(s: Session) -> Outcome:
+        a = s.talk(f"${number}={text}\n".encode())
+        listing = s.talk(b"$$\n")
+        row = next((x for x in listing.lines if x.startswith(f"${number}=")), "(missing)")
+        want = f"${number}={text}"
+        ok = a.lines[-1:] == ["ok"] and row == want
+        return ok, f"ok, then {want} in $$", f"{' | '.join(a.lines)}; {row}"
+    return run
+
+
+def _negative(number: int) -> Callable[[Session], Outcome]:
+    def run(s: Session) -> Outcome:
+        got = s.talk(f"${number}=-1\n".encode())
+        return got.lines[-1:] == ["error:4"], "error:4", " | ".join(got.lines)
+    return run
+
+
+def _status_has(s: Session, *, timeout: float = 0.5) -> str:
+    got = s.talk(b"?", timeout=timeout)
+    return next((x for x in got.lines if x.startswith("<")), "(no status report)")
+
+
+def _state(report: str) -> str:
+    return report[1:].split("|", 1)[0] if report.startswith("<") else report
+
+
+def _rt_status_no_ok(s: Session) -> Outcome:
+    got = s.talk(b"?", linger=0.1)
+    kinds = got.kinds(s.spec)
+    return kinds == ["status"], "one status report, no ok", " | ".join(got.lines) or "(silence)"
+
+
+def _rt_hold_resume(s: Session) -> Outcome:
+    s.talk(b"G1X-20F300\n")
+    s.wait(0.3)
+    s.talk(b"!", status=0, linger=0.0)
+    s.wait(1.5)
+    held = _status_has(s)
+    s.talk(b"~", status=0, linger=0.0)
+    s.wait(0.2)
+    resumed = _status_has(s)
+    ok = _state(held) == "Hold:0" and _state(resumed) == "Run"
+    s.talk(b"!", status=0, linger=0.0)
+    return ok, "Hold:0 after '!', Run after '~'", f"{_state(held)}, {_state(resumed)}"
+
+
+def _rt_reset_banner_in_motion(s: Session) -> Outcome:
+    s.talk(b"G1X-20F300\n")
+    s.wait(0.3)
+    got = s.talk(b"\x18", linger=0.1)
+    want = ["ALARM:3", "", s.v.banner, "[MSG:'$H'|'$X' to unlock]"]
+    return got.lines == want, " | ".join(want), " | ".join(got.lines)
+
+
+def _rt_feed_override(s: Session) -> Outcome:
+    s.talk(b"?")
+    s.talk(b"?")   # WCO: then Ov: after a reset; now the counters are running
+    s.target.send(b"\x91")
+    report = _status_has(s)
+    ov = next((f for f in report.strip("<>").split("|") if f.startswith("Ov:")), "(no Ov:)")
+    return ov == "Ov:110,100,100", "Ov:110,100,100 in the next report", ov
+
+
+def _rt_jog_cancel(s: Session) -> Outcome:
+    s.talk(b"$J=X-20F300\n")
+    s.wait(0.3)
+    s.target.send(b"\x85")
+    s.wait(1.5)
+    report = _status_has(s)
+    return _state(report) == "Idle", "Idle after 0x85", _state(report)
+
+
+def _line_limit(s: Session) -> Outcome:
+    n = s.v.line_max
+    fit = b"N" + b"0" * (n - 2) + b"1\n"
+    over = b"N" + b"0" * (n - 1) + b"1\n"
+    a, b = s.talk(fit), s.talk(over)
+    actual = f"{' | '.join(a.lines)}; {' | '.join(b.lines)}"
+    return a.lines == ["ok"] and b.lines == ["error:11"], f"{n} characters ok; {n + 1} error:11", actual
+
+
+def _rx_ring(s: Session) -> Outcome:
+    """While grbl dwells, the ring fills; what does not fit is lost (serial.c)."""
+    size = s.v.rx_buffer
+    filler = b"G90\n" * ((size + 64) // 4)
+    s.target.send(b"G4P0.5\n" + filler)
+    got = s.collect(answers=1 + size // 4, timeout=3.0, linger=0.5)
+    oks = sum(1 for x in got.lines if x == "ok")
+    want = 1 + size // 4
+    return oks == want, f"{want} ok (the dwell + {size} bytes of lines; the rest lost)", f"{oks} ok"
+
+
+def _check_mode(s: Session) -> Outcome:
+    a = s.talk(b"$C\n")
+    b = s.talk(b"G1X-5F100\n")
+    report = _status_has(s)
+    c = s.talk(b"$C\n", linger=0.1)
+    ok = (a.lines == ["[MSG:Enabled]", "ok"] and b.lines == ["ok"]
+          and _state(report) == "Check" and c.lines[:2] == ["[MSG:Disabled]", "ok"]
+          and s.v.banner in c.lines)
+    return ok, "enabled, ok, Check, disabled + reset", " / ".join(
+        " | ".join(x) for x in (a.lines, b.lines, [report], c.lines))
+
+
+def _alarm_unlock(s: Session) -> Outcome:
+    s.talk(b"$SLP\n", linger=0.1)
+    r = s.talk(b"\x18")
+    g = s.talk(b"G0X0\n")
+    x = s.talk(b"$X\n")
+    ok = ("[MSG:'$H'|'$X' to unlock]" in r.lines and g.lines == ["error:9"]
+          and x.lines == ["[MSG:Caution: Unlocked]", "ok"])
+    return ok, "locked after reset, error:9, unlocked", " / ".join(
+        " | ".join(y) for y in (r.lines, g.lines, x.lines))
+
+
+def _sleep(s: Session) -> Outcome:
+    a = s.talk(b"$SLP\n", linger=0.1)
+    report = _status_has(s)
+    r = s.talk(b"\x18")
+    ok = (a.lines == ["ok", "[MSG:Sleeping]"] and _state(report) == "Sleep"
+          and "[MSG:'$H'|'$X' to unlock]" in r.lines)
+    s.talk(b"$X\n")
+    return ok, "ok, [MSG:Sleeping], Sleep, reset into Alarm", " / ".join(
+        " | ".join(y) for y in (a.lines, [report], r.lines))
+
+
+def _alarm_soft_limit(s: Session) -> Outcome:
+    _setup(s, [b"$22=1\n", b"$20=1\n", b"\x18", b"$X\n"])
+    got = s.talk(b"G0X10\n", answers=0, timeout=0.5, linger=0.2)
+    after = _status_has(s)
+    s.talk(b"\x18")
+    s.talk(b"$X\n")
+    s.talk(b"$20=0\n")
+    s.talk(b"$22=0\n")
+    want = ["ALARM:2", "[MSG:Reset to continue]"]
+    return got.lines == want and after == "(no status report)", " | ".join(want) + "; '?' ignored", \
+        " | ".join(got.lines) + f"; {after}"
+
+
+def _alarm_probe(s: Session) -> Outcome:
+    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0)
+    return got.lines == ["ALARM:5", "ok"], "ALARM:5 | ok", " | ".join(got.lines)
+
+
+def _crlf(s: Session) -> Outcome:
+    got = s.talk(b"G90\r\n", answers=2 if s.v.crlf_is_two_lines else 1, linger=0.1)
+    want = ["ok", "ok"] if s.v.crlf_is_two_lines else ["ok"]
+    return got.lines == want, " | ".join(want), " | ".join(got.lines)
+
+
+def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
+    """Every check of a grbl variant, generated from its tables."""
+    v = spec.variant(vid)
+    out: list[GrblCheck] = []
+    for ex in spec.examples:
+        writes = any(b"=" in x and x.startswith(b"$") for x in (*ex.setup, ex.send))
+        out.append(GrblCheck(f"{vid}/{_src(ex.cite)}/example/{ex.id}", ex.cite,
+                             f"documented exchange: {ex.id}", _example(ex), eeprom=writes))
+    for n, c in spec.errors.items():
+        if c.send is None:
+            continue
+        every = (*c.setup, c.send)
+        moves = any(x.startswith((b"G1", b"$J", b"G0", b"G2")) for x in c.setup)
+        writes = any(x.startswith(b"$") and b"=" in x and not x.startswith(b"$J") for x in every)
+        out.append(GrblCheck(f"{vid}/error_codes/error/{n}", c.cite, f"error:{n} {c.name}",
+                             _error(n, c.send, c.setup), motion=moves, eeprom=writes))
+    out += [
+        GrblCheck(f"{vid}/alarm_codes/alarm/2", spec.alarms[2].cite, "soft limit alarm",
+                  _alarm_soft_limit, eeprom=True),
+        GrblCheck(f"{vid}/alarm_codes/alarm/3", spec.alarms[3].cite,
+                  "reset in motion: ALARM:3, banner, locked", _rt_reset_banner_in_motion,
+                  motion=True),
+        GrblCheck(f"{vid}/alarm_codes/alarm/5", spec.alarms[5].cite, "probe without contact",
+                  _alarm_probe, motion=True),
+    ]
+    for n, st in spec.settings.items():
+        out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}", st.cite,
+                             f"${n} ({st.name}) takes its default", _setting(n, st.text(st.default)),
+                             eeprom=True))
+        out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}/negative", st.cite,
+                             f"${n}=-1 is error:4", _negative(n), eeprom=True))
+    rt = {r.effect: r.cite for r in spec.realtime.values()}
+    out += [
+        GrblCheck(f"{vid}/realtime_cmds/realtime/status", rt["status"],
+                  "'?' answers a status report and no ok", _rt_status_no_ok),
+        GrblCheck(f"{vid}/realtime_cmds/realtime/hold-resume", rt["hold"],
+                  "'!' holds to Hold:0, '~' resumes", _rt_hold_resume, motion=True),
+        GrblCheck(f"{vid}/realtime_cmds/realtime/feed-override", rt["feed+10"],
+                  "0x91 raises the feed override 10%", _rt_feed_override),
+        GrblCheck(f"{vid}/jogging/realtime/jog-cancel", rt["jog-cancel"],
+                  "0x85 ends a jog", _rt_jog_cancel, motion=True),
+        GrblCheck(f"{vid}/protocol/buffer/line-limit", v.cite.get("line_max", ""),
+                  f"a line of {v.line_max} characters fits, one more is error:11", _line_limit),
+        GrblCheck(f"{vid}/serial/buffer/receive-ring", v.cite.get("rx_buffer", ""),
+                  f"bytes beyond the {v.rx_buffer}-byte receive buffer are lost", _rx_ring),
+        GrblCheck(f"{vid}/protocol/line/crlf", v.cite.get("crlf_is_two_lines", ""),
+                  "CR LF ends two lines (the empty one answered ok)", _crlf, level=INFO),
+        GrblCheck(f"{vid}/commands/state/check-mode", spec.commands["$C"].cite,
+                  "$C toggles check mode; leaving it resets", _check_mode),
+        GrblCheck(f"{vid}/commands/state/alarm-unlock", spec.commands["$X"].cite,
+                  "locked after a reset from sleep; error:9; $X unlocks", _alarm_unlock),
+        GrblCheck(f"{vid}/commands/state/sleep", spec.commands["$SLP"].cite,
+                  "$SLP sleeps; a reset wakes into Alarm", _sleep),
+    ]
+    return out
+
+
+def _src(cite: str) -> str:
+    head = cite.split(";")[0].split("§")[0].strip()
+    return {"iface": "interface", "guide": "guide", "rt": "realtime_cmds", "cmds": "commands",
+            "jog": "jogging"}.get(head, head.rsplit("/", 1)[-1].split("#")[0].removesuffix(".csv")
+                                  .removesuffix(".md") or "grbl")
+
+
+def select(checks: list[GrblCheck], patterns: Sequence[str]) -> list[GrblCheck]:
+    if not patterns:
+        return checks
+    return [c for c in checks if any(fnmatch.fnmatchcase(c.id, p) for p in patterns)]
+
+
+def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: str = "quick",
+               allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
+               progress: Callable[[CheckResult], None] | None = None,
+               spec: GrblSpec | None = None) -> TargetRun:
+    """Run the checks on an open target (EmuTarget or LinkTarget)."""
+    spec = spec or load_grbl()
+    v = spec.variant(vid)
+    checks = select(generate(spec, vid), patterns)
+    run = TargetRun(target.name, vid, target.emulated, profile,
+                    datetime.now(UTC).isoformat(timespec="seconds"), notes=list(notes or []))
+    session = Session(target, spec, v)
+    t_run = time.perf_counter()
+    try:
+        for c in checks:
+            result = _one(session, c, allow_motion or target.emulated,
+                          allow_eeprom or target.emulated)
+            result.variant, result.target = vid, target.name
+            run.checks.append(result)
+            if progress is not None:
+                progress(result)
+    except KeyboardInterrupt:
+        run.aborted = "interrupted; " + _stop(target)
+    finally:
+        run.duration = time.perf_counter() - t_run
+    return run
+
+
+def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckResult:
+    base = dict(id=c.id, clause=c.clause, level=c.level, title=c.title)
+    if c.motion and not motion_ok:
+        return CheckResult(grade=Grade.SKIPPED, detail="moves the machine: needs --allow-motion",
+                           **base)
+    if c.eeprom and not eeprom_ok:
+        return CheckResult(grade=Grade.SKIPPED, detail="writes settings: needs --allow-eeprom",
+                           **base)
+    t0 = time.perf_counter()
+    try:
+        s.fresh()
+        passed, expected, actual = c.run(s)
+        grade = Grade.PASS if passed else (Grade.DEVIATION if c.level == INFO else Grade.FAIL)
+        detail = ""
+        if passed is None:
+            grade, detail = Grade.NOT_APPLICABLE, "the unit is not in its power-up position"
+        if not s.target.emulated:
+            s.restore()
+    except HarnessError as exc:
+        grade, expected, actual, detail = Grade.ERROR, "", "", str(exc)
+    if grade is not Grade.PASS and not s.target.emulated and c.motion:
+        detail = (detail + "; " if detail else "") + _stop(s.target)
+    return CheckResult(grade=grade, expected=expected, actual=actual, detail=detail,
+                       log=list(s.target.log), duration=time.perf_counter() - t0, **base)
+
+
+def _until_still(target: Any, seconds: float) -> None:
+    """Ask '?' until grbl reports Hold:0, Idle, Alarm or Door:0 (or the time is up)."""
+    deadline = target.now() + seconds
+    while target.now() < deadline:
+        target._write(b"?")
+        buf = b""
+        end = min(deadline, target.now() + 0.2)
+        while target.now() < end:
+            buf += target._read(end)
+        if any(s in buf for s in (b"<Hold:0|", b"<Idle|", b"<Alarm|", b"<Door:0|")):
+            return
+
+
+def _stop(target: Any, attempts: int = 3) -> str:
+    """Feed hold, then a soft reset, until grbl acknowledges with its banner: the machine
+    stands and the planner and receive buffer are empty."""
+    notes = []
+    for _ in range(attempts):
+        try:
+            target._write(b"!")
+            _until_still(target, 5.0)   # a reset after the stop keeps the position (no ALARM:3)
+            target._write(b"\x18")
+            deadline = target.now() + 2.0
+            buf = b""
+            while target.now() < deadline and b"for help]" not in buf:
+                buf += target._read(deadline)
+            if b"for help]" in buf:
+                return "stopped: feed hold and soft reset, acknowledged by the banner"
+            notes.append("no banner after the reset")
+        except Exception as exc:  # noqa: BLE001 - report, try again
+            notes.append(f"not sent ({exc})")
+    return "stop NOT acknowledged: " + "; ".join(notes)
+
+
+def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
+                patterns: Sequence[str] = (), profile: str = "quick", allow_motion: bool = False,
+                allow_eeprom: bool = False, list_only: bool = False,
+                echo: Callable[[str], None] = print) -> list[TargetRun]:
+    """``conform run`` for grbl targets: ``emu:grbl-…`` or a serial port / URL."""
+    from conform.conformance.target import EmuTarget, open_target, parse_target
+    from conform.errors import UserError
+    from conform.families import family
+
+    spec = load_grbl()
+    fam = family("grbl")
+    runs = []
+    for text in plan:
+        kind, what, mutant = parse_target(text)
+        if kind == "emu" and what and what not in spec.variants:
+            raise UserError(f"target {text!r} is not a grbl unit: run GVE and grbl targets "
+                            "separately")
+        vid = variant or (what if kind == "emu" else None) or next(iter(spec.variants))
+        spec.variant(vid)
+        if list_only:
+            for c in select(generate(spec, vid), patterns):
+                echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
+            continue
+        if mutant is not None:
+            raise UserError(f"target {text!r}: grbl has no deviant units")
+        if kind == "emu":
+            target: Any = EmuTarget(lambda vid=vid: fam.make_unit(vid), f"emu:{vid}", baud=baud)
+        else:
+            target, _ = open_target(text, None, baud=baud)
+        notes = []
+        if not target.emulated and not allow_motion:
+            notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
+        if not target.emulated and not allow_eeprom:
+            notes.append("setting writes SKIPPED (no --allow-eeprom)")
+        try:
+            if not select(generate(spec, vid), patterns):
+                raise UserError(f"no check of {vid} matches {' '.join(patterns)} (see --list)")
+            runs.append(run_checks(target, vid, patterns=patterns, profile=profile,
+                                   allow_motion=allow_motion, allow_eeprom=allow_eeprom,
+                                   notes=notes, spec=spec))
+        finally:
+            target.close()
+        if runs[-1].aborted:
+            break
+    return runs

@@ -1,0 +1,596 @@
+"""The grbl 1.1f reference unit: sans-I/O, bytes and a time in, bytes and their due times out.
+
+    unit = GrblUnit(load_grbl().variant("grbl-1.1f"))
+    unit.receive(b"$G\\n", 0.0)
+    unit.poll(0.01)      # [(t, b"[GC:G0 G54 ...]\\r\\n"), (t, b"ok\\r\\n")]
+
+Like the GVE ``Unit`` it never reads a clock or sleeps: ``receive(data, t)``, ``poll(t)``,
+``next_deadline()`` and ``now`` are the whole contract the emulator adapter
+(:class:`conform.unit.serve.Emulator`) and the in-process conformance target use.
+
+What it models (docs/grbl.md): the 128-byte serial receive ring (bytes that find it full are
+lost, as on the hardware; realtime bytes and every byte above 0x7F never enter it), the line
+filter and the 80-byte line buffer (error:11), the g-code parser with its modal state
+(:mod:`.gcode`), the planner and motion in virtual time (:mod:`.planner`), the '$' commands
+(:mod:`.system`), states Idle/Run/Hold/Jog/Alarm/Check/Home/Sleep/Door, feed hold and resume,
+jog cancel, overrides, soft reset with the banner, alarms, and status reports with the $10
+mask and the WCO:/Ov: refresh counters.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+from conform.families.grbl import report as rp
+from conform.families.grbl.gcode import Block, GcodeError, Modal, parse
+from conform.families.grbl.planner import Move, Planner
+from conform.families.grbl.tables import GrblSpec, Variant, load_grbl
+
+INF = math.inf
+MOVING = ("Run", "Jog", "Home")
+
+
+class GrblUnit:
+    """One grbl controller. Times are seconds on the caller's clock."""
+
+    def __init__(self, variant: Variant, spec: GrblSpec | None = None, *, t0: float = 0.0,
+                 line_time: float = 0.0005, report_delay: float = 0.002,
+                 settings: dict[int, float] | None = None) -> None:
+        self.v = variant
+        self.spec = spec or load_grbl()
+        self.line_time = line_time
+        self.byte_time = 10.0 / variant.baud
+        self.report_delay = report_delay
+        self.settings = {n: s.default for n, s in self.spec.settings.items()}
+        if settings:
+            self.settings.update(settings)
+        self.startup = [""] * variant.n_startup_lines
+        self.build_info = ""
+        self.eeprom_coords = Modal()        # G54-G59, G28, G30 survive a reset (EEPROM)
+        self._now = float(t0)
+        self._out: list[tuple[float, bytes]] = []
+        self.lost = 0                       # bytes dropped because the receive ring was full
+        self.lines_done = 0
+        self.state = "Alarm" if self.settings[22] else "Idle"
+        self._reset(self._now, power_up=True)
+
+    # ============================================================ public API
+    @property
+    def now(self) -> float:
+        return self._now
+
+    @property
+    def rx_free(self) -> int:
+        return self.v.rx_buffer - len(self.rx)
+
+    @property
+    def position(self) -> list[float]:
+        return self.planner.where(self._now)[0]
+
+    def receive(self, data: bytes, t: float) -> None:
+        """Bytes from the sender whose last byte arrived at ``t``.
+
+        A UART hands grbl one byte at a time: byte i of n arrived (n-1-i) byte times before
+        ``t`` (10 bits a byte at the variant's baud), never before the unit's present.
+        """
+        n = len(data)
+        for i, b in enumerate(data):
+            tb = t - (n - 1 - i) * self.byte_time
+            if tb > self._now:
+                self._advance(tb)
+            tb = self._now
+            if b in self.spec.realtime:
+                self._realtime(b, tb)
+            elif b > 0x7F:
+                continue                     # unknown extended byte: dropped by the ISR
+            elif len(self.rx) >= self.v.rx_buffer:
+                self.lost += 1
+            else:
+                self.rx.append(b)
+                if len(self.rx) == 1 and self._ready_to_parse() and self._parser_free <= tb:
+                    self._read_rx(tb)
+        self._advance(t)
+
+    def poll(self, t: float) -> list[tuple[float, bytes]]:
+        """Everything due by ``t`` as (time, bytes)."""
+        self._advance(t)
+        due = [o for o in self._out if o[0] <= t]
+        self._out = [o for o in self._out if o[0] > t]
+        return due
+
+    def next_deadline(self) -> float | None:
+        best = min([o[0] for o in self._out] + [self._next_event()])
+        return None if best == INF else max(best, self._now)
+
+    def run_until(self, t: float) -> list[tuple[float, bytes]]:
+        return self.poll(t)
+
+    # ============================================================ the event loop
+    def _advance(self, t: float) -> None:
+        for _ in range(100000):
+            nxt = self._next_event()
+            if nxt > t:
+                break
+            self._now = max(self._now, nxt)
+            self._step(self._now)
+        self._now = max(self._now, t)
+
+    def _next_event(self) -> float:
+        best = INF
+        if self._report_at is not None:
+            best = self._report_at
+        if self._busy_until is not None:
+            best = min(best, self._busy_until)
+        pl = self.planner
+        if pl.blocks and pl.running:
+            best = min(best, pl.blocks[0].t0 + pl.blocks[0].duration)
+        if self._ready_to_parse():
+            best = min(best, max(self._now, self._parser_free))
+        return best
+
+    def _ready_to_parse(self) -> bool:
+        return (bool(self.rx) and self._pending is None and self._busy is None
+                and self._busy_until is None and not self._critical and self.state != "Sleep")
+
+    def _step(self, t: float) -> None:
+        if self._report_at is not None and self._report_at <= t:
+            self._report_at = None
+            self._emit(t, self._status_report(t))
+        if self._busy_until is not None and self._busy_until <= t:
+            self._busy_until = None
+            self._finish_busy(t)
+        pl = self.planner
+        if pl.blocks and pl.running and pl.blocks[0].t0 + pl.blocks[0].duration <= t + 1e-12:
+            self._block_done(pl.blocks[0].t0 + pl.blocks[0].duration)
+        if self._pending is not None:
+            self._try_pending(t)
+        if self._ready_to_parse() and self._parser_free <= t:
+            self._read_rx(t)
+
+    # ============================================================ output
+    def _emit(self, t: float, data: bytes) -> None:
+        if self._out and self._out[-1][0] > t:
+            t = self._out[-1][0]
+        self._out.append((t, data))
+
+    def _say(self, t: float, *texts: str) -> None:
+        for text in texts:
+            self._emit(t, rp.line(text))
+
+    def _answer(self, t: float, code: int) -> None:
+        self.lines_done += 1
+        self._say(t, "ok" if code == 0 else f"error:{code}")
+
+    # ============================================================ reading lines
+    def _read_rx(self, t: float) -> None:
+        """Move bytes from the ring into the line buffer until a line ends."""
+        while self.rx:
+            c = self.rx.popleft()
+            after_cr, self._after_cr = self._after_cr, c == 0x0D
+            if c == 0x0A and after_cr and not self.v.crlf_is_two_lines:
+                continue                     # a build that takes CR LF as one line end
+            if c in (0x0A, 0x0D):
+                text, overflow = "".join(self._line), self._overflow
+                self._line, self._overflow, self._paren, self._semi = [], False, False, False
+                done = t + self.line_time
+                self._parser_free = done
+                self._process(text, overflow, done)
+                return
+            ch = chr(c)
+            if self._paren:
+                if ch == ")":
+                    self._paren = False
+                continue
+            if self._semi:
+                continue
+            if ch <= " " or ch == "/" or c == 0x7F:
+                continue
+            if ch == "(":
+                self._paren = True
+            elif ch == ";":
+                self._semi = True
+            elif len(self._line) >= self.v.line_max:
+                self._overflow = True
+            else:
+                self._line.append(ch.upper() if "a" <= ch <= "z" else ch)
+
+    def _process(self, text: str, overflow: bool, t: float) -> None:
+        if overflow:
+            self._answer(t, 11)
+        elif not text:
+            self._answer(t, 0)
+        elif text.startswith("$"):
+            from conform.families.grbl.system import system_command
+
+            system_command(self, text, t)
+        elif self.state in ("Alarm", "Jog"):
+            self._answer(t, 9)
+        else:
+            self._gcode(text, t)
+
+    # ============================================================ g-code
+    def parser_position(self) -> list[float]:
+        return list(self._check_pos) if self.state == "Check" else list(self.planner.position)
+
+    def _gcode(self, text: str, t: float, *, jog: bool = False) -> None:
+        try:
+            block = parse(text, self.modal, self.parser_position(), jog=jog,
+                          tool_max=self.v.tool_max, line_number_max=self.v.line_number_max)
+        except GcodeError as exc:
+            self._answer(t, exc.code)
+            return
+        self._execute(block, t, jog=jog)
+
+    def _execute(self, block: Block, t: float, *, jog: bool = False, startup: str | None = None
+                 ) -> None:
+        if jog:
+            if block.target is None:
+                self._answer(t, 0)
+                return
+            if self._outside(block.target) and self.settings[20]:
+                self._answer(t, 15)
+                return
+            self._pending = ("plan", block, True, startup)
+            self._try_pending(t)
+            return
+        if block.target is not None and self.settings[20] and self.state != "Check" and (
+                self._outside(block.target) or (block.via and self._outside(block.via))):
+            self._soft_limit(t)
+            return
+        if self.state == "Check":
+            self.modal = block.modal
+            if block.target is not None:
+                self._check_pos = list(block.target)
+            if block.program_end:
+                self._program_end(t)
+            self._finish(t, 0, startup)
+            return
+        if block.sync or block.kind == "probe":
+            self._pending = ("sync", block, False, startup)
+        else:
+            self._pending = ("plan", block, False, startup)
+        self._try_pending(t)
+
+    def _outside(self, target: list[float]) -> bool:
+        for i, x in enumerate(target):
+            travel = self.settings[130 + i]
+            if x > 1e-6 or x < -travel - 1e-6:
+                return True
+        return False
+
+    def _soft_limit(self, t: float) -> None:
+        """ALARM:2 and the critical state: nothing but a reset is taken (interface.md)."""
+        self._hard_stop(t)
+        self.state = "Alarm"
+        self._critical = True
+        self._say(t, "ALARM:2", rp.MSG["reset"])
+
+    def _try_pending(self, t: float) -> None:
+        kind, block, jog, startup = self._pending
+        pl = self.planner
+        if kind == "plan":
+            n = self._moves_needed(block)
+            if pl.free < n:
+                return
+            self._pending = None
+            if not jog:
+                self.modal = block.modal
+            self._plan(block, t, jog)
+            self._finish(t, 0, startup)
+            return
+        # sync: wait for every block to finish
+        if pl.blocks or self.state in ("Hold", "Door"):
+            return
+        self._pending = None
+        self.modal = block.modal
+        if block.kind == "dwell":
+            self._busy_until = t + block.dwell
+            self._busy = ("dwell", startup)
+            return
+        if block.kind == "probe":
+            self._plan(block, t, False)
+            self._busy_until = None
+            self._busy = ("probe", startup, block)   # the parser waits for the probe
+            return
+        if block.kind in ("line", "arc", "home28", "home30"):
+            self._plan(block, t, False)
+        if block.coord_write:
+            self._store_coords()
+        if block.program_end:
+            self._program_end(t)
+        if block.pause:
+            self.state, self.hold_sub = "Hold", 0
+        self._finish(t, 0, startup)
+
+    def _finish(self, t: float, code: int, startup: str | None) -> None:
+        if startup is not None:
+            self._say(t, f">{startup}:" + ("ok" if code == 0 else f"error:{code}"))
+        else:
+            self._answer(t, code)
+
+    def _finish_busy(self, t: float) -> None:
+        what = self._busy
+        self._busy = None
+        if what and what[0] == "dwell":
+            self._finish(t, 0, what[1])
+        elif what and what[0] == "home":
+            self.planner.clear([-self.settings[27]] * 3)
+            self.state = "Idle"
+            self._answer(t, 0)
+            self._run_startup(t)
+
+    def _moves_needed(self, block: Block) -> int:
+        if block.kind in ("home28", "home30"):
+            return 2 if block.via else 1
+        return 1 if block.target is not None else 0
+
+    def _plan(self, block: Block, t: float, jog: bool) -> None:
+        pl = self.planner
+        start = list(pl.position)
+        points = []
+        if block.via is not None:
+            points.append(block.via)
+        if block.target is not None:
+            points.append(block.target)
+        for p in points:
+            rate = None if block.rapid else self._feed_rate(block, start, p)
+            kind = "jog" if jog else ("probe" if block.kind == "probe" else "line")
+            mv = pl.make(start, p, rate, kind, block)
+            if mv is not None:
+                if block.kind == "arc":
+                    mv.length = max(mv.length, block.arc_length)
+                if not block.rapid and not jog:
+                    mv.rate *= self.ov_feed / 100.0
+                elif block.rapid:
+                    mv.rate *= self.ov_rapid / 100.0
+                pl.push(mv)
+            start = list(p)
+        self._start_motion(t)
+
+    def _feed_rate(self, block: Block, start: list[float], end: list[float]) -> float:
+        if block.inverse_time:
+            length = max(math.dist(start, end), block.arc_length)
+            return length / (60.0 / block.feed) if block.feed else 1e-6
+        return block.feed / 60.0
+
+    def _start_motion(self, t: float) -> None:
+        pl = self.planner
+        if pl.running or not pl.blocks or self.state in ("Hold", "Door", "Alarm", "Sleep"):
+            return
+        pl.start_head(t, self._carry_speed)
+        self._carry_speed = 0.0
+        self.state = "Jog" if pl.blocks[0].kind == "jog" else "Run"
+
+    def _block_done(self, t: float) -> None:
+        pl = self.planner
+        if pl.holding:
+            # the hold's deceleration ended: stand still (Hold:0) until '~'
+            self.hold_sub = 0
+            pl.holding = False
+            if pl.stopped(t):
+                return
+            done = pl.blocks.popleft()
+            if done.kind == "probe":
+                self._probe_done(t, done)
+            return
+        done = pl.blocks.popleft()
+        pl.running = False
+        v_exit = done.v1
+        if done.kind == "probe":
+            self._probe_done(t, done)
+        if self._jog_cancel and not any(b.kind == "jog" for b in pl.blocks):
+            self._jog_cancel = False
+        if pl.blocks and self.state not in ("Hold", "Door", "Alarm"):
+            self._carry_speed = v_exit if pl.blocks[0].kind == done.kind else 0.0
+            self.state = "Idle"
+            self._start_motion(t)
+        elif not pl.blocks and self.state in MOVING:
+            self.state = "Idle"
+
+    def _probe_done(self, t: float, move: Move) -> None:
+        block = move.tag
+        busy = self._busy
+        self._busy = None
+        self.prb = list(move.end)
+        self.prb_ok = False
+        startup = busy[1] if busy else None
+        if isinstance(block, Block) and block.probe in ("38.2", "38.4"):
+            self.state = "Alarm"
+            self._say(t, "ALARM:5")
+        self._finish(t, 0, startup)
+
+    def _store_coords(self) -> None:
+        m = self.eeprom_coords
+        m.coords = [list(c) for c in self.modal.coords]
+        m.g28, m.g30 = list(self.modal.g28), list(self.modal.g30)
+
+    def _program_end(self, t: float) -> None:
+        """M2/M30: motion G1, plane, distance, feed mode, G54, spindle and coolant back to
+        their defaults; units, offsets, tool and feed kept (gcode.c program flow)."""
+        m = self.modal
+        m.motion, m.plane, m.distance, m.feed_mode, m.coord = "1", "17", "90", "94", 0
+        m.spindle, m.coolant, m.program = 5, frozenset(), None
+        self._say(t, rp.MSG["pgm_end"])
+
+    # ============================================================ realtime bytes
+    def _realtime(self, b: int, t: float) -> None:
+        effect = self.spec.realtime[b].effect
+        if effect == "reset":
+            self._soft_reset(t)
+        elif effect == "status":
+            if not self._critical and self.state != "Home" and self._report_at is None:
+                self._report_at = t + self.report_delay
+        elif self._critical or self.state == "Sleep":
+            return
+        elif effect == "hold":
+            self._feed_hold(t, "Hold")
+        elif effect == "door":
+            self._feed_hold(t, "Door")
+        elif effect == "resume":
+            if self.state in ("Hold", "Door") and self.hold_sub == 0:
+                self.state = "Idle"
+                if self.planner.blocks:
+                    self.planner.resume(t)
+                    self.state = "Jog" if self.planner.blocks[0].kind == "jog" else "Run"
+        elif effect == "jog-cancel":
+            if self.state == "Jog":
+                self._cancel_jog(t)
+        elif effect == "spindle-stop":
+            if self.state == "Hold":
+                self.spindle_stopped = not self.spindle_stopped
+        elif effect.startswith(("feed", "rapid", "spindle=", "spindle+", "spindle-")):
+            self._override(effect)
+        elif effect == "flood" and self.state in ("Idle", "Run", "Hold"):
+            m = self.modal
+            m.coolant = m.coolant - {8} if 8 in m.coolant else m.coolant | {8}
+            self._ovr_counter = 0
+
+    def _feed_hold(self, t: float, to: str) -> None:
+        if self.state == "Jog" and to == "Hold":
+            self._cancel_jog(t)
+            return
+        if self.state not in ("Idle", "Run", "Jog", "Hold") and not (to == "Door"
+                                                                      and self.state == "Door"):
+            return
+        if self.state in ("Run", "Jog") and self.planner.running:
+            stop = self.planner.hold(t)
+            self.state, self.hold_sub = to, (1 if stop > t else 0)
+        elif self.state == "Idle":
+            self.state, self.hold_sub = to, 0
+        elif to == "Door":
+            self.state = "Door"
+
+    def _cancel_jog(self, t: float) -> None:
+        pl = self.planner
+        if pl.running:
+            pl.hold(t)
+            head = pl.blocks[0]
+            pl.blocks.clear()
+            pl.blocks.append(head)
+            s_end = head.s_done + head.v0 * head.td - head.accel * head.td ** 2 / 2
+            head.length = min(head.length, s_end)
+            head.end = head.point(head.length)
+            pl.position = list(head.end)
+            pl.holding = False
+        self._jog_cancel = True
+
+    def _override(self, effect: str) -> None:
+        lims = self.spec.overrides
+        if effect.startswith("feed"):
+            self.ov_feed = self._ov(self.ov_feed, effect[4:], lims["feed"])
+        elif effect.startswith("rapid"):
+            self.ov_rapid = int(effect.split("=")[1])
+        else:
+            self.ov_spindle = self._ov(self.ov_spindle, effect[7:], lims["spindle"])
+        self._ovr_counter = 0
+
+    @staticmethod
+    def _ov(value: int, op: str, lim: dict[str, int]) -> int:
+        if op.startswith("="):
+            return int(op[1:])
+        return max(lim["lo"], min(lim["hi"], value + int(op)))
+
+    # ============================================================ reset
+    def _hard_stop(self, t: float) -> None:
+        pos = self.planner.where(t)[0] if hasattr(self, "planner") else [0.0] * 3
+        self.planner.clear(pos)
+        self._pending = None
+        self._busy = None
+        self._busy_until = None
+
+    def _soft_reset(self, t: float) -> None:
+        moving = self.state in MOVING or (self.state in ("Hold", "Door") and self.hold_sub != 0)
+        if moving:
+            code = 6 if self.state == "Home" else 3
+            self._say(t, f"ALARM:{code}")
+            self.state = "Alarm"
+        self._reset(t)
+
+    def _reset(self, t: float, power_up: bool = False) -> None:
+        pos = self.planner.where(t)[0] if not power_up else [0.0] * 3
+        a = [self.settings[120 + i] for i in range(3)]
+        r = [self.settings[110 + i] / 60.0 for i in range(3)]
+        self.planner = Planner(self.v.planner_blocks, r, a, self.settings[11])
+        self.planner.clear(pos)
+        self.rx: deque[int] = deque()
+        self._line: list[str] = []
+        self._overflow = self._paren = self._semi = self._after_cr = False
+        self._pending: tuple[Any, ...] | None = None
+        self._busy: tuple[Any, ...] | None = None
+        self._busy_until: float | None = None
+        self._report_at: float | None = None
+        self._parser_free = t
+        self._critical = False
+        self._carry_speed = 0.0
+        self._jog_cancel = False
+        self.hold_sub = 0
+        ee = self.eeprom_coords
+        self.modal = Modal(coords=[list(c) for c in ee.coords], g28=list(ee.g28), g30=list(ee.g30))
+        self._check_pos = list(pos)
+        self.prb = getattr(self, "prb", [0.0] * 3)
+        self.prb_ok = getattr(self, "prb_ok", False)
+        self.ov_feed = self.ov_rapid = self.ov_spindle = 100
+        self.spindle_stopped = False
+        self._wco_counter = self._ovr_counter = 0
+        if self.state in ("Alarm", "Sleep") or (power_up and self.settings[22]):
+            self.state = "Alarm"
+        else:
+            self.state = "Idle"
+        self._emit(t, rp.banner(self.v))
+        if self.state == "Alarm":
+            self._say(t, rp.MSG["locked"])
+        else:
+            self._run_startup(t)
+
+    def _run_startup(self, t: float) -> None:
+        for text in self.startup:
+            if text:
+                try:
+                    block = parse(text, self.modal, self.parser_position(),
+                                  tool_max=self.v.tool_max)
+                except GcodeError as exc:
+                    self._say(t, f">{text}:error:{exc.code}")
+                    continue
+                self._execute(block, t, startup=text)
+
+    # ============================================================ status report
+    def _status_report(self, t: float) -> bytes:
+        pos, v = self.planner.where(t)   # the machine's position (check mode moves nothing)
+        inches = bool(self.settings[13])
+        name = self.state
+        if self.state in ("Hold", "Door"):
+            name = f"{self.state}:{self.hold_sub}"
+        mask = int(self.settings[10])
+        m = self.modal
+        wco = m.wco()
+        parts = [name]
+        if mask & 1:
+            parts.append("MPos:" + rp.axes(pos, inches))
+        else:
+            parts.append("WPos:" + rp.axes([p - w for p, w in zip(pos, wco, strict=True)], inches))
+        if mask & 2:
+            parts.append(f"Bf:{self.planner.free},{self.rx_free}")
+        feed = v * 60.0 / (25.4 if inches else 1.0)
+        spindle = m.speed * self.ov_spindle / 100.0 if m.spindle in (3, 4) else 0.0
+        parts.append(f"FS:{feed:.0f},{spindle:.0f}")
+        busy = self.state in ("Run", "Hold", "Jog", "Home", "Door")
+        refresh = self.v.status_refresh
+        if self._wco_counter > 0:
+            self._wco_counter -= 1
+        else:
+            self._wco_counter = (refresh["wco_busy"] if busy else refresh["wco_idle"]) - 1
+            if self._ovr_counter == 0:
+                self._ovr_counter = 1
+            parts.append("WCO:" + rp.axes(wco, inches))
+        if self._ovr_counter > 0:
+            self._ovr_counter -= 1
+        else:
+            self._ovr_counter = (refresh["ovr_busy"] if busy else refresh["ovr_idle"]) - 1
+            parts.append(f"Ov:{self.ov_feed},{self.ov_rapid},{self.ov_spindle}")
+            acc = ("S" if m.spindle == 3 else "C" if m.spindle == 4 else "") + (
+                "F" if 8 in m.coolant else "") + ("M" if 7 in m.coolant else "")
+            if acc:
+                parts.append("A:" + acc)
+        return rp.line("<" + "|".join(parts) + ">")

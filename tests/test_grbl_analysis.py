@@ -1,0 +1,165 @@
+"""grbl traffic analysis in-process (reference senders against the reference unit), capture
+files made with the Recorder, and `conform analyze` choosing the family."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from conform.capture import Recorder
+from conform.families.grbl.analysis import analyze_streams
+from conform.families.grbl.streaming import stream
+from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.unit import GrblUnit
+
+G = load_grbl()
+V = G.variant("grbl-1.1f")
+JOB = [f"G1X{-(i % 20) * 0.5:.3f}Y{-(i % 7) * 0.3:.3f}F2000" for i in range(120)]
+
+
+def run(method, **kw):
+    u = GrblUnit(V, G)
+    u.poll(0.0)
+    traffic = stream(u, JOB, method=method, **kw)
+    return u, traffic, analyze_streams(traffic.host, traffic.unit)
+
+
+@pytest.mark.parametrize("method,found", [("counting", "character-counting"),
+                                          ("send-response", "send-response")])
+def test_well_behaved_senders(method, found):
+    u, traffic, a = run(method, poll=0.2)
+    assert u.lost == 0 and traffic.answers == ["ok"] * len(JOB)
+    m = a.metrics
+    assert m["streaming_method"] == found and m["hazards"] == 0 and m["errors"] == 0
+    assert m["max_bytes_in_flight"] <= 128 and m["answered"] == len(JOB)
+    assert 4.5 < m["poll_rate_hz"] < 5.5 and m["status_reports"] == m["status_polls"]
+    assert m["realtime_bytes"] == {"status report query": m["status_polls"]}
+    assert not a.findings
+
+
+def test_uncounted_lines_overflow_and_are_caught():
+    u, traffic, a = run("counting", extra={40: "$G", 41: "$G"}, timeout=120)
+    assert u.lost > 0
+    kinds = a.kinds()
+    assert kinds["rx-overflow-hazard"] >= 1
+    assert a.metrics["streaming_method"] == "character-counting"     # counting, overshot
+    assert any("outside the count" in f.message for f in a.findings)
+    hazard = a.hazards()[0]
+    assert hazard.extra["max_bytes"] > 128 and "receive buffer 128" in hazard.message
+    assert kinds.get("error-response", 0) + kinds.get("unanswered-lines", 0) >= 1
+
+
+def test_errors_and_alarms_are_findings():
+    host = [(0.0, b"G1X1\n"), (0.1, b"G38.2Z-1F100\n")]
+    u = GrblUnit(V, G)
+    u.poll(0.0)
+    for t, d in host:
+        u.receive(d, t)
+    unit = u.poll(5.0)
+    a = analyze_streams(host, unit)
+    kinds = a.kinds()
+    assert kinds == {"alarm": 1, "error-response": 1}
+    err = next(f for f in a.findings if f.kind == "error-response")
+    assert "error:22 (undefined feed rate)" in err.message and "#22" in err.clause
+    assert next(f for f in a.findings if f.kind == "alarm").message.startswith("ALARM:5")
+
+
+def test_starved_planner_is_seen_in_status_reports():
+    host, unit = [], []
+    u = GrblUnit(V, G)
+    u.poll(0.0)
+    t = 0.0
+    for i in range(4):                  # a sender that waits far too long between moves
+        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
+        u.receive(host[-1][1], t)
+        t += 3.0
+        host.append((t, b"?"))
+        u.receive(b"?", t)
+        t += 0.1
+    unit = u.poll(t + 10)
+    a = analyze_streams(host, unit)
+    assert a.kinds().get("planner-starved", 0) >= 1
+
+
+def record(path, host, unit, variant=""):
+    rec = Recorder(path, {"capture_method": "test", "variant": variant}, decode=False,
+                   clock=lambda: 1000.0)
+    for t, direction, d in sorted([(t, "host", d) for t, d in host] +
+                                  [(t, "unit", d) for t, d in unit]):
+        rec.chunk(direction, d, t_read=1000.0 + t)
+    rec.close()
+
+
+def analyze_cli(path):
+    return subprocess.run([sys.executable, "-m", "conform", "analyze", str(path)],
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_analyze_detects_grbl_from_the_traffic(tmp_path):
+    u, traffic, _ = run("counting", extra={40: "$G", 41: "$G"}, timeout=60)
+    path = tmp_path / "noname.mcap"
+    record(path, traffic.host, traffic.unit)              # no variant in the metadata
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(path), "--report",
+                        str(tmp_path / "rep"), "--parquet", str(tmp_path / "pq")],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert "protocol family grbl (" in p.stdout and "grbl messages" in p.stdout
+    import json
+
+    import pyarrow.parquet as pq
+
+    ex = pq.read_table(tmp_path / "pq" / "exchanges.parquet").to_pydict()
+    assert max(ex["bytes_in_flight"]) > 128 and ex["answer"][0] == "ok"
+    found = json.loads((tmp_path / "rep" / "findings.json").read_text())
+    assert found["family"] == "grbl" and found["metrics"]["hazards"] >= 1
+    assert "rx-overflow-hazard" in p.stdout
+    assert "not a hex digit" not in p.stdout
+
+
+def test_unknown_protocol_is_reported_as_such(tmp_path):
+    path = tmp_path / "modem.mcap"
+    host = [(i * 0.1, b"AT+CSQ\r\n") for i in range(40)]
+    unit = [(i * 0.1 + 0.05, b"+CSQ: 20,99\r\nOK\r\n") for i in range(40)]
+    record(path, host, unit)
+    p = analyze_cli(path)
+    assert p.returncode == 0, p.stderr
+    assert "protocol unknown" in p.stdout and "exchanges" not in p.stdout
+
+
+def test_gve_capture_stays_with_the_gve_analyser(tmp_path):
+    path = tmp_path / "gve.mcap"
+    record(path, [(0.0, b"!0?\r")], [(0.01, b"0,IP64MPG v19 10.9.2010\r")])
+    p = analyze_cli(path)
+    assert p.returncode == 0, p.stderr
+    assert "protocol" not in p.stdout and "exchanges" in p.stdout
+
+
+def test_the_two_host_splitters_agree():
+    import random
+
+    from conform.families.grbl.codec import HostLine, HostSplitter, split_host
+
+    rng = random.Random(1)
+    for _ in range(300):
+        data = bytes(rng.choice(b"G1X-0.5\n\r?!~\x18\x85\xa0 (;)$=") for _ in range(rng.randrange(300)))
+        splitter = HostSplitter()
+        events = splitter.feed(data[:40]) + splitter.feed(data[40:])      # fed in pieces
+        lines, realtime = split_host(data)
+        assert [(x.data, x.start, x.end) for x in events if isinstance(x, HostLine)] == [
+            (x.data, x.start, x.end) for x in lines]
+        assert [(x.byte, x.offset) for x in events if not isinstance(x, HostLine)] == [
+            (x.byte, x.offset) for x in realtime]
+
+
+def test_recording_a_grbl_session_says_why_frames_are_not_decoded(tmp_path):
+    from conform.capture.reader import open_capture
+
+    path = tmp_path / "g.mcap"
+    rec = Recorder(path, {"variant": "grbl-1.1f"})
+    rec.chunk("host", b"?")
+    rec.close()
+    notes = [x.get("message", "") for x in open_capture(path).logs()]
+    assert any("decoded by conform analyze from the raw bytes" in n for n in notes)
+    assert not any("unknown variant" in n for n in notes)

@@ -1,0 +1,107 @@
+"""grbl conformance: the generated checks pass on the reference unit, can fail on a deviant
+one, and `conform run --target emu:grbl-1.1f` writes the engine's reports."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+from conform.conformance.results import Grade
+from conform.conformance.target import EmuTarget
+from conform.families.grbl.checks import generate, run_checks
+from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.unit import GrblUnit
+
+G = load_grbl()
+V = G.variant("grbl-1.1f")
+
+
+def test_every_check_passes_on_the_reference_unit():
+    run = run_checks(EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f"), V.id)
+    bad = [(c.id, c.expected, c.actual) for c in run.checks if c.grade is not Grade.PASS]
+    assert not bad
+    ids = {c.id for c in run.checks}
+    assert len(ids) == len(run.checks) == len(generate(G, V.id))
+    assert sum(1 for i in ids if "/error/" in i) == sum(1 for c in G.errors.values() if c.send)
+    assert sum(1 for i in ids if "/example/" in i) == len(G.examples)
+    assert all(c.clause for c in run.checks)
+
+
+class BigRing(GrblUnit):
+    """A deviant unit that buffers 256 bytes and answers CR LF with one ok."""
+
+    def __init__(self, *a, **k):
+        super().__init__(dataclasses.replace(V, rx_buffer=256, crlf_is_two_lines=False), G, **k)
+
+
+class WrongHelp(GrblUnit):
+    def _say(self, t, *texts):
+        super()._say(t, *(x.replace("$SLP ", "") for x in texts))
+
+
+def test_a_deviant_unit_fails_the_clauses_it_breaks():
+    run = run_checks(EmuTarget(lambda: BigRing(), "emu:deviant"), V.id,
+                     patterns=["*/buffer/*", "*/example/status-buffer-state", "*/line/crlf"])
+    grades = {c.id.split("/", 1)[1]: c.grade for c in run.checks}
+    assert grades["serial/buffer/receive-ring"] is Grade.FAIL
+    assert grades["interface/example/status-buffer-state"] is Grade.FAIL          # Bf:15,256
+    assert grades["protocol/buffer/line-limit"] is Grade.PASS
+    assert grades["protocol/line/crlf"] is Grade.DEVIATION                      # INFO clause
+    run = run_checks(EmuTarget(lambda: WrongHelp(V, G), "emu:deviant"), V.id,
+                     patterns=["*/example/help"])
+    assert [c.grade for c in run.checks] == [Grade.FAIL]
+    assert "$SLP" in run.checks[0].expected and "$SLP" not in run.checks[0].actual
+
+
+def test_conform_run_on_the_emulator_writes_reports(tmp_path):
+    out = tmp_path / "rep"
+    p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", "emu:grbl-1.1f",
+                        "--report", str(out), "-q"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "emu:grbl-1.1f (grbl-1.1f, quick): PASS" in p.stdout
+    results = json.loads((out / "results.json").read_text())
+    assert results["runs"][0]["variant"] == "grbl-1.1f"
+    assert all(c["grade"] == "PASS" for c in results["checks"])
+    assert (out / "index.html").exists() and (out / "junit.xml").exists()
+    listed = subprocess.run([sys.executable, "-m", "conform", "run", "--target", "emu:grbl-1.1f",
+                             "--list", "--check", "*/error/2*"], capture_output=True, text=True,
+                            timeout=60)
+    assert listed.returncode == 0
+    assert [x.split("\t")[0] for x in listed.stdout.splitlines()] == [
+        f"grbl-1.1f/error_codes/error/{n}" for n in (2, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29)]
+    bad = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
+                          "emu:grbl-1.1f:nonsense"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "no deviant units" in bad.stderr
+
+
+def test_characterize_reads_what_the_build_does(tmp_path):
+    from conform.families.grbl.characterize import characterize, write_profile
+
+    obs = {o.name: o for o in characterize(EmuTarget(lambda: BigRing(), "emu:deviant"), V.id)}
+    assert obs["rx_buffer"].observed == 256 and not obs["rx_buffer"].same
+    assert obs["crlf_is_two_lines"].observed is False
+    assert all(obs[n].same for n in ("version", "build", "planner_blocks", "line_max"))
+    path = tmp_path / "p.toml"
+    write_profile(list(obs.values()), str(path), target="emu:deviant", variant=V.id)
+    import tomllib
+
+    prof = tomllib.loads(path.read_text())
+    assert prof["observed"]["rx_buffer"] == 256 and prof["table"]["rx_buffer"] == 128
+    p = subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:grbl-1.1f", "-o",
+                        str(tmp_path / "q.toml")], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "0 item(s) differ" in p.stdout
+
+
+def test_the_stop_is_confirmed_by_the_banner():
+    from conform.families.grbl.checks import _stop
+
+    target = EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f")
+    target.send(b"G1X-20F300\n")
+    target.wait(0.5)
+    assert target.unit.state == "Run"
+    assert _stop(target).startswith("stopped")
+    # held until still, then reset: no ALARM:3, so Idle (not Alarm) and the position is kept
+    assert target.unit.state == "Idle" and not target.unit.planner.blocks
+    assert -20.0 < target.unit.position[0] < 0.0
