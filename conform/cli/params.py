@@ -25,6 +25,12 @@ def _variant_ids() -> list[str]:
     return ids
 
 
+def _is_gve(variant: str) -> bool:
+    from conform.spec import load_spec
+
+    return not variant or variant in load_spec().variants
+
+
 class VariantType(click.ParamType):
     """A variant id of the tables (``gve64-v19``)."""
 
@@ -61,7 +67,7 @@ class TargetType(click.ParamType):
         if len(parts) > 1 and parts[1] and parts[1] not in known:
             self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
                       param, ctx)
-        if len(parts) > 2 and parts[2]:
+        if len(parts) > 2 and parts[2] and _is_gve(parts[1]):  # other families say their own
             from conform.conformance.mutants import MUTANTS
 
             if parts[2] not in MUTANTS:
