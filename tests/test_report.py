@@ -26,7 +26,8 @@ def _results():
                     **common),
         CheckResult("gve64-v19/13.5.9/G/nothing-to-go", Grade.DEVIATION, question="A15",
                     alternative="no-effect-0", detail="A15=no-effect-0", **common),
-        CheckResult("gve64-v19/13.5.2/C/valid", Grade.SKIPPED, detail="needs motion", **common),
+        CheckResult("gve64-v19/13.5.2/C/valid", Grade.SKIPPED,
+                    detail="needs motion (not allowed in this run: --allow-motion)", **common),
         CheckResult("gve64-v19/13.5.13/@/valid", Grade.ERROR, detail="link lost <&>", **common),
         CheckResult("gve64-v19/14.1/VL/valid", Grade.NOT_APPLICABLE, detail="no VL", **common),
     ]
@@ -58,7 +59,8 @@ def test_four_files_and_their_content(tmp_path):
     assert "gve64-v19/13.5.3/V/range/pps/hi+1" in html and "link lost &lt;&amp;&gt;" in html
     assert "1 of 1 deviant units caught" in html
     md = (out / "summary.md").read_text()
-    assert "## FAIL (1)" in md and "## DEVIATION (1)" in md and "Mutants: 1/1 killed" in md
+    assert "## Failures (2)" in md and "## Deviations on open questions (1)" in md
+    assert "Mutants: 1/1 killed" in md
 
 
 def test_report_command_re_renders(tmp_path):
@@ -69,7 +71,7 @@ def test_report_command_re_renders(tmp_path):
     assert info.value.code == 0
     again = RunResults.load(tmp_path / "again" / "results.json")
     assert [c.grade for c in again.checks] == [c.grade for c in _results().checks]
-    assert (tmp_path / "again" / "index.html").read_text().count("class=\"detail") == 4
+    assert (tmp_path / "again" / "index.html").read_text().count("class=\"detail") == 3
 
 
 def test_report_of_a_missing_or_bad_file_is_one_line(tmp_path, capsys):
@@ -81,3 +83,120 @@ def test_report_of_a_missing_or_bad_file_is_one_line(tmp_path, capsys):
         assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("conform: ") for line in err)
+
+
+def _sectioned():
+    """Two targets, failures in three sections, skips for two reasons, one run cut short."""
+    runs = []
+    for target, aborted in (("emu:gve64-v19", None), ("/dev/pts/9", "link lost after 4 checks")):
+        run = TargetRun(target, "gve64-v19", target.startswith("emu"), "quick", "t0",
+                        aborted=aborted)
+        common = dict(variant="gve64-v19", target=target)
+        run.checks = [
+            CheckResult("gve64-v19/13.5.13/J/syntax", Grade.FAIL, "GVE64 §13.5.13",
+                        expected="!0J# → 4", actual="!0J# → 4,60", replay="gve64-v19/13.5.13/J/syntax",
+                        log=[LogEntry(0.0, "tx", b"!0J#\r"), LogEntry(0.002, "rx", b"4,60\r")],
+                        **common),
+            CheckResult("gve64-v19/13.5.3/V/valid", Grade.FAIL, "GVE64 §13.5.3, GVE64 §14.1",
+                        expected="!0V1000 → 0", actual="!0V1000 → 5", **common),
+            CheckResult("gve64-v19/13.5/sequences", Grade.ERROR, "GVE64 §13.5", level="INFO",
+                        detail="LinkError: port gone", seed=77,
+                        replay="gve64-v19/13.5/sequences", **common),
+            CheckResult("gve64-v19/13.5.2/C/valid", Grade.SKIPPED, "GVE64 §13.5.2",
+                        detail="needs motion (not allowed in this run: --allow-motion)", **common),
+            CheckResult("gve64-v19/13.5.12/EW/valid", Grade.SKIPPED, "GVE64 §13.5.12",
+                        detail="needs eeprom (not allowed in this run: --allow-motion)", **common),
+            CheckResult("gve64-v19/13.5.2/L/valid", Grade.PASS, "GVE64 §13.5.2", **common),
+        ]
+        runs.append(run)
+    return RunResults(runs, "conform run --matrix", "2026-01-01T00:00:00")
+
+
+def test_html_leads_with_status_skips_and_failures_by_section(tmp_path):
+    html = (write_reports(_sectioned(), tmp_path) / "index.html").read_text()
+    at = html.index
+    # first screen: verdict, the incomplete run's reason, what was not verified and how, MUST/INFO
+    assert "INCOMPLETE" in html[:at('id="summary"')]
+    assert at("Incomplete run.") < at('id="failures"')
+    assert "/dev/pts/9: link lost after 4 checks" in html[:at('id="failures"')]
+    skipped = html[at('id="not-verified"'):at('id="failures"')]
+    assert "2 checks need motion (axes, outputs, spindle)" in skipped
+    assert "enable with <span class=\"mono\">--allow-motion --max-steps N</span>" in skipped
+    assert "2 checks need EEPROM writes" in skipped and "--allow-eeprom" in skipped
+    assert "<b>MUST</b>" in html[:at('id="failures"')] and "<b>INFO</b>" in html[:at('id="failures"')]
+    # failures before every matrix, grouped by section in the manual's (numeric) order
+    assert at('id="failures"') < at('id="sections"') < at('id="matrix"')
+    order = [at('<h3 id="f-s-GVE64-13-5">'), at('<h3 id="f-s-GVE64-13-5-3">'),
+             at('<h3 id="f-s-GVE64-13-5-13">')]
+    assert order == sorted(order)
+    first = html[at('<h3 id="f-s-GVE64-13-5">'):at('id="sections"')]
+    assert "conform run --target /dev/pts/9 --variant gve64-v19 --replay " \
+           "gve64-v19/13.5/sequences@77" in first
+    j = html[at('id="c-emu-gve64-v19-gve64-v19-13-5-13-J-syntax"'):]
+    assert "!0J# → 4,60" in j and '<span class="tx">' in j and "4,60\\r" in j
+    assert "conform run --target emu:gve64-v19 --variant gve64-v19 --replay " \
+           "gve64-v19/13.5.13/J/syntax" in j
+
+
+def test_markdown_follows_the_same_order(tmp_path):
+    md = (write_reports(_sectioned(), tmp_path) / "summary.md").read_text()
+    at = md.index
+    assert md.startswith("# Conformance summary: INCOMPLETE")
+    assert at("**Incomplete run.** /dev/pts/9: link lost") < at("## Not verified") \
+        < at("## Failures (6)") < at("## Manual sections × variants")
+    assert at("### GVE64 §13.5 (") < at("### GVE64 §13.5.3 (") < at("### GVE64 §13.5.13 (")
+    assert "- 2 checks need EEPROM writes — enable with `--allow-eeprom`" in md
+    assert "0.002000 rx   4,60\\r" in md and "expected: `!0J# → 4`" in md
+    assert "| GVE64 §13.5.2 | 1 PASS 1 SKIPPED | 1 PASS 1 SKIPPED |" in md
+
+
+def test_junit_classname_is_variant_and_section(tmp_path):
+    suite = ET.parse(write_reports(_sectioned(), tmp_path) / "junit.xml").getroot()
+    names = {(c.get("classname"), c.get("name")) for c in suite.iter("testcase")}
+    assert ("gve64-v19.13.5.3", "gve64-v19/13.5.3/V/valid") in names
+    assert all(cls for cls, _ in names)
+
+
+def test_latest_link_follows_the_last_report(tmp_path):
+    from conform.report.render import link_latest
+
+    for name in ("20260101-000000", "20260101-000100"):
+        link = link_latest(write_reports(_sectioned(), tmp_path / name))
+    assert link == tmp_path / "latest" and link.is_symlink()
+    assert (link / "index.html").resolve() == (tmp_path / "20260101-000100" / "index.html")
+    (tmp_path / "x" / "latest").mkdir(parents=True)
+    assert link_latest(tmp_path / "x" / "r") is None  # a real folder of that name is kept
+
+
+def test_not_verified_groups_the_runners_reasons():
+    from conform.report.view import not_verified
+
+    def skipped(i, detail, target="/dev/ttyUSB0"):
+        return CheckResult(f"gve64-v19/13.5.2/C/x{i}", Grade.SKIPPED, "GVE64 §13.5.2",
+                           detail=detail, variant="gve64-v19", target=target)
+
+    run = TargetRun("/dev/ttyUSB0", "gve64-v19", False, "quick", "t0")
+    run.checks = [
+        skipped(1, "needs actuator, motion (not allowed in this run: enable with --allow-motion "
+                   "--max-steps N)"),
+        skipped(2, "needs motion (not allowed in this run: --allow-motion)"),  # older wording
+        skipped(3, "needs eeprom, motion (not allowed in this run: enable with --allow-motion "
+                   "--max-steps N --allow-eeprom)"),
+        skipped(4, "outside the envelope (a move of 4000 pulses cannot be done inside "
+                   "--max-steps 1000: enable with --max-steps 4000)"),
+        skipped(5, "outside the envelope (a move of 9000 pulses cannot be done inside "
+                   "--max-steps 1000: enable with --max-steps 9000)"),
+        skipped(6, "refused to send b'!0L2000,0,0': a move of 2000 steps exceeds --max-steps 1000"),
+        skipped(7, "needs inputs driven (a real unit's inputs are switched by hand; with `conform "
+                   "emulate serve` behind the link: enable with --inputs-control PATH)"),
+        skipped(8, "the moon is not full"),
+    ]
+    groups = {g.reason: (len(g.checks), g.how) for g in not_verified(RunResults([run]))}
+    assert groups == {
+        "motion (axes, outputs, spindle)": (2, "--allow-motion --max-steps N"),
+        "EEPROM writes and motion (axes, outputs, spindle)":
+            (1, "--allow-motion --max-steps N --allow-eeprom"),
+        "moves longer than --max-steps allows": (3, "--max-steps 9000"),
+        "driven inputs (only an emulator can drive them)": (1, "--inputs-control PATH"),
+        "the moon is not full": (1, ""),
+    }

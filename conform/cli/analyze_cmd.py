@@ -6,24 +6,34 @@ import os
 
 import click
 
+from conform.cli.params import (
+    FRACTIONAL_BAUD,
+    INPUT_PATH,
+    OUTPUT_DIR,
+    VARIANT,
+    echo_json,
+    json_option,
+)
+from conform.cli.progress import progress as show_progress
 from conform.errors import UserError
-
-BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
 
 
 @click.command(name="analyze")
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=True, path_type=str))
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
+@click.argument("files", nargs=-1, required=True, type=INPUT_PATH)
+@click.option("--report", "report_dir", type=OUTPUT_DIR,
               default=None, help="Write DIR/index.html, DIR/summary.md, DIR/findings.json.")
-@click.option("--parquet", "parquet_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Write the tables as Parquet files into DIR.")
-@click.option("--variant", default=None, help="Decode as this variant (default: the capture's).")
-@click.option("--baud", type=float, default=None,
+@click.option("--parquet", "parquet_dir", type=OUTPUT_DIR, default=None,
+              help="Write the tables (exchanges, frames_host, frames_unit, series, "
+                   "queue_depth) as Parquet files into DIR, for pandas, polars or DuckDB.")
+@click.option("--variant", type=VARIANT, default=None,
+              help="Decode as this variant (default: the capture's).")
+@click.option("--baud", type=FRACTIONAL_BAUD, default=None,
               help="The line's baud rate (default: the capture's, checked against the data).")
 @click.option("--dialect", default=None, help="Open-question choices, e.g. A10=every-line.")
 @click.option("--no-whatif", is_flag=True, help="Skip the what-if queue replays.")
 @click.option("--progress/--no-progress", default=None,
-              help="Progress display (default: on for large files on a terminal).")
+              help="Progress display (default: bars on a terminal, a line every few seconds "
+                   "off one).")
 @click.option("--time-range", default=None, metavar="START:END",
               help="Draw the plots over time for this range only, in seconds from the start "
                    "(either end may be left out), to look closely at a stutter.")
@@ -32,20 +42,36 @@ BIG_FILE = 20 * 1024 * 1024  # show a progress display above this size
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Several captures: run on this Dask distributed scheduler "
                    "(e.g. tcp://host:8786) instead of local processes.")
+@json_option("findings.json's document (several captures: the fleet summary), plus the paths "
+             "written")
 def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
         progress: bool | None, time_range: str | None, jobs: int | None,
-        scheduler: str | None) -> None:
+        scheduler: str | None, as_json: bool) -> None:
     """Analyse a capture: findings with manual clauses, latency split, throughput, queue.
 
     Several files or a folder: each capture analysed in parallel, one Parquet dataset and a
     fleet summary (per machine and session) in the report folder.
+
+    \b
+    Examples:
+      conform analyze captures/careless-noisy.mcap
+      conform analyze captures/usb-latency.mcap --report out/ --parquet out/tables/
+      conform analyze captures/good-rs232.mcap --json | jq .metrics.exchanges
+      conform analyze captures/ --report fleet/     # every capture in the folder
     """
     from conform.analysis.analyze import analyze
-    from conform.analysis.report import write_parquet, write_report
+    from conform.analysis.report import findings_document, write_parquet, write_report
+
+    def echo(text: str) -> None:
+        click.echo(text, err=as_json)
 
     if len(files) > 1 or os.path.isdir(files[0]):
-        _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler)
+        with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
+            bar.task(f"analysing {len(files)} inputs" if len(files) > 1 else
+                     f"analysing the captures in {files[0]}")
+            _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler,
+                   echo, as_json)
         return
     file = files[0]
     from conform.families.capture_hook import analyze_other_family
@@ -58,49 +84,43 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         size = os.path.getsize(file)
     except OSError:
         size = 0
-    show = progress if progress is not None else (size > BIG_FILE and _tty())
-    if baud is not None and baud <= 0:
-        raise UserError(f"--baud {baud:g}: must be positive")
-    if show:
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
+        task = bar.task(os.path.basename(file), size or None, unit="bytes")
 
-        with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
-                      transient=True) as bar:
-            task = bar.add_task("reading", total=size or 1)
+        def on_bytes(done: int, total: int) -> None:
+            task.update(completed=done, total=total)
 
-            def on_bytes(done: int, total: int) -> None:
-                bar.update(task, completed=done, total=total)
-
-            def on_step(name: str) -> None:
-                bar.update(task, description=name)
-
-            a = analyze(file, variant=variant, baud=baud, dialect=dialect, progress=on_bytes,
-                        step=on_step, whatif_replays=not no_whatif)
-    else:
-        a = analyze(file, variant=variant, baud=baud, dialect=dialect,
-                    whatif_replays=not no_whatif)
-    a.time_range = window
+        a = analyze(file, variant=variant, baud=baud, dialect=dialect, progress=on_bytes,
+                    step=lambda name: task.update(step=name), whatif_replays=not no_whatif)
+        a.time_range = window
+        paths = {}
+        if report_dir:
+            task.update(step="writing the report (plots)")
+            paths["report"] = str(write_report(a, report_dir)["html"])
+        if parquet_dir:
+            task.update(step="writing Parquet tables")
+            write_parquet(a, parquet_dir)
+            paths["parquet"] = parquet_dir
     m = a.metrics
-    click.echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
-               f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
-               f"baud {int(m['baud']['used'])}")
+    echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
+         f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
+         f"baud {int(m['baud']['used'])}")
     damage = a.raw.status.describe()
     if damage:
-        click.echo(f"capture damaged: {damage}; analysed what is intact")
+        echo(f"capture damaged: {damage}; analysed what is intact")
+    for note in a.notes:
+        echo(f"note: {note}")
     counts = m.get("finding_counts", {})
-    if counts:
-        click.echo("findings: " + ", ".join(f"{k} {n}" for k, n in counts.items()))
-    else:
-        click.echo("findings: none")
+    echo("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) if counts else "none"))
     for f in a.findings:
         if f.severity in ("hazard", "error"):
-            click.echo(f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}")
-    if report_dir:
-        paths = write_report(a, report_dir)
-        click.echo(f"report: {paths['html']}")
+            echo(f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}")
+    if "report" in paths:
+        echo(f"report: {paths['report']}")
     if parquet_dir:
-        write_parquet(a, parquet_dir)
-        click.echo(f"tables: {parquet_dir}")
+        echo(f"tables: {parquet_dir}")
+    if as_json:
+        echo_json(findings_document(a) | paths)
     if damage:
         raise SystemExit(1)
 
@@ -121,33 +141,31 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
 
 def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
            variant: str | None, baud: float | None, dialect: str | None, jobs: int | None,
-           scheduler: str | None) -> None:
+           scheduler: str | None, echo, as_json: bool) -> None:  # noqa: ANN001
     from conform.analysis.fleet import analyze_fleet, write_fleet_report
 
     options = {"variant": variant, "baud": baud, "dialect": dialect}
     s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
                       scheduler=scheduler)
     t = s["totals"]
-    click.echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
-               f"exchanges, {t['hazards']} hazards, {t['errors']} not analysed")
+    echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
+         f"exchanges, {t['hazards']} hazards, {t['errors']} not analysed")
     for m in s["machines"]:
-        click.echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges, "
-                   f"{m['hazards']} hazards, {m['starvations']} starvations"
-                   + (f", {m['damaged']} damaged" if m["damaged"] else "")
-                   + (f", {m['errors']} not analysed" if m["errors"] else ""))
+        echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges, "
+             f"{m['hazards']} hazards, {m['starvations']} starvations"
+             + (f", {m['damaged']} damaged" if m["damaged"] else "")
+             + (f", {m['errors']} not analysed" if m["errors"] else ""))
     for r in s["sessions"]:
         if r["error"]:
-            click.echo(f"  {r['path']}: {r['error']}")
+            echo(f"  {r['path']}: {r['error']}")
+    paths = {}
     if report_dir:
-        paths = write_fleet_report(s, report_dir)
-        click.echo(f"report: {paths['html']}")
+        paths["report"] = str(write_fleet_report(s, report_dir)["html"])
+        echo(f"report: {paths['report']}")
     if parquet_dir:
-        click.echo(f"tables: {parquet_dir}/exchanges (one dataset, partitioned by machine)")
+        paths["parquet"] = parquet_dir
+        echo(f"tables: {parquet_dir}/exchanges (one dataset, partitioned by machine)")
+    if as_json:
+        echo_json(s | paths)
     if any(r["state"] != "clean" for r in s["sessions"]):
         raise SystemExit(1)  # some captures damaged or not analysed: listed above
-
-
-def _tty() -> bool:
-    import sys
-
-    return sys.stderr.isatty()

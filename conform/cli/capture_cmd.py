@@ -2,34 +2,47 @@
 
 from __future__ import annotations
 
-import json
 from datetime import UTC, datetime
 
 import click
 
 from conform.capture.recover import capture_info, format_info, recover
+from conform.cli.params import INPUT_PATH, OUTPUT_FILE, echo_json, json_option
+from conform.cli.progress import progress
 
 
 @click.group(name="capture")
 def cli() -> None:
-    """Inspect and repair MCAP capture files."""
+    """Inspect and repair MCAP capture files.
+
+    \b
+    Example:
+      conform capture info captures/good-rs232.mcap
+    """
 
 
 @cli.command()
-@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
-@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@click.argument("file", type=INPUT_PATH)
+@json_option()
 def info(file: str, as_json: bool) -> None:
-    """Duration, bytes each way, messages per channel, clean or truncated."""
-    result = capture_info(file)
+    """Duration, bytes each way, messages per channel, clean or truncated.
+
+    \b
+    Example:
+      conform capture info captures/good-rs232.mcap --json
+    """
+    with progress("conform capture info", transient=True) as bar:
+        bar.task(f"reading {file}")
+        result = capture_info(file)
     if as_json:
         s = result.status
-        click.echo(json.dumps({
+        echo_json({
             "file": str(result.path), "state": result.state, "problem": s.problem,
             "intact_bytes": s.valid_bytes, "size": s.size, "duration": result.duration,
             "bytes": result.bytes, "reads": result.reads, "gaps": result.gaps,
             "messages": dict(result.messages), "unreadable_messages": result.bad_messages,
             "metadata": result.metadata,
-        }, indent=2))
+        })
     else:
         click.echo(format_info(result))
     if result.state not in ("clean", "recovered"):
@@ -37,13 +50,20 @@ def info(file: str, as_json: bool) -> None:
 
 
 @cli.command(name="recover")
-@click.argument("file", type=click.Path(dir_okay=True, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
+@click.argument("file", type=INPUT_PATH)
+@click.option("-o", "--output", type=OUTPUT_FILE, default=None,
               help="Where to write (default: FILE without .part, or FILE.recovered.mcap).")
 @click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
 def recover_cmd(file: str, output: str | None, force: bool) -> None:
-    """Rewrite the intact part of a killed or damaged recording as a complete MCAP."""
-    res = recover(file, output, force=force)
+    """Rewrite the intact part of a killed or damaged recording as a complete MCAP.
+
+    \b
+    Example:
+      conform capture recover session.mcap.part
+    """
+    with progress("conform capture recover", transient=True) as bar:
+        bar.task(f"salvaging {file}")
+        res = recover(file, output, force=force)
     s = res.status
     last = "-"
     if res.last_ns is not None:

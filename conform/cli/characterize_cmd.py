@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from conform.cli.params import BAUD, OUTPUT_FILE, POSITIVE_INT, TARGET, VARIANT
+from conform.cli.progress import progress
 from conform.conformance.characterize import characterize, to_profile
 from conform.conformance.profile import write_profile
 from conform.conformance.safety import Guard
@@ -13,17 +15,23 @@ from conform.spec import load_spec
 
 
 @click.command(name="characterize")
-@click.argument("target")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+@click.argument("target", type=TARGET)
+@click.option("-o", "--output", type=OUTPUT_FILE, required=True,
               help="Profile to write (TOML: [dialect] A-id = alternative, plus evidence).")
-@click.option("--variant", default=None, help="The model (default: the emulator's or ask '?').")
-@click.option("--baud", type=int, default=115200, show_default=True)
+@click.option("--variant", type=VARIANT, default=None, help="The model (default: the emulator's or ask '?').")
+@click.option("--baud", type=BAUD, default=115200, show_default=True)
 @click.option("--allow-motion", is_flag=True, help="Real units: allow probes that move axes.")
-@click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
+@click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM write probes (A18).")
 def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: bool,
         max_steps: int | None, allow_eeprom: bool) -> None:
-    """Probe the open questions A1–A29 and write what the unit actually does."""
+    """Probe the open questions A1–A29 and write what the unit actually does.
+
+    \b
+    Examples:
+      conform characterize emu:gve64-v19 -o unit.toml
+      conform characterize /dev/ttyUSB0 -o unit.toml --allow-motion --max-steps 2000
+    """
     from conform.families import is_family_variant
 
     if is_family_variant(variant or parse_target(target)[1], "grbl"):
@@ -50,7 +58,14 @@ def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: 
                        + (f" ({', '.join(f.matches)})" if f.status == "ambiguous" else "")
                        + (f" — {f.note}" if f.status == "not-probed" else ""))
 
-        dialect, findings = characterize(spec, tgt, vid, progress=show)
+        with progress("conform characterize") as bar:
+            task = bar.task(f"{target} ({vid})", len(spec.questions))
+
+            def step(f):  # noqa: ANN001, ANN202
+                task.update(advance=1, step=f.question)
+                show(f)
+
+            dialect, findings = characterize(spec, tgt, vid, progress=step)
         if not tgt.emulated and allow_motion:
             click.echo(tgt.safe_stop(), err=True)
     finally:

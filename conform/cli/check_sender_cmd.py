@@ -11,30 +11,37 @@ import sys
 
 import click
 
+from conform.cli.params import INPUT_FILE, NON_NEGATIVE_INT, OUTPUT_DIR, VARIANT, json_option
 from conform.errors import UserError
 
 
 @click.command(name="check-sender", context_settings={"ignore_unknown_options": True})
-@click.option("--variant", default=None, help="The unit to emulate (default gve64-v19).")
+@click.option("--variant", type=VARIANT, default=None, help="The unit to emulate (default gve64-v19).")
 @click.option("--scenario", "scenarios", multiple=True, metavar="NAME",
               help="Run only these scenarios (repeatable; default: all). `--scenario list` "
                    "lists them.")
-@click.option("--report", "report_dir", default=None, type=click.Path(file_okay=False),
+@click.option("--report", "report_dir", default=None, type=OUTPUT_DIR,
               help="Write index.html, summary.md, junit.xml, results.json here "
                    "(default reports/check-sender-<timestamp>/).")
 @click.option("--timeout", type=float, default=None,
               help="Seconds before a program still running is stopped and graded as hung "
                    "(default per scenario, 30).")
-@click.option("--job", "job_file", default=None, type=click.Path(dir_okay=False),
+@click.option("--job", "job_file", default=None, type=INPUT_FILE,
               help="A vector file to use as the job in every scenario instead of the "
                    "scenario's own.")
-@click.option("--seed", type=int, default=1, show_default=True, help="Seed of the faults.")
-@click.option("--json", "as_json", is_flag=True, help="Print results.json to stdout.")
+@click.option("--seed", type=NON_NEGATIVE_INT, default=1, show_default=True, help="Seed of the faults.")
+@json_option("results.json's document")
 @click.argument("command", nargs=-1, type=click.UNPROCESSED)
 def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         timeout: float | None, job_file: str | None, seed: int, as_json: bool,
         command: tuple[str, ...]) -> None:
-    """Run COMMAND once per scenario against the emulator and grade it per rule and clause."""
+    """Run COMMAND once per scenario against the emulator and grade it per rule and clause.
+
+    \b
+    Examples:
+      conform check-sender --scenario list
+      conform check-sender --scenario clean -- python tests/senders/careful.py {port} {job}
+    """
     from conform.families import is_family_variant
 
     if is_family_variant(variant, "grbl"):  # grbl senders: that family's scenarios and rules

@@ -15,6 +15,7 @@ from typing import Any
 
 import click
 
+from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
 from conform.conformance.profile import load_profile
 from conform.errors import UserError
 from conform.spec import load_spec
@@ -30,9 +31,21 @@ class _EmulateGroup(click.Group):
         return super().parse_args(ctx, args)
 
 
-@click.group(cls=_EmulateGroup)
+@click.group(cls=_EmulateGroup,
+             subcommand_metavar="[serve] VARIANT [OPTIONS] | control SOCKET WORDS...")
 def cli() -> None:
-    """Serve the reference unit model on a pty or TCP (VARIANT), or control a running one."""
+    """Serve the reference unit model on a pty or TCP, or control a running one.
+
+    `conform emulate VARIANT [OPTIONS]` is short for `conform emulate serve VARIANT [OPTIONS]`
+    (see `conform emulate serve --help` for the options).
+
+    \b
+    Examples:
+      conform emulate serve gve64-v19               # prints /dev/pts/N; Ctrl-C stops it
+      conform emulate gve64-v19 --baud 115200       # the same, paced at the wire speed
+      conform emulate gve124 --tcp 5024             # socket://localhost:5024
+      conform emulate control SOCKET press stop     # SOCKET: shown on the emulator's stderr
+    """
 
 
 def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, str]:
@@ -57,19 +70,20 @@ def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
 
 
 @cli.command("serve")
-@click.argument("variant")
-@click.option("--baud", type=int, default=None,
+@click.argument("variant", type=VARIANT)
+@click.option("--baud", type=BAUD, default=None,
               help="Pace both directions at this wire speed (10 bits per byte).")
-@click.option("--tcp", "tcp_port", type=int, default=None,
+@click.option("--tcp", "tcp_port", type=PORT_NUMBER, default=None,
               help="Serve socket://127.0.0.1:PORT instead of a pty (0: any free port).")
 @click.option("--dialect", "dialect_pairs", multiple=True, metavar="A<n>=ALT",
               help="Choose an open-question alternative (repeatable).")
-@click.option("--profile", type=click.Path(dir_okay=False), default=None,
+@click.option("--profile", type=INPUT_FILE, default=None,
               help="A TOML file whose [dialect] table chooses alternatives.")
 @click.option("--faults", default=None, metavar="SPEC",
               help="Noise, drops, latency, garbled answers, disconnects "
                    "(e.g. corrupt=1e-3,drop=1e-4,latency=1-16,garble=0.01,disconnect=0.02).")
-@click.option("--seed", type=int, default=None, help="Seed for the fault injection.")
+@click.option("--seed", type=NON_NEGATIVE_INT, default=None,
+              help="Seed for the fault injection.")
 @click.option("--control", "control_path", default=None, metavar="PATH",
               help="Unix socket for control commands (default: a fresh path, shown on stderr).")
 @click.option("--link", "link_path", default=None, metavar="PATH",
@@ -78,7 +92,7 @@ def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
               help="Record the session as an MCAP capture.")
 @click.option("--switch", "switch_pairs", multiple=True, metavar="AXIS=PULSES",
               help="Distance from a W's start to that axis's reference switch (default 3000).")
-@click.option("--answer-delay", type=float, default=0.0, show_default=True,
+@click.option("--answer-delay", type=NON_NEGATIVE, default=0.0, show_default=True,
               help="Processing time of the unit before each answer, seconds.")
 @click.option("--truth", "truth_path", default=None, metavar="FILE.json",
               help="On exit, write what the unit accepted and executed (every vector, D/K/R/"
@@ -87,7 +101,13 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
               profile: str | None, faults: str | None, seed: int | None,
               control_path: str | None, link_path: str | None, record_path: str | None,
               switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None) -> None:
-    """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path."""
+    """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
+
+    \b
+    Examples:
+      conform emulate serve gve64-v19 --baud 115200
+      conform emulate serve gve64-v19 --faults "corrupt=1e-3,latency=1-16" --seed 1
+    """
     from conform.families import family_for_variant
 
     fam = family_for_variant(variant)
@@ -205,7 +225,13 @@ def _open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, An
 @click.argument("words", nargs=-1, required=True)
 def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
     """Send a control command to a running emulator, e.g. `press stop`, `input 1 7 off`,
-    `release sensor`, `state`, `help`."""
+    `release sensor`, `state`, `help`.
+
+    \b
+    Example:
+      conform emulate gve64-v19 --control /tmp/emu.sock &
+      conform emulate control /tmp/emu.sock press stop
+    """
     from conform.unit.control import send_control
 
     try:

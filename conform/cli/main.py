@@ -29,13 +29,26 @@ SUBCOMMANDS: tuple[str, ...] = (
     "analyze",
     "send",
     "check-sender",
+    "ports",
 )
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="conform")
 def cli() -> None:
-    """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators."""
+    """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators.
+
+    Exit status: 0 done, 1 something failed (a FAIL, a failed send, a damaged capture), 2 a
+    usage or input mistake, a link that cannot be opened, or a run that stopped early; 130
+    interrupted.
+
+    \b
+    Examples:
+      conform run                                   # conformance against the emulator
+      conform ports --probe                         # which serial port has a unit
+      conform analyze captures/careless-noisy.mcap  # what went wrong in a session
+      conform COMMAND --help                        # each command, with examples
+    """
 
 
 def _register() -> None:
@@ -53,8 +66,9 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> None:
-    try:
-        cli.main(args=argv, prog_name="conform", standalone_mode=False)
+    args = sys.argv[1:] if argv is None else list(argv)
+    try:  # obj["argv"]: the command line as given, for the reports' "how to run it again"
+        cli.main(args=args, prog_name="conform", standalone_mode=False, obj={"argv": args})
     except click.exceptions.Abort:
         click.echo("conform: aborted", err=True)
         sys.exit(130)

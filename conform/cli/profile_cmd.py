@@ -6,20 +6,31 @@ import sys
 
 import click
 
+from conform.cli.params import INPUT_FILE
 from conform.conformance.profile import diff_profiles, load_profile
 from conform.spec import load_spec
 
 
 @click.group(name="profile")
 def cli() -> None:
-    """Characterisation profiles (from ``conform characterize``)."""
+    """Characterisation profiles (from ``conform characterize``).
+
+    \b
+    Example:
+      conform profile diff unit.toml unit-v10.toml
+    """
 
 
 @cli.command()
-@click.argument("a", type=click.Path(dir_okay=False))
-@click.argument("b", type=click.Path(dir_okay=False))
+@click.argument("a", type=INPUT_FILE)
+@click.argument("b", type=INPUT_FILE)
 def diff(a: str, b: str) -> None:
-    """Open questions on which two profiles differ; exit 1 when they do."""
+    """Open questions on which two profiles differ; exit 1 when they do.
+
+    \b
+    Example:
+      conform profile diff unit-a.toml unit-b.toml
+    """
     pa, pb = load_profile(a), load_profile(b)
     rows = diff_profiles(pa, pb, dict(load_spec().dialect().choices))
     if not rows:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import click
 
 from conform.capture.live import ProxyCapture, run_until_signal
+from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
+from conform.cli.progress import progress, recording
 from conform.errors import LinkError
 
 
@@ -14,31 +17,42 @@ from conform.errors import LinkError
 @click.option("--unit", "unit_url", required=True,
               help="The unit: a device path, an emulator's pty, or any pyserial URL "
                    "(socket://host:port, rfc2217://...).")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--output", required=True, type=OUTPUT_FILE,
               help="The MCAP file to write (FILE.part until finished).")
-@click.option("--baud", default=115200, show_default=True, type=click.IntRange(min=1),
+@click.option("--baud", default=115200, show_default=True, type=BAUD,
               help="Baud rate of the unit's port (also used for wire-time estimates).")
-@click.option("--variant", default=None,
+@click.option("--variant", type=VARIANT, default=None,
               help="Decode frames with this variant's tables (e.g. gve64-v19).")
 @click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
 @click.option("--reconnect", is_flag=True,
               help="If the unit's port vanishes, wait for it to come back and go on.")
-@click.option("--link", default=None, type=click.Path(dir_okay=False),
+@click.option("--link", default=None, type=OUTPUT_FILE,
               help="Also make this symlink to the sender's pty (a stable name).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: bool,
-        reconnect: bool, link: str | None) -> None:
+        reconnect: bool, link: str | None, quiet: bool) -> None:
     """Create a pty for the sender, forward it to the unit and record until SIGINT/SIGTERM.
 
-    The first line on stdout is the pty's device path.
+    The first line on stdout is the pty's device path; stderr shows the bytes recorded.
+
+    \b
+    Example:
+      conform proxy --unit /dev/ttyUSB0 --baud 115200 -o session.mcap
     """
     # the recorder's writer thread must not hold the GIL for long while a pump thread waits
     # to forward bytes: a short switch interval bounds that wait (latency added at p99)
     sys.setswitchinterval(0.0002)
     proxy = ProxyCapture(unit_url, output, baud=baud, variant=variant, decode=not no_decode,
                          reconnect=reconnect, link=link)
-    sys.stdout.write(proxy.host_path + "\n")
-    sys.stdout.flush()
-    failure = run_until_signal(proxy)
+    # a sender may start on the pty and stop us before run_until_signal is reached: from the
+    # moment the path is out, SIGINT/SIGTERM end the recording cleanly
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda _signum, _frame: proxy.stop())
+    with progress("conform proxy", quiet=quiet) as bar:
+        recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")
+        sys.stdout.write(proxy.host_path + "\n")
+        sys.stdout.flush()
+        failure = run_until_signal(proxy)
     click.echo(f"conform proxy: recorded {proxy.recorder.path}", err=True)
     if failure:
         raise LinkError(f"{failure} (recording finished cleanly in {proxy.recorder.path})",

@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from conform.cli.params import INPUT_FILE, OUTPUT_DIR
 from conform.conformance.results import Grade, RunResults
 from conform.errors import UserError, load_user_file
 from conform.report.render import write_reports
@@ -102,11 +103,16 @@ def load_results(path: str) -> RunResults:
 
 
 @click.command(name="report")
-@click.argument("results", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", type=click.Path(file_okay=False), default=None,
+@click.argument("results", type=INPUT_FILE)
+@click.option("-o", "--output", type=OUTPUT_DIR, default=None,
               help="Folder to write into (default: the folder of RESULTS).")
 def cli(results: str, output: str | None) -> None:
-    """Write index.html, summary.md and junit.xml (and results.json) from RESULTS."""
+    """Write index.html, summary.md and junit.xml (and results.json) from RESULTS.
+
+    \b
+    Example:
+      conform report reports/latest/results.json -o shared/
+    """
     data = load_results(results)
     out = Path(output) if output else Path(results).resolve().parent
     write_reports(data, out)

@@ -4,10 +4,23 @@ from __future__ import annotations
 
 import shlex
 import sys
+from functools import partial
 from pathlib import Path
 
 import click
 
+from conform.cli.params import (
+    BAUD,
+    INPUT_FILE,
+    NON_NEGATIVE_INT,
+    OUTPUT_DIR,
+    POSITIVE_INT,
+    TARGET,
+    VARIANT,
+    echo_json,
+    json_option,
+)
+from conform.cli.progress import progress as show_progress
 from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
@@ -22,64 +35,20 @@ from conform.conformance.suite import (
 )
 from conform.conformance.target import DEFAULT_VARIANT, identify, open_target, parse_target
 from conform.errors import UserError
-from conform.report.render import default_dir, write_reports
+from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 from conform.spec import load_spec
 
 
-class _Progress:
-    """A rich progress bar per target (quiet when stderr is not a terminal)."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.bar = None
-        if enabled:
-            from rich.console import Console
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                Progress,
-                TextColumn,
-                TimeElapsedColumn,
-            )
-
-            self.bar = Progress(TextColumn("{task.description}"), BarColumn(),
-                                MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
-                                TimeElapsedColumn(), console=Console(stderr=True),
-                                transient=False)
-
-    def __enter__(self) -> _Progress:
-        if self.bar is not None:
-            self.bar.__enter__()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(*exc)
-
-    def task(self, name: str, total: int):  # noqa: ANN201 - returns a progress callback
-        if self.bar is None:
-            return None
-        tid = self.bar.add_task(name, total=total, last="")
-        fails = [0]
-
-        def step(result):  # noqa: ANN001, ANN202
-            if result.grade is Grade.FAIL:
-                fails[0] += 1
-            self.bar.update(tid, advance=1, last=f"FAIL {fails[0]}" if fails[0] else "")
-
-        return step
-
-
 @click.command(name="run")
-@click.option("--target", "targets", multiple=True, metavar="T",
+@click.option("--target", "targets", multiple=True, metavar="T", type=TARGET,
               help="emu:VARIANT[:MUTANT], a device path, a pty or a pyserial URL "
                    "(socket://, rfc2217://). Repeat for several. Default: emu:gve64-v19.")
-@click.option("--variant", default=None, help="The model expected (default: the emulator's, "
+@click.option("--variant", type=VARIANT, default=None, help="The model expected (default: the emulator's, "
               "else ask '?' and map the firmware string, else gve64-v19).")
-@click.option("--baud", type=int, default=115200, show_default=True)
+@click.option("--baud", type=BAUD, default=115200, show_default=True)
 @click.option("--profile", type=click.Choice(PROFILE_NAMES), default="quick", show_default=True)
-@click.option("--report", "report_dir", type=click.Path(file_okay=False), default=None,
-              help="Report folder (default reports/<timestamp>/).")
+@click.option("--report", "report_dir", type=OUTPUT_DIR, default=None,
+              help="Report folder (default reports/<timestamp>/, linked as reports/latest).")
 @click.option("--check", "patterns", multiple=True, metavar="GLOB",
               help="Only checks whose id matches (e.g. '*/C/*'); repeatable.")
 @click.option("--list", "list_only", is_flag=True, help="List the check ids and exit.")
@@ -88,24 +57,34 @@ class _Progress:
               help="Also run the deviant units and report the kill rate.")
 @click.option("--replay", default=None, metavar="ID[@SEED]",
               help="Re-run one check (a state-machine check with the seed that found it).")
-@click.option("--seed", type=int, default=0, show_default=True, help="State-machine seed.")
-@click.option("--dialect", "dialect_file", type=click.Path(dir_okay=False), default=None,
+@click.option("--seed", type=NON_NEGATIVE_INT, default=0, show_default=True, help="State-machine seed.")
+@click.option("--dialect", "dialect_file", type=INPUT_FILE, default=None,
               help="Expect this characterised profile's dialect instead of the defaults.")
 @click.option("--allow-motion", is_flag=True, help="Real units: allow checks that move axes, "
               "switch outputs or start the spindle (needs --max-steps).")
-@click.option("--max-steps", type=int, default=None, help="Bound on every axis move (pulses).")
+@click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM writes.")
 @click.option("--no-machine", is_flag=True, help="Skip the random-sequence state machine.")
 @click.option("--inputs-control", default=None, metavar="PATH",
               help="Drive the inputs of an emulator behind the link through its control socket "
                    "(`conform emulate serve` prints it), for the checks that need inputs.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@json_option("the results in results.json's format, plus the report folder")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        inputs_control: str | None, quiet: bool) -> None:
-    """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does."""
+        inputs_control: str | None, quiet: bool, as_json: bool) -> None:
+    """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
+    usage or link error (or a run that stopped early).
+
+    \b
+    Examples:
+      conform run                                   # the GVE64 v19 emulator, quick profile
+      conform run --matrix --json > results.json    # all four variants, results on stdout
+      conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
+      xdg-open reports/latest/index.html            # the last run's report
+    """
     if _other_family(targets, variant):
         if mutants or matrix or replay or dialect_file:
             raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
@@ -119,7 +98,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
     if max_steps is not None and max_steps <= 0:
         raise UserError("--max-steps must be a positive number of pulses")
-    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    argv = (click.get_current_context().find_root().obj or {}).get("argv", sys.argv[1:])
+    command = "conform " + " ".join(shlex.quote(a) for a in argv)
     exact = None
     if replay:
         check_id, replay_seed = parse_replay(replay)
@@ -135,17 +115,23 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     dialect = load_profile_dialect(spec, dialect_file) if dialect_file else None
 
     if list_only:
+        listed = []
         for t in plan:
             kind, what, _ = parse_target(t)
             vid = variant or (what if kind == "emu" and what else DEFAULT_VARIANT)
             for c in suite(spec, vid, patterns=patterns, machine=not no_machine,
                            profile=profile):
-                click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
+                listed.append({"id": c.id, "level": c.level, "clause": c.clause,
+                               "title": c.title})
+                if not as_json:
+                    click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
+        if as_json:
+            echo_json({"checks": listed})
         return
 
     runs: list[TargetRun] = []
     aborted = None
-    with _Progress(not quiet and sys.stderr.isatty()) as bar:
+    with show_progress("conform run", quiet=quiet) as bar:
         for t in plan:
             kind, what, _ = parse_target(t)
             guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
@@ -170,7 +156,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                 options = RunOptions(profile=profile, seed=seed, notes=notes,
                                      announce=None if quiet else
                                      (lambda text: click.echo(text, err=True)))
-                progress = bar.task(f"{target.name} ({vid})", len(checks))
+                progress = _step(bar.task(f"{target.name} ({vid})", len(checks)), checks)
                 try:
                     run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
                                   progress=progress)
@@ -184,20 +170,43 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                     break
             finally:
                 target.close()
-    mutant_report = []
-    if mutants and aborted is None:
-        variants = [r.variant for r in runs] or [DEFAULT_VARIANT]
-        mutant_report, _ = run_mutants(spec, variants, profile=profile, seed=seed,
-                                       progress=None if quiet else
-                                       (lambda s: click.echo(s, err=True)))
+        mutant_report = []
+        if mutants and aborted is None:
+            from conform.conformance.mutants import mutant_targets
+
+            variants = [r.variant for r in runs] or [DEFAULT_VARIANT]
+            task = bar.task("mutants", len(list(mutant_targets(variants))))
+            mutant_report, _ = run_mutants(
+                spec, variants, profile=profile, seed=seed,
+                progress=lambda s: task.update(advance=1, step=s))
     results = results_of(runs, command, mutant_report)
     out = Path(report_dir) if report_dir else default_dir()
     write_reports(results, out)
-    _print_summary(results, out)
+    if not report_dir:
+        link_latest(out)
+    code = 2 if aborted is not None else 1 if results.failed() else 0
+    if as_json:
+        echo_json(results.to_json() | {"report": str(out), "exit": code})
+    _print_summary(results, out, err=as_json)
     if aborted is not None:
         raise UserError(f"run aborted: {aborted}", exit_code=2)
-    if results.failed():
-        sys.exit(1)
+    if code:
+        sys.exit(code)
+
+
+def _step(task, checks):  # noqa: ANN001, ANN202 - a progress Task, the checks in run order
+    """The runner's per-check callback: advance, count FAILs, name the check now running."""
+    fails = [0]
+
+    def step(result):  # noqa: ANN001, ANN202
+        fails[0] += result.grade is Grade.FAIL
+        done = int(task.completed) + 1
+        upcoming = checks[done].id if done < len(checks) else "writing the report"
+        task.update(advance=1, step=(f"FAIL {fails[0]} · " if fails[0] else "") + upcoming)
+
+    if checks:
+        task.update(step=checks[0].id)
+    return step
 
 
 def _other_family(targets: tuple[str, ...], variant: str | None) -> bool:
@@ -231,23 +240,23 @@ def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profil
         sys.exit(1)
 
 
-def _print_summary(results, out: Path) -> None:  # noqa: ANN001
+def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
+    echo = partial(click.echo, err=err)
     for r in results.runs:
         counts = r.counts()
         shown = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
-        click.echo(f"{r.target} ({r.variant}, {r.profile}): {shown} in {r.duration:.1f} s")
+        echo(f"{r.target} ({r.variant}, {r.profile}): {shown} in {r.duration:.1f} s")
         for c in r.checks:
             if c.grade is Grade.FAIL:
-                click.echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+                echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
         if r.aborted:
-            click.echo(f"  INCOMPLETE: {r.aborted}")
-        for g in r.not_verified:
-            click.echo(f"  not verified: {g['count']} checks {g['reason']}"
-                       + (f" — enable with {g['how']}" if g["how"] else ""))
+            echo(f"  INCOMPLETE: {r.aborted}")
     if results.mutants:
         killed = sum(1 for m in results.mutants if m["killed"])
-        click.echo(f"mutants: {killed}/{len(results.mutants)} killed")
+        echo(f"mutants: {killed}/{len(results.mutants)} killed")
         for m in results.mutants:
             if not m["killed"]:
-                click.echo(f"  SURVIVED {m['name']} ({m['fault']})")
-    click.echo(f"report: {out / 'index.html'}")
+                echo(f"  SURVIVED {m['name']} ({m['fault']})")
+    for line in not_verified_lines(results):
+        echo(line)
+    echo(f"report: {out / 'index.html'}")

@@ -7,6 +7,18 @@ import time
 
 import click
 
+from conform.cli.params import (
+    BAUD,
+    INPUT_FILE,
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    OUTPUT_FILE,
+    POSITIVE,
+    POSITIVE_INT,
+    PROBABILITY,
+    TARGET,
+    VARIANT,
+)
 from conform.errors import LinkError, UserError
 from conform.sender.core import POLICIES
 
@@ -76,31 +88,31 @@ def _finish(sender: object) -> None:
 
 
 @click.command(name="send")
-@click.argument("job", type=click.Path(dir_okay=False, path_type=str))
-@click.option("--target", required=True,
+@click.argument("job", type=INPUT_FILE)
+@click.option("--target", required=True, type=TARGET,
               help="emu:VARIANT (in-process), a pyserial URL (socket://, rfc2217://...) or a "
                    "port / pty path.")
-@click.option("--variant", default=None, help="The unit's variant (default: emu's, or gve64-v19).")
-@click.option("--baud", type=int, default=115200, show_default=True)
+@click.option("--variant", type=VARIANT, default=None, help="The unit's variant (default: emu's, or gve64-v19).")
+@click.option("--baud", type=BAUD, default=115200, show_default=True)
 @click.option("--checksums/--no-checksums", default=False, show_default=True)
-@click.option("--packet", type=int, default=1, show_default=True,
+@click.option("--packet", type=POSITIVE_INT, default=1, show_default=True,
               help="C/B lines per *S…*E packet (1: no packets).")
 @click.option("--policy", type=click.Choice(POLICIES), default="careful", show_default=True,
               help="What to do after a garbled answer or none (careless ones are for demos).")
-@click.option("--latency", type=float, default=0.0, show_default=True,
+@click.option("--latency", type=NON_NEGATIVE, default=0.0, show_default=True,
               help="Simulated converter latency per direction, ms.")
-@click.option("--timeout", type=float, default=250.0, show_default=True,
+@click.option("--timeout", type=POSITIVE, default=250.0, show_default=True,
               help="Answer timeout, ms.")
-@click.option("--noise", type=float, default=0.0, help="emu: probability a byte is damaged.")
-@click.option("--seed", type=int, default=1, help="emu: seed of the noise.")
+@click.option("--noise", type=PROBABILITY, default=0.0, help="emu: probability a byte is damaged.")
+@click.option("--seed", type=NON_NEGATIVE_INT, default=1, help="emu: seed of the noise.")
 @click.option("--corrupt-command", default="", help="emu: damage these host writes (0-based).")
 @click.option("--corrupt-answer", default="", help="emu: damage these answer lines (0-based).")
-@click.option("--record", type=click.Path(dir_okay=False, path_type=str), default=None,
+@click.option("--record", type=OUTPUT_FILE, default=None,
               help="emu: record the session as an MCAP capture.")
 @click.option("--steps-per-mm", default="100", show_default=True, help="G-code: per axis, X,Y,Z.")
-@click.option("--feed", type=float, default=600.0, show_default=True,
+@click.option("--feed", type=POSITIVE, default=600.0, show_default=True,
               help="G-code: mm/min before the first F.")
-@click.option("--accel", type=float, default=500.0, show_default=True, help="G-code: mm/s².")
+@click.option("--accel", type=POSITIVE, default=500.0, show_default=True, help="G-code: mm/s².")
 @click.option("--lenient", is_flag=True,
               help="G-code: skip words outside the subset and what cannot be read.")
 @click.option("--allow-motion", is_flag=True,
@@ -109,7 +121,13 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
         policy: str, latency: float, timeout: float, noise: float, seed: int,
         corrupt_command: str, corrupt_answer: str, record: str | None, steps_per_mm: str,
         feed: float, accel: float, lenient: bool, allow_motion: bool) -> None:
-    """Stream JOB (one command per line, or .nc/.gcode) and report what happened."""
+    """Stream JOB (one command per line, or .nc/.gcode) and report what happened.
+
+    \b
+    Examples:
+      conform send captures/jobs/part.nc --target emu:gve64-v19 --checksums --packet 20
+      conform send captures/jobs/raster.txt --target /dev/ttyUSB0 --allow-motion
+    """
     from conform.sender.job import load_job
     from conform.spec import load_spec
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import click
 
 from conform.capture.live import SniffCapture, run_until_signal
+from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
+from conform.cli.progress import progress, recording
 from conform.errors import LinkError
 
 
@@ -13,21 +15,29 @@ from conform.errors import LinkError
               help="Adapter that receives what the sender transmits (device or pyserial URL).")
 @click.option("--unit-port", required=True,
               help="Adapter that receives what the unit transmits.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--output", required=True, type=OUTPUT_FILE,
               help="The MCAP file to write (FILE.part until finished).")
-@click.option("--baud", default=115200, show_default=True, type=click.IntRange(min=1))
-@click.option("--variant", default=None,
+@click.option("--baud", default=115200, show_default=True, type=BAUD)
+@click.option("--variant", type=VARIANT, default=None,
               help="Decode frames with this variant's tables (e.g. gve64-v19).")
 @click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
 @click.option("--reconnect", is_flag=True,
               help="If an adapter vanishes, wait for it to come back and go on.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 def cli(host_port: str, unit_port: str, output: str, baud: int, variant: str | None,
-        no_decode: bool, reconnect: bool) -> None:
-    """Record both directions of a live link without sending a byte, until SIGINT/SIGTERM."""
+        no_decode: bool, reconnect: bool, quiet: bool) -> None:
+    """Record both directions of a live link without sending a byte, until SIGINT/SIGTERM.
+
+    \b
+    Example:
+      conform sniff --host-port /dev/ttyUSB1 --unit-port /dev/ttyUSB2 -o session.mcap
+    """
     tap = SniffCapture(host_port, unit_port, output, baud=baud, variant=variant,
                        decode=not no_decode, reconnect=reconnect)
     click.echo(f"conform sniff: recording {host_port} + {unit_port} to {output}", err=True)
-    failure = run_until_signal(tap)
+    with progress("conform sniff", quiet=quiet) as bar:
+        recording(bar, tap.recorder, f"{host_port} + {unit_port}")
+        failure = run_until_signal(tap)
     click.echo(f"conform sniff: recorded {tap.recorder.path}", err=True)
     if failure:
         raise LinkError(f"{failure} (recording finished cleanly in {tap.recorder.path})",

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import click
 from rich.console import Console
 from rich.table import Table
 
+from conform.cli.params import VARIANT, echo_json, json_option
+from conform.errors import UserError
 from conform.spec import load_spec
 from conform.spec.diff import diff_variants
 from conform.spec.model import CommandSpec, Variant
@@ -13,6 +18,23 @@ from conform.spec.model import CommandSpec, Variant
 
 def _console() -> Console:
     return Console(soft_wrap=False, width=None if click.get_text_stream("stdout").isatty() else 160)
+
+
+_JSON = json_option("the table's rows")
+
+
+def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json: bool,
+          key: str, **extra: Any) -> None:
+    """Print rows as a rich table, or as ``{key: [{column: value}], ...extra}`` JSON."""
+    if as_json:
+        echo_json({**extra, key: [dict(zip(columns, row, strict=True)) for row in rows]})
+        return
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, overflow="fold")
+    for row in rows:
+        table.add_row(*(str(x) for x in row))
+    _console().print(table)
 
 
 def _params(cmd: CommandSpec, variant: Variant) -> str:
@@ -35,21 +57,40 @@ def _params(cmd: CommandSpec, variant: Variant) -> str:
 
 @click.group()
 def cli() -> None:
-    """The protocol tables: variants, commands, ranges and differences."""
+    """The protocol tables: variants, commands, ranges and differences.
+
+    \b
+    Examples:
+      conform spec list
+      conform spec diff gve64-v10 gve64-v19
+    """
 
 
 @cli.command("list")
-def list_cmd() -> None:
-    """List the modelled variants."""
+@_JSON
+def list_cmd(as_json: bool) -> None:
+    """List the modelled variants.
+
+    \b
+    Example:
+      conform spec list --json | jq -r '.variants[].variant'
+    """
     spec = load_spec()
-    table = Table(title="GVE variants")
-    for col in ("variant", "title", "firmware", "axes", "queue", "max rate", "commands", "base"):
-        table.add_column(col)
-    for v in spec.variants.values():
-        table.add_row(v.id, v.title, v.firmware, "".join(v.axes), str(v.queue), f"{v.max_rate:,}",
-                      str(len(v.commands)), v.base or "-")
-    _console().print(table)
-    _other_families()
+    rows = [(v.id, v.title, v.firmware, "".join(v.axes), v.queue, v.max_rate, len(v.commands),
+             v.base or "-") for v in spec.variants.values()]
+    if not as_json:
+        rows = [(*r[:5], f"{r[5]:,}", *r[6:]) for r in rows]
+    others = {}
+    if as_json:
+        from conform.families import families
+
+        others = {f.name: [{"variant": v.id, "title": v.title, "firmware": v.firmware,
+                            "axes": v.axes, "buffers": v.buffer, "notes": v.notes}
+                           for v in f.variants()] for f in families() if f.name != "gve"}
+    _emit("GVE variants", ("variant", "title", "firmware", "axes", "queue", "max rate",
+                           "commands", "base"), rows, as_json, "variants", other_families=others)
+    if not as_json:
+        _other_families()
 
 
 def _other_families() -> None:
@@ -68,10 +109,17 @@ def _other_families() -> None:
 
 
 @cli.command("show")
-@click.argument("variant")
+@click.argument("variant", type=VARIANT)
 @click.argument("command", required=False)
-def show_cmd(variant: str, command: str | None) -> None:
-    """Show a variant's commands (or one command) with ranges and manual clauses."""
+@_JSON
+def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
+    """Show a variant's commands (or one command) with ranges and manual clauses.
+
+    \b
+    Examples:
+      conform spec show gve64-v19
+      conform spec show gve124 V --json
+    """
     from conform.families import family_for_variant
 
     if family_for_variant(variant).name == "grbl":
@@ -87,11 +135,8 @@ def show_cmd(variant: str, command: str | None) -> None:
         if cmd is None:
             known = spec.commands.get(command)
             if known is None:
-                raise click.ClickException(f"no command {command!r} in the tables")
-            raise click.ClickException(f"{v.id} has no command {command!r} (absent in this version)")
-        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
-        table.add_column("field")
-        table.add_column("value")
+                raise UserError(f"no command {command!r} in the tables")
+            raise UserError(f"{v.id} has no command {command!r} (absent in this version)")
         rows = [
             ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),
             ("family", cmd.family), ("parameters", _params(cmd, v)),
@@ -104,40 +149,55 @@ def show_cmd(variant: str, command: str | None) -> None:
             ("open questions", ", ".join(cmd.questions) or "-"),
             ("variants", ", ".join(x.id for x in spec.variants.values() if x.has(cmd.id))),
         ]
+        if as_json:
+            echo_json({"variant": v.id, "command": cmd.id, **dict(rows)})
+            return
+        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
+        table.add_column("field")
+        table.add_column("value")
         for k, val in rows:
             table.add_row(k, val)
         console.print(table)
         return
-    table = Table(title=f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
-                        f"max {v.max_rate:,} pulses/s")
-    for col in ("command", "addr", "parameters", "answer", "modal", "running", "clause"):
-        table.add_column(col, overflow="fold")
-    for cmd in v.commands.values():
-        table.add_row(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
-                      ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
-                      "" if cmd.while_running else "7", cmd.clause_for(v.manual))
-    console.print(table)
+    rows = [(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
+             ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
+             "" if cmd.while_running else "7", cmd.clause_for(v.manual))
+            for cmd in v.commands.values()]
+    _emit(f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
+          f"max {v.max_rate:,} pulses/s",
+          ("command", "addr", "parameters", "answer", "modal", "running", "clause"), rows,
+          as_json, "commands", variant=v.id, axes="".join(v.axes), queue=v.queue,
+          max_rate=v.max_rate)
 
 
 @cli.command("diff")
-@click.argument("a")
-@click.argument("b")
-def diff_cmd(a: str, b: str) -> None:
-    """What differs from variant A to variant B."""
+@click.argument("a", type=VARIANT)
+@click.argument("b", type=VARIANT)
+@_JSON
+def diff_cmd(a: str, b: str, as_json: bool) -> None:
+    """What differs from variant A to variant B.
+
+    \b
+    Example:
+      conform spec diff gve64-v19 gve124
+    """
     spec = load_spec()
     va, vb = spec.variant(a), spec.variant(b)
     diffs = diff_variants(va, vb)
-    table = Table(title=f"{va.id} → {vb.id}: {len(diffs)} differences")
-    for col in ("kind", "what", a, b, "clause"):
-        table.add_column(col, overflow="fold")
-    for d in diffs:
-        table.add_row(d.kind, d.what, str(d.a), str(d.b), d.clause)
-    _console().print(table)
+    rows = [(d.kind, d.what, d.a, d.b, d.clause) for d in diffs]
+    _emit(f"{va.id} → {vb.id}: {len(diffs)} differences", ("kind", "what", a, b, "clause"),
+          rows if as_json else [(*r[:2], str(r[2]), str(r[3]), r[4]) for r in rows], as_json,
+          "differences", a=a, b=b)
 
 
 @cli.command("questions")
 def questions_cmd() -> None:
-    """The open questions the manuals leave, with the assumed default."""
+    """The open questions the manuals leave, with the assumed default.
+
+    \b
+    Example:
+      conform spec questions
+    """
     spec = load_spec()
     table = Table(title="Open questions (A-register)")
     for col in ("id", "question", "default", "alternatives", "settled"):
@@ -150,7 +210,12 @@ def questions_cmd() -> None:
 @cli.command("check")
 @click.option("--specs", "root", type=click.Path(), default=None, help="A spec folder to validate.")
 def check_cmd(root: str | None) -> None:
-    """Load and validate the tables; one line per problem, non-zero exit."""
+    """Load and validate the tables; one line per problem, non-zero exit.
+
+    \b
+    Example:
+      conform spec check --specs specs
+    """
     spec = load_spec(root)
     n = sum(len(v.commands) for v in spec.variants.values())
     click.echo(f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "

@@ -3,67 +3,127 @@ template, inline CSS, no network), ``summary.md``, ``junit.xml`` and ``results.j
 
 from __future__ import annotations
 
+import os
+import re
 import xml.etree.ElementTree as ET
 from collections import OrderedDict
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import jinja2
 
-from conform.conformance.results import GRADE_ORDER, CheckResult, Grade, RunResults
+from conform.conformance.results import GRADE_ORDER, INFO, MUST, CheckResult, Grade, RunResults
 from conform.errors import UserError
+from conform.report import view
+from conform.report.view import column_name
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
-NOTEWORTHY = (Grade.FAIL, Grade.ERROR, Grade.DEVIATION)
 
 
 def default_dir(root: str | Path = "reports") -> Path:
     return Path(root) / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
 
 
-def _column(run: Any) -> str:
-    return run.variant if run.target == f"emu:{run.variant}" else f"{run.target} ({run.variant})"
+def link_latest(directory: str | Path, name: str = "latest") -> Path | None:
+    """Point ``<parent>/latest`` at ``directory`` (a relative symlink), so that
+    ``reports/latest/index.html`` is always the last run's; None where links are not possible."""
+    d = Path(directory)
+    link = d.parent / name
+    tmp = d.parent / f".{name}.{os.getpid()}"
+    try:
+        if link.exists() and not link.is_symlink():
+            return None  # a real folder of that name belongs to the user
+        tmp.unlink(missing_ok=True)
+        tmp.symlink_to(d.name, target_is_directory=True)
+        os.replace(tmp, link)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        return None
+    return link
 
 
 def matrix(results: RunResults) -> tuple[list[str], list[tuple[str, list[CheckResult | None]]]]:
     """Columns (one per target run) and rows (check key → the result in each column)."""
-    columns = [_column(r) for r in results.runs]
+    columns = [column_name(r) for r in results.runs]
+    return columns, _rows(results, results.checks)
+
+
+def _rows(results: RunResults, checks: list[CheckResult]
+          ) -> list[tuple[str, list[CheckResult | None]]]:
+    index = {(r.target, r.variant): i for i, r in enumerate(results.runs)}
     rows: OrderedDict[str, list[CheckResult | None]] = OrderedDict()
-    for i, run in enumerate(results.runs):
-        for c in run.checks:
-            rows.setdefault(c.key, [None] * len(columns))[i] = c
-    return columns, list(rows.items())
+    for c in checks:
+        i = index.get((c.target, c.variant))
+        if i is not None:
+            rows.setdefault(c.key, [None] * len(results.runs))[i] = c
+    return list(rows.items())
 
 
-def anchor(check_id: str, target: str = "") -> str:
-    raw = f"{target}|{check_id}"
-    return "c-" + "".join(ch if ch.isalnum() else "-" for ch in raw) + f"-{abs(hash(raw)) % 10**6}"
-
-
-def _log_text(check: CheckResult) -> list[tuple[str, str, str]]:
-    return [(f"{e.t:10.6f}", e.dir, repr(e.data)[2:-1]) for e in check.log]
+def anchor(check: CheckResult) -> str:
+    raw = f"{check.target}|{check.id}"
+    return "c-" + re.sub(r"[^A-Za-z0-9]+", "-", raw).strip("-")
 
 
 def render_html(results: RunResults) -> str:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              trim_blocks=True, lstrip_blocks=True)
-    env.globals.update(anchor=anchor, log_text=_log_text)
-    columns, rows = matrix(results)
-    details = [c for c in results.checks if c.grade in NOTEWORTHY or c.grade is Grade.SKIPPED]
-    details.sort(key=lambda c: (GRADE_ORDER.index(c.grade), c.variant, c.id))
-    passed = [c for c in results.checks if c.grade is Grade.PASS]
+
+    def rows_of(section: view.Section) -> list[tuple[str, str, list[CheckResult | None]]]:
+        return [(key, next(c.level for c in row if c), row)
+                for key, row in _rows(results, section.checks)]
+
+    env.globals.update(anchor=anchor, log_lines=view.log_lines, replay=view.replay_command,
+                       rows_of=rows_of)
+    columns, section_rows = view.section_matrix(results)
+    problems = view.problems(results)
+    deviations = view.deviations(results)
     return env.get_template("report.html.j2").render(
-        results=results, runs=results.runs, columns=columns, rows=rows, details=details,
-        passed=passed, grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
+        results=results, runs=results.runs, head=view.headline(results),
+        skipped=view.not_verified(results), levels=view.LEVELS, grade_help=view.GRADES,
+        not_applicable=sum(1 for c in results.checks if c.grade is Grade.NOT_APPLICABLE),
+        problems=problems, n_problems=sum(len(s.checks) for s in problems),
+        deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
+        columns=columns, section_rows=section_rows, n_checks=len(results.checks),
+        grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
     )
 
 
+def not_verified_lines(results: RunResults) -> list[str]:
+    """What a run did not verify and how to include it: for the terminal and the Markdown."""
+    out = []
+    for g in view.not_verified(results):
+        line = f"not verified: {g.sentence()}"
+        out.append(line + (f" (enable with {g.how})" if g.how else ""))
+    return out
+
+
+def _md_check(c: CheckResult, log_limit: int = 24) -> list[str]:
+    out = [f"- **{c.grade.value}** `{c.id}` ({c.level}"
+           + (f"; open question {c.question}" if c.question else "") + f") — {c.title}"]
+    if c.expected or c.actual:
+        out += [f"  - expected: `{c.expected}`", f"  - actual: `{c.actual}`"]
+    if c.detail:
+        out.append(f"  - {c.detail}")
+    out.append(f"  - replay: `{view.replay_command(c)}`")
+    if c.log:
+        lines = view.log_lines(c, log_limit)
+        cut = len(c.log) - len(lines)
+        out += ["", "  ```", *(f"  {t} {d:<4} {x}" for t, d, x in lines), "  ```"]
+        if cut:
+            out.insert(-3, f"  ({cut} earlier chunks in results.json)")
+    return out
+
+
 def render_markdown(results: RunResults) -> str:
-    out = ["# Conformance summary", ""]
+    head = view.headline(results)
+    out = [f"# Conformance summary: {head.verdict}", ""]
     if results.command:
         out += [f"`{results.command}`", ""]
+    out += [f"**{head.text}**", ""]
+    out += [f"> **Incomplete run.** {why}" for why in head.incomplete]
+    if head.incomplete:
+        out.append("")
     out += ["| target | variant | profile | " + " | ".join(g.value for g in GRADE_ORDER)
             + " | time (s) |", "|---" * (len(GRADE_ORDER) + 4) + "|"]
     for r in results.runs:
@@ -72,11 +132,39 @@ def render_markdown(results: RunResults) -> str:
                    + " | ".join(str(counts[g.value]) for g in GRADE_ORDER)
                    + f" | {r.duration:.1f} |")
     out.append("")
-    for r in results.runs:
-        if r.aborted:
-            out += [f"**{r.target}: {r.aborted}**", ""]
-        for note in r.notes:
-            out += [f"- {r.target}: {note}"]
+    out += [f"- {r.target}: {'; '.join(r.notes)}" for r in results.runs if r.notes]
+    skipped = view.not_verified(results)
+    out += ["", "## Not verified", ""]
+    if skipped:
+        for g in skipped:
+            out.append(f"- {g.sentence()}" + (f" (on {', '.join(g.only)})" if g.only else "")
+                       + (f" — enable with `{g.how}`" if g.how else ""))
+    else:
+        out.append("Nothing skipped: every check this profile holds was run.")
+    out += ["", f"MUST: {view.LEVELS[MUST]}. INFO: {view.LEVELS[INFO]}.", ""]
+    problems = view.problems(results)
+    out += [f"## Failures ({sum(len(s.checks) for s in problems)})", ""]
+    if not problems:
+        out.append("No FAIL and no ERROR.")
+    for s in problems:
+        out += [f"### {s.clause} ({', '.join(s.commands)})", ""]
+        for c in s.checks:
+            out += _md_check(c)
+        out.append("")
+    deviations = view.deviations(results)
+    if deviations:
+        out += ["", f"## Deviations on open questions ({sum(len(s.checks) for s in deviations)})",
+                ""]
+        for s in deviations:
+            out += [f"### {s.clause}", ""]
+            for c in s.checks:
+                out += _md_check(c, log_limit=0) if not c.log else _md_check(c)
+            out.append("")
+    columns, rows = view.section_matrix(results)
+    out += ["", "## Manual sections × variants", "",
+            "| section | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
+    for section, cells in rows:
+        out.append(f"| {section.clause} | " + " | ".join(cell.text() for cell in cells) + " |")
     if results.mutants:
         killed = sum(1 for m in results.mutants if m.get("killed"))
         out += ["", f"## Mutants: {killed}/{len(results.mutants)} killed", "",
@@ -85,23 +173,6 @@ def render_markdown(results: RunResults) -> str:
             out.append(f"| {m['name']} | {m['variant']} | {m['fault']} | "
                        f"{', '.join(m.get('caught_by', [])[:3]) or '—'} | "
                        f"{'yes' if m.get('killed') else 'NO'} |")
-    for grade in NOTEWORTHY:
-        items = [c for c in results.checks if c.grade is grade]
-        if not items:
-            continue
-        out += ["", f"## {grade.value} ({len(items)})", ""]
-        for c in items:
-            out.append(f"- **{c.id}** ({c.clause}; {c.level}) — {c.title}")
-            if c.expected or c.actual:
-                out.append(f"  - expected: `{c.expected}`")
-                out.append(f"  - actual: `{c.actual}`")
-            if c.detail:
-                out.append(f"  - {c.detail}")
-            if c.seed is not None:
-                out.append(f"  - seed {c.seed}; replay: `conform run --replay '{c.replay}'`")
-            else:
-                out.append(f"  - replay: `conform run --target {c.target} --variant {c.variant} "
-                           f"--replay '{c.replay}'`")
     return "\n".join(out) + "\n"
 
 
@@ -114,11 +185,11 @@ def render_junit(results: RunResults) -> str:
             failures=str(counts["FAIL"]), errors=str(counts["ERROR"]),
             skipped=str(counts["SKIPPED"] + counts["NOT-APPLICABLE"]), time=f"{r.duration:.3f}")
         for c in r.checks:
-            case = ET.SubElement(suite, "testcase", classname=f"{r.variant}.{c.clause}",
+            case = ET.SubElement(suite, "testcase", classname=view.junit_classname(c),
                                  name=c.id, time=f"{c.duration:.4f}")
             message = f"{c.clause}: expected {c.expected!s}; actual {c.actual!s}. {c.detail}"
-            body = "\n".join([f"replay: {c.replay}", *c.sequence,
-                              *(f"{t} {d} {x}" for t, d, x in _log_text(c))])
+            body = "\n".join([f"replay: {view.replay_command(c)}", *c.sequence,
+                              *(f"{t} {d} {x}" for t, d, x in view.log_lines(c))])
             if c.grade is Grade.FAIL:
                 ET.SubElement(case, "failure", message=message, type="FAIL").text = body
             elif c.grade is Grade.ERROR:

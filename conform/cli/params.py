@@ -1,0 +1,174 @@
+"""Shared click parameter types: every command checks variants, bauds, probabilities, counts
+and targets the same way, so a mistake is the same one line (exit 2) everywhere."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+from click.shell_completion import CompletionItem
+
+MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware limit
+
+
+def _variant_ids() -> list[str]:
+    """The GVE tables' variants, then those of any other protocol family (conform.families)."""
+    from conform.spec import load_spec
+
+    ids = list(load_spec().variants)
+    try:
+        from conform.families import families  # type: ignore[attr-defined]
+    except ImportError:
+        return ids
+    for fam in families():
+        ids += [v.id for v in fam.variants() if v.id not in ids]
+    return ids
+
+
+def _is_gve(variant: str) -> bool:
+    from conform.spec import load_spec
+
+    return not variant or variant in load_spec().variants
+
+
+class VariantType(click.ParamType):
+    """A variant id of the tables (``gve64-v19``)."""
+
+    name = "variant"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        text = str(value).strip()
+        known = _variant_ids()
+        if text not in known:
+            self.fail(f"{text!r} is not a variant (known: {', '.join(known)})", param, ctx)
+        return text
+
+    def shell_complete(self, ctx: click.Context, param: click.Parameter,
+                       incomplete: str) -> list[CompletionItem]:
+        return [CompletionItem(v) for v in _variant_ids() if v.startswith(incomplete)]
+
+
+class TargetType(click.ParamType):
+    """``emu``, ``emu:VARIANT[:MUTANT]``, a device path, a pty or a pyserial URL. The emulator
+    forms are checked here; a port is checked when it is opened."""
+
+    name = "target"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        text = str(value).strip()
+        if not text:
+            self.fail("empty target", param, ctx)
+        if text != "emu" and not text.startswith("emu:"):
+            return text
+        parts = text.split(":")
+        if len(parts) > 3:
+            self.fail(f"{text!r}: expected emu:VARIANT[:MUTANT]", param, ctx)
+        known = _variant_ids()
+        if len(parts) > 1 and parts[1] and parts[1] not in known:
+            self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
+                      param, ctx)
+        if len(parts) > 2 and parts[2] and _is_gve(parts[1]):  # other families say their own
+            from conform.conformance.mutants import MUTANTS
+
+            if parts[2] not in MUTANTS:
+                self.fail(f"{text!r}: no mutant {parts[2]!r} (see conform run --mutants)",
+                          param, ctx)
+        return text
+
+    def shell_complete(self, ctx: click.Context, param: click.Parameter,
+                       incomplete: str) -> list[CompletionItem]:
+        if incomplete.startswith("emu"):
+            return [CompletionItem(f"emu:{v}") for v in _variant_ids()
+                    if f"emu:{v}".startswith(incomplete)]
+        return [CompletionItem(incomplete, type="file")]
+
+
+class BaudType(click.ParamType):
+    """A positive baud rate (int, or float where a measured rate is allowed)."""
+
+    name = "baud"
+
+    def __init__(self, fractional: bool = False) -> None:
+        self.fractional = fractional
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> int | float:
+        try:
+            rate = float(value) if self.fractional else int(str(value).strip())
+        except ValueError:
+            self.fail(f"{value!r} is not a baud rate (e.g. 115200)", param, ctx)
+        if not 0 < rate <= MAX_BAUD:
+            self.fail(f"{value} is not a baud rate (a number from 1 to {MAX_BAUD:,})", param, ctx)
+        return rate
+
+
+class ProbabilityType(click.ParamType):
+    """A probability, 0 to 1."""
+
+    name = "probability"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> float:
+        try:
+            p = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not 0.0 <= p <= 1.0:
+            self.fail(f"{value} is not a probability (0 to 1)", param, ctx)
+        return p
+
+
+class InputPathType(click.Path):
+    """An existing file (or folder, where allowed) the user named; missing or of the wrong kind
+    is the project's one line (``PATH: no such file``), as the readers say it."""
+
+    def __init__(self, dir_okay: bool = False) -> None:
+        super().__init__(exists=True, dir_okay=dir_okay, path_type=str)
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        import os
+
+        from conform.errors import UserError
+
+        path = os.fspath(value)
+        if not os.path.exists(path):
+            raise UserError(f"{path}: no such file")
+        if not self.dir_okay and os.path.isdir(path):
+            raise UserError(f"{path}: is a directory, not a file")
+        return super().convert(value, param, ctx)
+
+
+VARIANT = VariantType()
+TARGET = TargetType()
+BAUD = BaudType()
+FRACTIONAL_BAUD = BaudType(fractional=True)
+PROBABILITY = ProbabilityType()
+POSITIVE_INT = click.IntRange(min=1)
+NON_NEGATIVE_INT = click.IntRange(min=0)
+NON_NEGATIVE = click.FloatRange(min=0.0)
+POSITIVE = click.FloatRange(min=0.0, min_open=True)
+PORT_NUMBER = click.IntRange(0, 65535)
+#: an existing input file (a directory is refused by click with one line)
+INPUT_FILE = InputPathType()
+#: an existing capture (a file, or a folder of a split capture)
+INPUT_PATH = InputPathType(dir_okay=True)
+OUTPUT_DIR = click.Path(file_okay=False, path_type=str)
+OUTPUT_FILE = click.Path(dir_okay=False, path_type=str)
+
+def json_option(what: str = "") -> Any:
+    """``--json`` (``as_json``): one JSON document on stdout; human messages go to stderr."""
+    return click.option("--json", "as_json", is_flag=True,
+                        help=f"One JSON document on stdout{': ' + what if what else ''}; "
+                             "messages go to stderr.")
+
+
+def echo_json(doc: Any) -> None:
+    """The one JSON document of a ``--json`` command."""
+    import json
+
+    click.echo(json.dumps(doc, indent=1, default=str, ensure_ascii=False))
+
+
+#: exit statuses every command shares (README "Exit status")
+EXIT_OK, EXIT_FINDING, EXIT_USAGE = 0, 1, 2

@@ -1,0 +1,255 @@
+"""What a conformance report shows, in the order a reader needs it, independent of the format.
+
+The HTML, Markdown and terminal renderings all take their content from here: the headline (and
+why a run is incomplete), what was not verified and how to enable it, the failures grouped by
+manual section with a replay command each, and the sections × variants matrix.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+from collections import Counter, OrderedDict
+from dataclasses import dataclass, field
+
+from conform.conformance.results import GRADE_ORDER, INFO, MUST, CheckResult, Grade, RunResults
+
+#: what a reader must look at, worst first
+PROBLEMS = (Grade.FAIL, Grade.ERROR)
+
+LEVELS = {
+    MUST: "follows from what the manual states: a FAIL is a defect of the unit",
+    INFO: "probes an open question (A1–A29) or random sequences: a FAIL counts (exit 1), but "
+          "read the question before calling it a defect",
+}
+GRADES = {
+    "PASS": "as the tables and the reference model say",
+    "FAIL": "differs from what the manual states",
+    "ERROR": "the harness or the link failed",
+    "DEVIATION": "differs on an open question (recorded, not a failure)",
+    "SKIPPED": "not run (see Not verified)",
+    "NOT-APPLICABLE": "the variant lacks it",
+}
+
+
+@dataclass
+class SkipGroup:
+    """SKIPPED checks that share one reason, and how a run would include them."""
+
+    reason: str
+    how: str
+    checks: list[CheckResult] = field(default_factory=list)
+    only: list[str] = field(default_factory=list)  # the targets, when not all of the run's
+
+    @property
+    def targets(self) -> list[str]:
+        return sorted({c.target for c in self.checks})
+
+    def sentence(self) -> str:
+        """``"3 checks need EEPROM writes"``."""
+        n = len(self.checks)
+        return f"{n} check needs {self.reason}" if n == 1 else f"{n} checks need {self.reason}"
+
+
+@dataclass
+class Section:
+    """The checks of one manual section (``GVE64 §13.5.3``)."""
+
+    clause: str
+    checks: list[CheckResult] = field(default_factory=list)
+
+    @property
+    def anchor(self) -> str:
+        return "s-" + re.sub(r"[^A-Za-z0-9]+", "-", self.clause).strip("-")
+
+    @property
+    def commands(self) -> list[str]:
+        """The commands its checks are about (the third part of the id), in first-seen order."""
+        out: OrderedDict[str, None] = OrderedDict()
+        for c in self.checks:
+            parts = c.id.split("/")
+            if len(parts) > 2:
+                out.setdefault(parts[2], None)
+        return list(out)
+
+    def counts(self) -> Counter[str]:
+        return Counter(c.grade.value for c in self.checks)
+
+
+def section_of(clause: str) -> str:
+    """The first clause a check cites: ``"GVE64 §13.5.2, GVE64 §14.1"`` → ``"GVE64 §13.5.2"``."""
+    return clause.split(",", 1)[0].strip() or "(no clause)"
+
+
+def junit_classname(c: CheckResult) -> str:
+    """``gve64-v19.13.5.3``: the variant and the manual section, as JUnit's dotted class."""
+    number = section_of(c.clause).split("§", 1)[-1].strip().replace(" ", "-")
+    return f"{c.variant}.{number}" if c.variant else number
+
+
+def _clause_key(clause: str) -> tuple:
+    manual, _, number = clause.partition("§")
+    nums = tuple(int(x) if x.isdigit() else 10**6 for x in re.split(r"[.\s]", number.strip())
+                 if x)
+    return (manual.strip(), nums, clause)
+
+
+def by_section(checks: list[CheckResult]) -> list[Section]:
+    """Checks grouped by manual section: manuals in the order the checks first cite them,
+    sections in each manual's numeric order (§13.5.3 before §13.5.13)."""
+    groups: dict[str, Section] = {}
+    manuals: dict[str, int] = {}
+    for c in checks:
+        key = section_of(c.clause)
+        groups.setdefault(key, Section(key)).checks.append(c)
+        manuals.setdefault(_clause_key(key)[0], len(manuals))
+    return sorted(groups.values(),
+                  key=lambda s: (manuals[_clause_key(s.clause)[0]], _clause_key(s.clause)))
+
+
+def replay_command(c: CheckResult) -> str:
+    """The command that re-runs one check on the same target (with its seed if it has one)."""
+    token = c.replay or c.id
+    if c.seed is not None and "@" not in token:
+        token = f"{token}@{c.seed}"
+    target = c.target or f"emu:{c.variant}"
+    return (f"conform run --target {shlex.quote(target)} --variant {shlex.quote(c.variant)} "
+            f"--replay {shlex.quote(token)}")
+
+
+_HOW = (
+    # (words in the reason, what the checks need, how to include them when the reason does not
+    # say it; the runner's reasons end in "enable with OPTIONS)")
+    (("inputs",), "driven inputs (only an emulator can drive them)",
+     "--target emu:VARIANT, or --inputs-control with `conform emulate serve` behind the link"),
+    (("max-steps", "envelope"), "moves longer than --max-steps allows", "a larger --max-steps"),
+    (("eeprom",), "EEPROM writes", "--allow-eeprom"),
+    (("motion", "actuator"), "motion (axes, outputs, spindle)", "--allow-motion --max-steps N"),
+)
+_ENABLE = re.compile(r"enable with (.+?)\)?$")
+
+
+def _skip_group(detail: str) -> tuple[str, str]:
+    """(what the checks need, how to include them) for one SKIPPED check's detail."""
+    said = _ENABLE.search(detail)
+    reason = detail.split(" (", 1)[0]
+    found = [(name, how) for words, name, how in _HOW if any(w in reason.lower() for w in words)]
+    if found:
+        names = " and ".join(dict.fromkeys(name for name, _ in found))
+        return names, said.group(1) if said else " ".join(dict.fromkeys(h for _, h in found))
+    reason = re.sub(r"b'[^']*'|\d+", "…", reason).strip()
+    return (reason or "(no reason given)"), said.group(1) if said else ""
+
+
+def _largest_steps(hows: list[str]) -> str:
+    """``--max-steps 4000`` of several: the largest, which enables them all."""
+    numbers = [int(m.group(1)) for h in hows if (m := re.search(r"--max-steps (\d+)", h))]
+    return f"--max-steps {max(numbers)}" if numbers else hows[0]
+
+
+def not_verified(results: RunResults) -> list[SkipGroup]:
+    """SKIPPED checks grouped by reason, the largest group first; a group names its targets
+    when it does not hold for all of them."""
+    groups: dict[str, SkipGroup] = {}
+    hows: dict[str, list[str]] = {}
+    for c in results.checks:
+        if c.grade is Grade.SKIPPED:
+            reason, how = _skip_group(c.detail)
+            groups.setdefault(reason, SkipGroup(reason, how)).checks.append(c)
+            hows.setdefault(reason, []).append(how)
+    every = {r.target for r in results.runs}
+    for g in groups.values():
+        g.only = [] if set(g.targets) >= every else g.targets
+        g.how = _largest_steps(hows[g.reason]) if "--max-steps " in g.how and \
+            "--allow" not in g.how else g.how
+    return sorted(groups.values(), key=lambda g: -len(g.checks))
+
+
+@dataclass
+class Headline:
+    """The verdict of the whole run in one line, and whether (and why) it is incomplete."""
+
+    verdict: str  # FAIL | ERROR | PASS | INCOMPLETE
+    text: str
+    incomplete: list[str]
+
+
+def headline(results: RunResults) -> Headline:
+    counts = Counter(c.grade.value for c in results.checks)
+    total = sum(counts.values())
+    shown = ", ".join(f"{counts[g.value]} {g.value}" for g in GRADE_ORDER if counts[g.value])
+    targets = len(results.runs)
+    where = f"{total} checks on {targets} target{'s' if targets != 1 else ''}"
+    incomplete = [f"{r.target}: {r.aborted}" for r in results.runs if r.aborted]
+    if incomplete:
+        verdict = "INCOMPLETE"
+    elif counts["FAIL"]:
+        verdict = "FAIL"
+    elif counts["ERROR"]:
+        verdict = "ERROR"
+    else:
+        verdict = "PASS"
+    return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete)
+
+
+@dataclass
+class Cell:
+    """One section on one target: grade counts and the worst grade (its colour)."""
+
+    counts: Counter[str]
+    worst: str | None
+
+    def text(self) -> str:
+        if not self.counts:
+            return "—"
+        return " ".join(f"{n} {g}" for g in (x.value for x in GRADE_ORDER)
+                        if (n := self.counts.get(g)))
+
+
+def _worst(counts: Counter[str]) -> str | None:
+    for g in GRADE_ORDER:
+        if counts.get(g.value):
+            return g.value
+    return None
+
+
+def column_name(run) -> str:  # noqa: ANN001 - a TargetRun
+    return run.variant if run.target == f"emu:{run.variant}" else f"{run.target} ({run.variant})"
+
+
+def section_matrix(results: RunResults) -> tuple[list[str], list[tuple[Section, list[Cell]]]]:
+    """Columns (one per target run) and one row per manual section."""
+    columns = [column_name(r) for r in results.runs]
+    rows = []
+    for section in by_section(results.checks):
+        cells = []
+        for run in results.runs:
+            counts = Counter(c.grade.value for c in section.checks
+                             if c.target == run.target and c.variant == run.variant)
+            cells.append(Cell(counts, _worst(counts)))
+        rows.append((section, cells))
+    return columns, rows
+
+
+def _run_index(results: RunResults) -> dict[tuple[str, str], int]:
+    return {(r.target, r.variant): i for i, r in enumerate(results.runs)}
+
+
+def problems(results: RunResults) -> list[Section]:
+    """FAIL and ERROR checks by manual section: FAIL before ERROR, MUST before INFO, then in the
+    order of the run's targets."""
+    order = _run_index(results)
+    chosen = [c for c in results.checks if c.grade in PROBLEMS]
+    chosen.sort(key=lambda c: (PROBLEMS.index(c.grade), c.level != MUST,
+                               order.get((c.target, c.variant), 0), c.id))
+    return by_section(chosen)
+
+
+def deviations(results: RunResults) -> list[Section]:
+    return by_section([c for c in results.checks if c.grade is Grade.DEVIATION])
+
+
+def log_lines(c: CheckResult, limit: int | None = None) -> list[tuple[str, str, str]]:
+    """(time, direction, bytes as text) per chunk on the wire; the last ``limit`` if given."""
+    entries = c.log if limit is None else c.log[-limit:]
+    return [(f"{e.t:10.6f}", e.dir, repr(e.data)[2:-1]) for e in entries]
