@@ -162,6 +162,27 @@ _STATEFUL = frozenset(("%", "*S", "*E", "J", "H", "W"))
 _MAY_BE_STATEFUL = re.compile(rb"[%*JjHhWw]")
 
 
+_KEEP = 8  # parsers (with their verdict caches) and grammars kept by a campaign
+
+
+class _Reader:
+    """A dialect that records which questions are read (to tell which dialects read alike)."""
+
+    def __init__(self, dialect: Dialect) -> None:
+        self.dialect = dialect
+        self.ranges = dialect.ranges
+        self.read: set[str] = set()
+
+    def __getitem__(self, question_id: str) -> str:
+        self.read.add(question_id)
+        return self.dialect[question_id]
+
+
+def _answers(dialect: Dialect, questions: set[str]) -> tuple:
+    return (tuple(sorted((q, dialect[q]) for q in questions)),
+            tuple(sorted(dialect.ranges.items())))
+
+
 class Campaign:
     """Run ``frames`` frames over every variant and dialect (see the module docstring)."""
 
@@ -174,18 +195,52 @@ class Campaign:
         self.configs = [(v, d) for d in dialects(spec, self.rng, mixes) for v in spec.variants]
         self.rng.shuffle(self.configs)
         self._pools: dict[str, list[bytes]] = {}
-        self._parsers: dict[tuple, CommandParser] = {}
-        self._verdicts: dict[tuple, tuple[dict, dict]] = {}
+        self._built: dict[tuple, Any] = {}
+        self._reads: dict[tuple[str, str], set[str]] = {}
+        self._framed: dict[tuple[str, bytes], tuple[list[bytes], list[bytes]]] = {}
+
+    def _shared(self, kind: str, build: Any, variant: Variant, dialect: Dialect) -> Any:
+        """``build(variant, dialect)``, made once for all dialects that agree on what it read.
+
+        A build is recorded with the questions (and ranges) it read; a later dialect with the
+        same answers to those gets the same object. Configurations are visited in shuffled
+        order, so the most recent ``_KEEP`` builds of each kind are kept."""
+        reads = self._reads.setdefault((kind, variant.id), set())
+        key = (kind, variant.id, _answers(dialect, reads))
+        made = self._built.get(key)
+        if made is not None:
+            self._built[key] = self._built.pop(key)  # most recently used last
+            return made
+        reader = _Reader(dialect)
+        made = build(variant, reader)
+        reads.update(reader.read)
+        self._built[(kind, variant.id, _answers(dialect, reads))] = made
+        kept = [k for k in self._built if k[0] == kind]
+        for old in kept[: max(0, len(kept) - _KEEP)]:
+            del self._built[old]
+        return made
 
     def parser(self, variant: Variant, dialect: Dialect) -> tuple[CommandParser, tuple[dict, dict]]:
         """The tables' reading of a line for this variant and dialect, with a cache of its
-        verdicts with checksums off and on (made once)."""
-        key = (variant.id, tuple(sorted(dialect.changed().items())))
-        parser = self._parsers.get(key)
-        if parser is None:
-            parser = self._parsers[key] = CommandParser(variant, dialect, dict(self.spec.commands))
-            self._verdicts[key] = ({}, {})
-        return parser, self._verdicts[key]
+        verdicts with checksums off and on (shared by the dialects the parser reads alike)."""
+        commands = dict(self.spec.commands)
+        return self._shared("parser", lambda v, d: (CommandParser(v, d, commands), ({}, {})),
+                            variant, dialect)
+
+    def grammar(self, variant: Variant, dialect: Dialect) -> AnswerGrammar:
+        """The answer grammar for this variant and dialect (shared likewise)."""
+        return self._shared("grammar", lambda v, d: AnswerGrammar(self.spec, v, d),
+                            variant, dialect)
+
+    def framed(self, variant: Variant, term: bytes) -> tuple[list[bytes], list[bytes]]:
+        """The pool's lines with ``term``, without and with a checksum (made once)."""
+        key = (variant.id, term)
+        framed = self._framed.get(key)
+        if framed is None:
+            pool = self.pool(variant)
+            framed = self._framed[key] = ([x + term for x in pool],
+                                          [append_checksum(x) + term for x in pool])
+        return framed
 
     def pool(self, variant: Variant) -> list[bytes]:
         """The lines of one variant (made once; values beyond a dialect's ranges are wanted)."""
@@ -206,9 +261,6 @@ class Campaign:
             fig.configs += 1
             _Run(self, self.spec.variant(vid), self.spec.dialect(choices), fig).go(
                 min(per, frames - fig.frames))
-            if len(self._parsers) > 8:  # a campaign visits each dialect about once: keep few
-                self._parsers.clear()
-                self._verdicts.clear()
         fig.seconds = time.perf_counter() - start
         fig.cpu_seconds = time.process_time() - cpu
         return fig
@@ -218,7 +270,6 @@ class _Run:
     """One variant under one dialect: one unit, the harness's view of its state."""
 
     def __init__(self, campaign: Campaign, variant: Variant, dialect: Dialect, fig: Figures) -> None:
-        spec = campaign.spec
         self.c = campaign
         self.rng = campaign.rng
         self.fig = fig
@@ -226,14 +277,13 @@ class _Run:
         self.dialect = dialect
         self.label = f"{variant.id} {dict(dialect.changed())}"
         self.unit = campaign.unit_class(variant, dialect)
-        self.grammar = AnswerGrammar(spec, variant, dialect)
+        self.grammar = campaign.grammar(variant, dialect)
         self.parser, self._verdicts = campaign.parser(variant, dialect)
         self.splitter = LineSplitter(dialect["A1"])
         self.term = b"\r\n" if dialect["A1"] == "crlf" else b"\r"
         self.mode = dialect["A1"]
         self.pool = campaign.pool(variant)
-        self.framed = ([x + self.term for x in self.pool],
-                       [append_checksum(x) + self.term for x in self.pool])
+        self.framed = campaign.framed(variant, self.term)
         self.addr = b"!%d" % variant.interpolator_address
         self.reset_cs = bool(variant.reset.get("checksum", False))
         self.ready_after = float(variant.reset.get("ready_after_s", 2.0))
