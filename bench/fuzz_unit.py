@@ -25,13 +25,18 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=200_000)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--per-config", type=int, default=None,
+                    help="frames per variant x dialect run (default: frames / runs, at least "
+                         "200; 31 250 gives a short run the mix of a 10 M one)")
     ap.add_argument("--hang", type=float, default=0.5,
                     help="a frame taking longer than this (CPU seconds) counts as a hang")
     args = ap.parse_args(argv)
     if args.frames <= 0:
         ap.error("--frames must be positive")
+    if args.per_config is not None and args.per_config <= 0:
+        ap.error("--per-config must be positive")
     campaign = Campaign(load_spec(), seed=args.seed, hang_s=args.hang)
-    fig = campaign.run(args.frames)
+    fig = campaign.run(args.frames, per_config=args.per_config)
     cpu_rate = fig.frames / fig.cpu_seconds if fig.cpu_seconds else 0.0
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"frames            {fig.frames:,} ({fig.judged:,} judged against their command, "

@@ -282,6 +282,8 @@ class _Run:
         self.splitter = LineSplitter(dialect["A1"])
         self.term = b"\r\n" if dialect["A1"] == "crlf" else b"\r"
         self.mode = dialect["A1"]
+        self._cut = -len(self.term)
+        self._clock = _cpu()
         self.pool = campaign.pool(variant)
         self.framed = campaign.framed(variant, self.term)
         self.addr = b"!%d" % variant.interpolator_address
@@ -332,8 +334,6 @@ class _Run:
         return frame.replace(b",", b" ,  ", 1)
 
     def _frame(self) -> bytes:
-        if self.queue:
-            return self.queue.pop(0)
         rng = self.rng
         r = rng.random()
         if r < 0.82:
@@ -364,20 +364,25 @@ class _Run:
     def go(self, n: int) -> None:
         fig = self.fig
         rng = self.rng
+        send = self.send
         end = fig.frames + n
+        self._clock = _cpu()
         while fig.frames < end:
             if not self.known:
                 if self.unknown_left <= 0:
                     self.resync()
                     continue
                 self.unknown_left -= 1
-            self.send(self._frame())
+            send(self.queue.pop(0) if self.queue else self._frame())
             self.t += _STEPS[int(rng.random() * 5)]
 
     def _exchange(self, frame: bytes) -> bytes | None:
+        """The unit's answer to ``frame`` (None after an exception, counted), its time checked.
+
+        A frame's time is the CPU time since the previous frame's answer: the exchange with
+        the harness's own work around it, an upper bound of the unit's share."""
         fig = self.fig
         fig.frames += 1
-        t0 = _cpu()
         try:
             t_ans, out = self.unit.exchange(frame, self.t)
         except Exception as exc:  # noqa: BLE001 - counting them is the point
@@ -385,8 +390,11 @@ class _Run:
             fig.note(f"{self.label}: {frame[:60]!r}: {type(exc).__name__}: {exc}")
             self.unit = self.c.unit_class(self.variant, self.dialect, t0=self.t)
             self._reset_state()
+            self._clock = _cpu()
             return None
-        dt = _cpu() - t0
+        clock = _cpu()
+        dt = clock - self._clock
+        self._clock = clock
         if dt > fig.max_frame_s:
             fig.max_frame_s = dt
             if dt > self.c.hang_s:
@@ -414,7 +422,7 @@ class _Run:
         if deaf or not self.known:
             lines: list[bytes] = []
         elif self._one_line(frame):
-            single = frame[: -len(self.term)]
+            single = frame[: self._cut]
             lines = [single]
         else:
             had_pending = bool(self.splitter._buf)
@@ -425,15 +433,18 @@ class _Run:
         out = self._exchange(frame)
         if out is None:
             return
-        if not self.known:
+        if single is not None and not deaf:
+            if abs(t - self.deaf_until) < 1e-6:
+                self.known = False  # too close to call
+                return
+            problem = self._judge(single, out, t)
+        elif not self.known:
             problem = self.grammar.check(out, None, None)
         elif abs(t - self.deaf_until) < 1e-6:
             self.known = False  # too close to call
             return
         elif deaf:
             problem = self.grammar.check(out, self.cs, None, silent=True)
-        elif single is not None:
-            problem = self._judge(single, out, t)
         else:
             problem = self._several(lines, out)
         if problem is not None:

@@ -79,6 +79,8 @@ DEFAULT_SWITCH_RELEASE = 200
 """Pulses a W backs off from the switch before it opens again."""
 
 _parser_cache: dict[tuple, CommandParser] = {}
+_MEMO_LINE = 80  # longest line whose reading a unit keeps
+_MEMO_SIZE = 4096  # readings kept (then forgotten all at once)
 
 
 def _parser_for(variant: Variant, dialect: Dialect, spec: Spec) -> CommandParser:
@@ -140,6 +142,7 @@ class Unit:
             self.switches[axis.upper()] = int(dist)
         self.switch_release = int(switch_release)
         self._parser = _parser_for(variant, d, self.spec)
+        self._parsed: tuple[dict, dict] = ({}, {})  # line -> reading, checksums off / on
         self._specs = variant.commands
         self._naxes = len(variant.axes)
         self._capacity = variant.queue
@@ -536,10 +539,20 @@ class Unit:
         self._answer(line, WATCHDOG, t, None, "watchdog")
 
     def _parse(self, line: bytes) -> Command | Rejection:
+        """The line's reading (a pure function of the line and the checksum state: readings
+        of short lines are kept, a host repeats its lines)."""
+        memo = self._parsed[1 if self._checksum_on else 0]
+        r = memo.get(line)
+        if r is not None:
+            return r
         r = self._parser.parse(line, self._checksum_on)
         if self._hex_floats and r.name in ("EFW", "EUW"):
             if r.__class__ is Command or r.kind in ("syntax", "range"):
-                return self._parse_hex_write(line, r)
+                r = self._parse_hex_write(line, r)
+        if len(line) <= _MEMO_LINE:
+            if len(memo) >= _MEMO_SIZE:
+                memo.clear()
+            memo[line] = r
         return r
 
     def _parse_hex_write(self, line: bytes, r: Command | Rejection) -> Command | Rejection:
