@@ -212,3 +212,22 @@ def test_campaign_200k_frames():
     fig = Campaign(SPEC, seed=1).run(200_000)
     assert fig.frames == 200_000 and fig.configs >= len(SPEC.variants) * 30
     assert fig.failures == 0, fig.examples
+
+
+def test_shared_parsers_and_grammars_read_as_fresh_ones():
+    """The campaign shares a parser (grammar) between dialects that read alike: each shared one
+    reads lines (judges answers) as one built for that very dialect does."""
+    campaign = Campaign(SPEC, seed=3, mixes=6)
+    probes = [b"0\r", b"8\r", b"0,5C\r", b"4\r", b"0,12\r", b"!0V1\r0\r", b"0,FF\r", b""]
+    for vid, choices in campaign.configs[:60]:
+        v, d = SPEC.variant(vid), SPEC.dialect(choices)
+        parser, _ = campaign.parser(v, d)
+        grammar = campaign.grammar(v, d)
+        fresh_p, fresh_g = CommandParser(v, d, dict(SPEC.commands)), AnswerGrammar(SPEC, v, d)
+        assert grammar.j_answers == fresh_g.j_answers and grammar.echo == fresh_g.echo
+        for line in campaign.pool(v)[::97]:
+            for cs in (False, True):
+                verdict = fresh_p.parse(line, cs)
+                assert parser.parse(line, cs) == verdict, (vid, choices, line)
+                for out in probes:
+                    assert grammar.check(out, cs, verdict) == fresh_g.check(out, cs, verdict)

@@ -162,7 +162,8 @@ _STATEFUL = frozenset(("%", "*S", "*E", "J", "H", "W"))
 _MAY_BE_STATEFUL = re.compile(rb"[%*JjHhWw]")
 
 
-_KEEP = 8  # parsers (with their verdict caches) and grammars kept by a campaign
+_KEEP = {"parser": 8, "grammar": 512}  # kept by a campaign (parsers hold verdict caches)
+_RANGES = " ranges"  # a read of the dialect's ranges (not a question id)
 
 
 class _Reader:
@@ -170,17 +171,21 @@ class _Reader:
 
     def __init__(self, dialect: Dialect) -> None:
         self.dialect = dialect
-        self.ranges = dialect.ranges
         self.read: set[str] = set()
+
+    @property
+    def ranges(self) -> Any:
+        self.read.add(_RANGES)
+        return self.dialect.ranges
 
     def __getitem__(self, question_id: str) -> str:
         self.read.add(question_id)
         return self.dialect[question_id]
 
 
-def _answers(dialect: Dialect, questions: set[str]) -> tuple:
-    return (tuple(sorted((q, dialect[q]) for q in questions)),
-            tuple(sorted(dialect.ranges.items())))
+def _answers(dialect: Dialect, reads: set[str]) -> tuple:
+    return (tuple(sorted((q, dialect[q]) for q in reads if q != _RANGES)),
+            tuple(sorted(dialect.ranges.items())) if _RANGES in reads else ())
 
 
 class Campaign:
@@ -204,7 +209,7 @@ class Campaign:
 
         A build is recorded with the questions (and ranges) it read; a later dialect with the
         same answers to those gets the same object. Configurations are visited in shuffled
-        order, so the most recent ``_KEEP`` builds of each kind are kept."""
+        order, so the most recent builds of each kind are kept (``_KEEP``)."""
         reads = self._reads.setdefault((kind, variant.id), set())
         key = (kind, variant.id, _answers(dialect, reads))
         made = self._built.get(key)
@@ -216,7 +221,7 @@ class Campaign:
         reads.update(reader.read)
         self._built[(kind, variant.id, _answers(dialect, reads))] = made
         kept = [k for k in self._built if k[0] == kind]
-        for old in kept[: max(0, len(kept) - _KEEP)]:
+        for old in kept[: max(0, len(kept) - _KEEP[kind])]:
             del self._built[old]
         return made
 
