@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -17,7 +18,7 @@ from conform.spec.model import CommandSpec, Variant
 
 
 def _console() -> Console:
-    return Console(soft_wrap=False, width=None if click.get_text_stream("stdout").isatty() else 160)
+    return Console(soft_wrap=False, width=None if sys.stdout.isatty() else 160)
 
 
 _JSON = json_option("the table's rows")
