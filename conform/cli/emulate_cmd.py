@@ -118,17 +118,13 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
         fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
                   link_path=link_path, record_path=record_path, answer_delay=answer_delay)
         return
-    from conform.link.faults import FaultConfig, FaultInjector
     from conform.unit.model import Unit
     from conform.unit.serve import ControlServer, Emulator
 
     spec = load_spec()
     v = spec.variant(variant)
     dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
-    if baud is not None and baud <= 0:
-        raise UserError(f"--baud {baud}: must be positive")
-    if not 0 <= answer_delay <= 60:  # nan fails this too
-        raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
+    check_pacing(baud, answer_delay)
     t_start = time.monotonic()  # the unit runs on the monotonic wall clock
     try:
         unit = Unit(v, dialect, t0=t_start, switches=_switches(switch_pairs),
@@ -140,11 +136,7 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
         from conform.unit.truth import GroundTruth
 
         truth = GroundTruth(unit, t0=t_start)
-    injector = None
-    if faults:
-        config = FaultConfig.parse(faults)
-        injector = FaultInjector(config, seed, t0=t_start) if config.active else None
-
+    injector = fault_injector(faults, seed, t_start)
     endpoint, reopen = _open_endpoint(tcp_port, link_path)
 
     try:
@@ -171,25 +163,13 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
             control.close()
             raise
 
-    def report(msg: str) -> None:
-        click.echo(f"conform emulate: {msg}", err=True)
-
     emulator = Emulator(unit, endpoint, baud=baud, injector=injector, recorder=recorder,
                         control=control, reopen=reopen, report=report)
-    click.echo(endpoint.name)
-    sys.stdout.flush()
-    report(f"{v.id} on {endpoint.name}; control: {control_path}"
-           + (f"; dialect {dialect.changed()}" if dialect.changed() else ""))
-
-    def on_signal(signum: int, _frame: Any) -> None:
-        emulator.stop()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    announce(endpoint, f"{v.id} on {endpoint.name}; control: {control_path}"
+             + (f"; dialect {dialect.changed()}" if dialect.changed() else ""))
     try:
-        emulator.run()
+        run_until_signal(emulator)
     finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
         control.close()
         if recorder is not None:
             recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out})
@@ -199,6 +179,48 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
             except OSError as exc:
                 report(f"--truth {truth_path}: cannot write: {exc.strerror or exc}")
         report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out)")
+
+
+def check_pacing(baud: int | None, answer_delay: float) -> None:
+    """The serve options every family's emulator takes: one line for a value out of range."""
+    if baud is not None and baud <= 0:
+        raise UserError(f"--baud {baud}: must be positive")
+    if not 0 <= answer_delay <= 60:  # nan fails this too
+        raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
+
+
+def fault_injector(faults: str | None, seed: int | None, t0: float) -> Any:
+    """The line faults asked for with --faults, or None when there are none."""
+    from conform.link.faults import FaultConfig, FaultInjector
+
+    if not faults:
+        return None
+    config = FaultConfig.parse(faults)
+    return FaultInjector(config, seed, t0=t0) if config.active else None
+
+
+def report(msg: str) -> None:
+    click.echo(f"conform emulate: {msg}", err=True)
+
+
+def announce(endpoint: Any, what: str) -> None:
+    """The device path alone on stdout's first line (what scripts read), then what is served."""
+    click.echo(endpoint.name)
+    sys.stdout.flush()
+    report(what)
+
+
+def run_until_signal(emulator: Any) -> None:
+    """Serve until SIGINT or SIGTERM, then put the previous handlers back."""
+    def on_signal(signum: int, _frame: Any) -> None:
+        emulator.stop()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        emulator.run()
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 def _open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any]:

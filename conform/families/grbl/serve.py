@@ -4,12 +4,8 @@ recording, reconnects)."""
 
 from __future__ import annotations
 
-import signal
-import sys
 import time
 from typing import Any
-
-import click
 
 from conform.errors import UserError
 
@@ -17,24 +13,17 @@ from conform.errors import UserError
 def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           faults: str | None = None, seed: int | None = None, link_path: str | None = None,
           record_path: str | None = None, answer_delay: float = 0.0, **_ignored: Any) -> None:
-    from conform.cli.emulate_cmd import _open_endpoint
+    from conform.cli.emulate_cmd import _open_endpoint, announce, check_pacing, fault_injector, report, run_until_signal
     from conform.families.grbl.tables import load_grbl
     from conform.families.grbl.unit import GrblUnit
-    from conform.link.faults import FaultConfig, FaultInjector
     from conform.unit.serve import Emulator
 
     spec = load_grbl()
     v = spec.variant(variant)
-    if baud is not None and baud <= 0:
-        raise UserError(f"--baud {baud}: must be positive")
-    if not 0 <= answer_delay <= 60:  # nan fails this too
-        raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
+    check_pacing(baud, answer_delay)
     t_start = time.monotonic()
     unit = GrblUnit(v, spec, t0=t_start, line_time=max(answer_delay, 0.0005))
-    injector = None
-    if faults:
-        config = FaultConfig.parse(faults)
-        injector = FaultInjector(config, seed, t0=t_start) if config.active else None
+    injector = fault_injector(faults, seed, t_start)
     endpoint, reopen = _open_endpoint(tcp_port, link_path)
     recorder = None
     if record_path:
@@ -49,25 +38,13 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
             endpoint.close()
             raise
 
-    def report(msg: str) -> None:
-        click.echo(f"conform emulate: {msg}", err=True)
-
     emulator = Emulator(unit, endpoint, baud=baud, injector=injector, recorder=recorder,
                         control=None, reopen=reopen, report=report)
-    click.echo(endpoint.name)
-    sys.stdout.flush()
-    report(f"{v.id} on {endpoint.name} (receive buffer {v.rx_buffer} bytes, "
-           f"planner {v.planner_blocks} blocks)")
-
-    def on_signal(signum: int, _frame: Any) -> None:
-        emulator.stop()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    announce(endpoint, f"{v.id} on {endpoint.name} (receive buffer {v.rx_buffer} bytes, "
+             f"planner {v.planner_blocks} blocks)")
     try:
-        emulator.run()
+        run_until_signal(emulator)
     finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
         if recorder is not None:
             recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out,
                             "bytes_lost": unit.lost})
