@@ -3,10 +3,12 @@ template, inline CSS, no network), ``summary.md``, ``junit.xml`` and ``results.j
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import xml.etree.ElementTree as ET
 from collections import OrderedDict
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -202,15 +204,24 @@ def render_junit(results: RunResults) -> str:
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode")
 
 
-def write_reports(results: RunResults, directory: str | Path) -> Path:
-    """Write all four files into ``directory`` (created); returns the directory."""
+def write_files(directory: str | Path, files: Mapping[str, Callable[[], str]]) -> Path:
+    """Create ``directory`` and write each named file from its renderer, in order; a folder that
+    cannot be written is the project's one-line error. Returns the directory."""
     d = Path(directory)
     try:
         d.mkdir(parents=True, exist_ok=True)
-        results.dump(d / "results.json")
-        (d / "index.html").write_text(render_html(results), encoding="utf-8")
-        (d / "summary.md").write_text(render_markdown(results), encoding="utf-8")
-        (d / "junit.xml").write_text(render_junit(results), encoding="utf-8")
+        for name, render in files.items():
+            (d / name).write_text(render(), encoding="utf-8")
     except OSError as exc:
         raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
     return d
+
+
+def write_reports(results: RunResults, directory: str | Path) -> Path:
+    """Write all four files into ``directory`` (created); returns the directory."""
+    return write_files(directory, {
+        "results.json": lambda: json.dumps(results.to_json(), indent=1),
+        "index.html": lambda: render_html(results),
+        "summary.md": lambda: render_markdown(results),
+        "junit.xml": lambda: render_junit(results),
+    })

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jinja2
 
-from conform.errors import UserError
+from conform.report.render import write_files
 from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN
 from conform.sendercheck.grade import CheckResults
 
@@ -108,14 +108,9 @@ def render_junit(r: CheckResults) -> str:
 
 
 def write_reports(r: CheckResults, directory: str | Path) -> Path:
-    d = Path(directory)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        (d / "results.json").write_text(json.dumps(r.to_json(), indent=1, default=str) + "\n",
-                                        encoding="utf-8")
-        (d / "index.html").write_text(render_html(r), encoding="utf-8")
-        (d / "summary.md").write_text(render_markdown(r), encoding="utf-8")
-        (d / "junit.xml").write_text(render_junit(r), encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
-    return d
+    return write_files(directory, {
+        "results.json": lambda: json.dumps(r.to_json(), indent=1, default=str) + "\n",
+        "index.html": lambda: render_html(r),
+        "summary.md": lambda: render_markdown(r),
+        "junit.xml": lambda: render_junit(r),
+    })

@@ -323,21 +323,20 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
 def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     """findings.json and summary.md in ``directory``."""
-    from conform.errors import UserError
+    from conform.report.render import write_files
 
-    d = Path(directory)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        (d / "findings.json").write_text(json.dumps(a.to_json(), indent=1, default=str),
-                                         encoding="utf-8")
+    def summary() -> str:
         lines = [f"# grbl capture analysis: {a.path}", "", f"family: grbl ({a.detected})", ""]
         lines += [f"- {k}: {v}" for k, v in a.metrics.items() if k != "finding_counts"]
         lines += ["", "## Findings", ""]
         lines += [f"- {f.t:.4f} s {f.severity} {f.kind}: {f.message} [{f.clause}]"
                   for f in a.findings] or ["none"]
-        (d / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{d}: cannot write the report: {exc.strerror or exc}") from None
+        return "\n".join(lines) + "\n"
+
+    d = write_files(directory, {
+        "findings.json": lambda: json.dumps(a.to_json(), indent=1, default=str),
+        "summary.md": summary,
+    })
     return {"json": d / "findings.json", "md": d / "summary.md"}
 
 
