@@ -23,11 +23,14 @@ from conform.errors import LinkError, UserError
 from conform.sender.core import POLICIES
 
 
-def _ints(text: str) -> set[int]:
-    try:
-        return {int(x) for x in text.split(",") if x.strip()}
-    except ValueError:
-        raise UserError(f"expected comma-separated numbers, not {text!r}") from None
+def _ints(text: str, option: str) -> set[int]:
+    """0-based write or answer numbers: ``3,7,12``."""
+    parts = [x.strip() for x in text.split(",")] if text.strip() else []
+    if any(not x.isdigit() for x in parts):
+        bad = next(x for x in parts if not x.isdigit())
+        raise UserError(f"{option}: expected comma-separated numbers from 0 (e.g. 3,7,12), "
+                        f"not {bad!r} in {text!r}")
+    return {int(x) for x in parts}
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -162,8 +165,8 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
     from conform.sender.session import send_emulated
 
     link = LinkModel(baud=baud, latency=latency / 1000.0, noise=noise, seed=seed,
-                     corrupt_commands=_ints(corrupt_command),
-                     corrupt_answers=_ints(corrupt_answer))
+                     corrupt_commands=_ints(corrupt_command, "--corrupt-command"),
+                     corrupt_answers=_ints(corrupt_answer, "--corrupt-answer"))
     res = send_emulated(items, var, dialect, policy=policy, checksums=checksums,
                         packet=packet, link=link, record=record, timeout=timeout / 1000.0,
                         progress=Progress)
