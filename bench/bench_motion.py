@@ -1,4 +1,4 @@
-"""Benchmark of the motion executor (conform.unit.motion) in virtual time.
+"""Benchmark of the motion executor (conform.families.gve.unit.motion) in virtual time.
 
 Three figures, each printed with its target and the ratio to it:
 
@@ -23,7 +23,7 @@ import sys
 import time
 import tracemalloc
 
-from conform.unit.motion import MotionExecutor, MotionParams
+from conform.families.gve.unit.motion import MotionExecutor, MotionParams
 
 JOB_TARGET_S = 20.0
 RSS_TARGET_MB = 1024.0

@@ -17,8 +17,8 @@ import resource
 import sys
 import time
 
-from conform.spec import load_spec
-from conform.unit import Unit
+from conform.families.gve.spec import load_spec
+from conform.families.gve.unit import Unit
 
 TARGET_RATE = 140_000
 TARGET_JOB_S = 20.0

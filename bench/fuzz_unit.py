@@ -2,7 +2,7 @@
 its target, then one JSON object as the last line.
 
 Random and mutated frames over every variant and dialect, checksums on and off, packets,
-over-long lines and numbers (see conform/unit/fuzz.py). Target: >= 50 000 frames/s in-process,
+over-long lines and numbers (see conform/families/gve/unit/fuzz.py). Target: >= 50 000 frames/s in-process,
 with 0 exceptions, 0 hangs and 0 malformed answers.
 
     python bench/fuzz_unit.py --frames 10000000 [--seed 1] [--hang 0.5]
@@ -15,8 +15,8 @@ import json
 import resource
 import sys
 
-from conform.spec import load_spec
-from conform.unit.fuzz import Campaign
+from conform.families.gve.spec import load_spec
+from conform.families.gve.unit.fuzz import Campaign
 
 TARGET_RATE = 50_000
 

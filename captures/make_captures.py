@@ -4,9 +4,9 @@
     python captures/make_captures.py good-rs232 # one
 
 Each session runs the reference sender against the in-process reference unit on a virtual
-clock (``conform.sender.session.send_emulated``, the same code as
+clock (``conform.families.gve.sender.session.send_emulated``, the same code as
 ``conform send JOB --target emu:gve64-v19 --record FILE``) with the link model of
-``conform.sender.links``: 115200 baud, converter latency, noise and scripted faults.
+``conform.families.gve.sender.links``: 115200 baud, converter latency, noise and scripted faults.
 Everything is seeded, so the files are reproducible.
 """
 
@@ -15,10 +15,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from conform.sender.job import load_job
-from conform.sender.links import LinkModel
-from conform.sender.session import send_emulated
-from conform.spec import load_spec
+from conform.families.gve.sender.job import load_job
+from conform.families.gve.sender.links import LinkModel
+from conform.families.gve.sender.session import send_emulated
+from conform.families.gve.spec import load_spec
 
 HERE = Path(__file__).resolve().parent
 JOBS = HERE / "jobs"

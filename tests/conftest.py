@@ -1,6 +1,6 @@
 import pytest
 
-from conform.spec import load_spec
+from conform.families.gve.spec import load_spec
 
 
 @pytest.fixture(scope="session")

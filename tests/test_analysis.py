@@ -15,7 +15,7 @@ from conform.analysis.rawread import b64decode_many
 from conform.capture.recorder import Recorder
 from conform.cli.main import cli
 from conform.errors import UserError
-from conform.protocol import append_checksum
+from conform.families.gve.protocol import append_checksum
 
 T0 = 1_750_000_000.0
 BAUD = 115200

@@ -11,7 +11,7 @@ import pytest
 from conform.analysis import analyze
 from conform.analysis.analyze import accepted_vectors
 from conform.analysis.queue import CONTROL, replay
-from conform.spec import load_spec
+from conform.families.gve.spec import load_spec
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"
 FIELDS = ("pushes", "push_rows", "starts", "ends", "starved", "v_out", "done_rows",

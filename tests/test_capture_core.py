@@ -7,10 +7,10 @@ import base64
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conform.capture.decode import LineTracker, make_decoder
 from conform.capture.merge import Merger
 from conform.capture.session import CaptureSession, escape_bytes, unescape_text, wire_time
-from conform.protocol.checksum import append_checksum
+from conform.families.gve.decode import LineTracker, make_decoder
+from conform.families.gve.protocol.checksum import append_checksum
 
 
 @settings(max_examples=60, deadline=None)

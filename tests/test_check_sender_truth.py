@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from conform.unit.model import Unit, run_until_idle
-from conform.unit.truth import GroundTruth, dumps
+from conform.families.gve.unit.model import Unit, run_until_idle
+from conform.families.gve.unit.truth import GroundTruth, dumps
 
 
 def _unit(spec, variant="gve64-v19"):

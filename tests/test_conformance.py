@@ -9,11 +9,8 @@ import time
 import pytest
 
 from conform.cli.main import main
-from conform.conformance.checks import generate, select
-from conform.conformance.expect import Reference
 from conform.conformance.results import Grade
 from conform.conformance.runner import RunAborted, Runner, RunOptions
-from conform.conformance.safety import Guard, SafetyRefusal, hazards
 from conform.conformance.suite import suite
 from conform.conformance.target import (
     EmuTarget,
@@ -23,6 +20,9 @@ from conform.conformance.target import (
     unit_class,
     variant_for_firmware,
 )
+from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.expect import Reference
+from conform.families.gve.conformance.safety import Guard, SafetyRefusal, hazards
 
 VARIANTS = ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124")
 
@@ -296,7 +296,7 @@ def test_firmware_string_and_eeprom_read_back_are_exact(spec):
     an EEPROM byte the script wrote is read back exactly (not just by shape)."""
     by_key = {c.key: c for c in generate(spec, "gve64-v19")}
     ref = Reference(spec, "gve64-v19")
-    from conform.conformance.expect import judge
+    from conform.families.gve.conformance.expect import judge
 
     for key, good, bad in [("?/valid", b"0,IP64MPG v19 10.9.2010", b"0,IP64MPG v19 10.9.2011"),
                            ("EW/read-back", b"0,5A", b"0,5B")]:

@@ -5,14 +5,14 @@ from __future__ import annotations
 import pytest
 
 from conform.cli.main import main
-from conform.conformance.characterize import characterize, to_profile
-from conform.conformance.profile import (
+from conform.conformance.target import open_target
+from conform.families.gve.conformance.characterize import characterize, to_profile
+from conform.families.gve.conformance.profile import (
     diff_profiles,
     load_profile,
     load_profile_dialect,
     write_profile,
 )
-from conform.conformance.target import open_target
 
 DIALECTS = [
     {},

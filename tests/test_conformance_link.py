@@ -14,13 +14,13 @@ import pytest
 from test_conformance import UnitEndpoint  # the reference unit behind an endpoint
 
 from conform.cli.main import main
-from conform.conformance.checks import generate, select
 from conform.conformance.results import Grade
 from conform.conformance.runner import Runner, RunOptions
-from conform.conformance.safety import Guard, not_verified
-from conform.conformance.state import StateKeeper
 from conform.conformance.suite import suite
 from conform.conformance.target import EmuTarget, LinkTarget, emulator_factory, open_target
+from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.safety import Guard, not_verified
+from conform.families.gve.conformance.state import StateKeeper
 from conform.link import open_port
 
 # a subset that exercises every way to a check's state: commands only (V, checksum), J with a
@@ -246,7 +246,7 @@ def test_a_link_gone_silent_is_an_error_not_a_fail(spec, monkeypatch):
             if not self.silent:
                 super().write(data)
 
-    import conform.conformance.state as state
+    import conform.families.gve.conformance.state as state
 
     monkeypatch.setattr(state, "READY_MARGIN", 0.5)  # the deaf time + 0.5 s of silence: lost
     target = LinkTarget(GoesSilent(spec, "gve64-v19"), "fake://unit", Guard(False, None, False),

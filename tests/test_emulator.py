@@ -13,11 +13,11 @@ import time
 import pytest
 from conftest import stop_emulator
 
+from conform.emulator.control import run_control, send_control
+from conform.emulator.serve import ControlServer, Emulator
 from conform.errors import UserError
+from conform.families.gve.unit import Unit
 from conform.link.faults import FaultConfig, FaultInjector, FaultyEndpoint
-from conform.unit import Unit
-from conform.unit.control import run_control, send_control
-from conform.unit.serve import ControlServer, Emulator
 
 # ---------------------------------------------------------------- fault injection (sans-I/O)
 

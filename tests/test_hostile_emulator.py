@@ -16,10 +16,10 @@ import tty
 import pytest
 from conftest import stop_emulator
 
+from conform.emulator.serve import ControlServer, Emulator
 from conform.errors import UserError
-from conform.protocol import CommandParser
-from conform.unit import Unit
-from conform.unit.serve import ControlServer, Emulator
+from conform.families.gve.protocol import CommandParser
+from conform.families.gve.unit import Unit
 
 HUGE = b"9" * 5000
 

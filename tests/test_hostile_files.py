@@ -25,8 +25,8 @@ import pytest
 
 from conform.cli.main import main
 from conform.conformance.results import CheckResult, Grade, LogEntry, RunResults, TargetRun
-from conform.spec import load_spec
-from conform.spec.load import FILES
+from conform.families.gve.spec import load_spec
+from conform.families.gve.spec.load import FILES
 
 Case = tuple[str, Callable[[Path], None]]
 DEEP = 5000

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from conform.unit.kinematics import (
+from conform.families.gve.unit.kinematics import (
     brake,
     braking_distance,
     braking_time,
@@ -21,7 +21,7 @@ from conform.unit.kinematics import (
     speed_at,
     speed_cap,
 )
-from conform.unit.motion import (
+from conform.families.gve.unit.motion import (
     MotionExecutor,
     MotionParams,
     MotionStateError,

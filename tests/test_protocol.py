@@ -6,7 +6,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conform.protocol import (
+from conform.families.gve.protocol import (
     Answer,
     CommandParser,
     Garbled,
@@ -21,8 +21,8 @@ from conform.protocol import (
     split_checksum,
     verify,
 )
-from conform.protocol.strategies import command_args
-from conform.spec import load_spec
+from conform.families.gve.protocol.strategies import command_args
+from conform.families.gve.spec import load_spec
 
 SPEC = load_spec()
 DIALECT = SPEC.dialect()

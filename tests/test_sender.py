@@ -10,13 +10,13 @@ from click.testing import CliRunner
 from conform.analysis import analyze
 from conform.cli.main import cli
 from conform.errors import UserError
-from conform.protocol import CommandParser
-from conform.sender.core import Sender
-from conform.sender.gcode import GcodeOptions, gcode_segments, gcode_to_items, junction_speed
-from conform.sender.job import load_job, parse_item
-from conform.sender.links import LinkModel, halt_and_delete
-from conform.sender.session import send_emulated
-from conform.spec import load_spec
+from conform.families.gve.protocol import CommandParser
+from conform.families.gve.sender.core import Sender
+from conform.families.gve.sender.gcode import GcodeOptions, gcode_segments, gcode_to_items, junction_speed
+from conform.families.gve.sender.job import load_job, parse_item
+from conform.families.gve.sender.links import LinkModel, halt_and_delete
+from conform.families.gve.sender.session import send_emulated
+from conform.families.gve.spec import load_spec
 
 SPEC = load_spec()
 VAR = SPEC.variant("gve64-v19")
@@ -167,7 +167,7 @@ class UnitPort:
     def __init__(self) -> None:
         import time
 
-        from conform.unit import Unit
+        from conform.families.gve.unit import Unit
 
         self.clock = time.monotonic
         self.unit = Unit(VAR, DIA, t0=self.clock())
@@ -199,7 +199,7 @@ class UnitPort:
 
 
 def test_run_serial_on_the_wall_clock() -> None:
-    from conform.sender.links import run_serial
+    from conform.families.gve.sender.links import run_serial
 
     parser = CommandParser(VAR, DIA)
     items = [parse_item(x, VAR, parser) for x in ["V50000", "C100,0,0", "C0,100,0", "C-50,0,0"]]

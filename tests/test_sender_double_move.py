@@ -11,10 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from conform.analysis import analyze
-from conform.protocol import CommandParser
-from conform.sender.job import parse_item
-from conform.sender.links import LinkModel
-from conform.sender.session import send_emulated
+from conform.families.gve.protocol import CommandParser
+from conform.families.gve.sender.job import parse_item
+from conform.families.gve.sender.links import LinkModel
+from conform.families.gve.sender.session import send_emulated
 
 
 def _items(spec, lines):

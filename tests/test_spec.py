@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from conform.spec import SpecError, load_spec
-from conform.spec.diff import diff_variants
+from conform.families.gve.spec import SpecError, load_spec
+from conform.families.gve.spec.diff import diff_variants
 
 VARIANTS = ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124")
 CLAUSE = re.compile(r"^(GVE64|GVE124) §\d+(\.\d+)*$")
@@ -115,7 +115,7 @@ def test_dialect_overrides_and_rejects(spec):
 
 def test_answer_times_come_from_the_tables(spec):
     """H and W answer when their action ends (their rows say so); everything else at once."""
-    from conform.conformance.checks import generate
+    from conform.families.gve.conformance.checks import generate
 
     v = spec.variant("gve64-v19")
     late = {cid: c.answer_within for cid, c in v.commands.items() if c.answer_within != 0.5}

@@ -1,12 +1,12 @@
-"""The reference unit model (conform.unit): golden examples, state machine, open questions."""
+"""The reference unit model (conform.families.gve.unit): golden examples, state machine, open questions."""
 
 from __future__ import annotations
 
 import pytest
 
-from conform.protocol import append_checksum
-from conform.unit import Unit, run_until_idle
-from conform.unit.given import drive_given
+from conform.families.gve.protocol import append_checksum
+from conform.families.gve.unit import Unit, run_until_idle
+from conform.families.gve.unit.given import drive_given
 
 VARIANTS = ["gve64-v10", "gve64-v19", "gve64-phantom", "gve124"]
 

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conform.protocol import Command, CommandParser, Rejection, append_checksum
-from conform.spec import load_spec
-from conform.unit import Unit
+from conform.families.gve.protocol import Command, CommandParser, Rejection, append_checksum
+from conform.families.gve.spec import load_spec
+from conform.families.gve.unit import Unit
 
 SPEC = load_spec()
 SETTINGS = settings(max_examples=120, deadline=None,
@@ -158,8 +158,8 @@ def test_fast_path_equals_parser(steps, variant):
 
 # ---------------------------------------------------------------- the fuzz campaign
 
-from conform.protocol.grammar import AnswerGrammar  # noqa: E402
-from conform.unit.fuzz import Campaign  # noqa: E402
+from conform.families.gve.protocol.grammar import AnswerGrammar  # noqa: E402
+from conform.families.gve.unit.fuzz import Campaign  # noqa: E402
 
 
 def test_answer_grammar_rejects_what_the_tables_do_not_allow():

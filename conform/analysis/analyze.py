@@ -168,7 +168,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
             progress: Callable[[int, int], None] | None = None, step: Step | None = None,
             whatif_replays: bool = True) -> Analysis:
     """Analyse one capture file (see the module docstring)."""
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     def say(name: str) -> None:
         release_memory()
@@ -355,7 +355,7 @@ def _check_answer_shapes(ex: pd.DataFrame, unit: fr.DecodedLines, data: np.ndarr
 
 
 def _parser(var: Any, dia: Any) -> Any:
-    from conform.protocol import CommandParser
+    from conform.families.gve.protocol import CommandParser
 
     return CommandParser(var, dia)
 

@@ -18,8 +18,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from conform.analysis.rawread import Direction
-from conform.protocol import Command, CommandParser, Garbled, Rejection, parse_answer
-from conform.spec.model import Dialect, Variant
+from conform.families.gve.protocol import Command, CommandParser, Garbled, Rejection, parse_answer
+from conform.families.gve.spec.model import Dialect, Variant
 
 CR, LF, COMMA, BANG = 13, 10, 44, 33
 BITS_PER_BYTE = 10

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from conform.analysis.columns import AXES, isin
-from conform.spec.model import Variant
+from conform.families.gve.spec.model import Variant
 
 MODAL = {"V", "A", "B", "$", "T", "VK", "VN"}
 CONTROL = {"H", "G", "D", "J", "K", "R"}
@@ -47,7 +47,7 @@ class QueueReplay:
 
 
 def _params(variant: Variant) -> Any:
-    from conform.unit.motion import MotionParams
+    from conform.families.gve.unit.motion import MotionParams
 
     r = variant.reset
     return MotionParams(v=float(r.get("V", 1000)), a=float(r.get("A", 20)) * 1000.0,
@@ -218,7 +218,7 @@ def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.nda
                 cont: np.ndarray, names: np.ndarray, host_parsed: Any, variant: Variant,
                 chunk: int | None = None) -> tuple[Completions, list[float], list[str]]:
     """Every row through ``MotionExecutor`` (any session, H/G/D/K/R/J included)."""
-    from conform.unit.motion import Completion, MotionExecutor, MotionStateError
+    from conform.families.gve.unit.motion import Completion, MotionExecutor, MotionStateError
 
     naxes = len(variant.axes)
     vec = vec[:]  # the whole (vectors, axes) array: the Python replay takes small sessions

@@ -16,7 +16,7 @@ from math import sqrt
 import numpy as np
 from numba import njit
 
-from conform.unit.kinematics import plan
+from conform.families.gve.unit.kinematics import plan
 
 _REST, _JOIN, _PENDING = 0, 1, -1
 # float state

@@ -280,7 +280,7 @@ def _make_decoder(variant: str, baud: int | None) -> tuple[Decoder | None, str]:
         return None, f"frames not decoded while recording: {variant} traffic is decoded by " \
                      "conform analyze from the raw bytes"
     try:
-        from conform.capture.decode import make_decoder
+        from conform.families.gve.decode import make_decoder
     except ImportError as exc:
         return None, f"frames not decoded: {exc}"
     try:

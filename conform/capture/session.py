@@ -36,7 +36,7 @@ class Record:
 
 
 class Decoder(Protocol):
-    """What ``CaptureSession`` needs from a frame decoder (see ``conform.capture.decode``)."""
+    """What ``CaptureSession`` needs from a frame decoder (see ``conform.families.gve.decode``)."""
 
     def feed(
         self, direction: str, data: bytes, offset: int, t_read: float, t_first: float

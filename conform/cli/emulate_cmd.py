@@ -16,9 +16,9 @@ from typing import Any
 import click
 
 from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
-from conform.conformance.profile import load_profile
 from conform.errors import UserError
-from conform.spec import load_spec
+from conform.families.gve.conformance.profile import load_profile
+from conform.families.gve.spec import load_spec
 
 
 class _EmulateGroup(click.Group):
@@ -118,8 +118,8 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
         fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
                   link_path=link_path, record_path=record_path, answer_delay=answer_delay)
         return
-    from conform.unit.model import Unit
-    from conform.unit.serve import ControlServer, Emulator
+    from conform.emulator.serve import ControlServer, Emulator
+    from conform.families.gve.unit.model import Unit
 
     spec = load_spec()
     v = spec.variant(variant)
@@ -133,7 +133,7 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
         raise UserError(f"--switch: {exc}") from None
     truth = None
     if truth_path:
-        from conform.unit.truth import GroundTruth
+        from conform.families.gve.unit.truth import GroundTruth
 
         truth = GroundTruth(unit, t0=t_start)
     injector = fault_injector(faults, seed, t_start)
@@ -254,7 +254,7 @@ def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
       conform emulate gve64-v19 --control /tmp/emu.sock &
       conform emulate control /tmp/emu.sock press stop
     """
-    from conform.unit.control import send_control
+    from conform.emulator.control import send_control
 
     try:
         reply = send_control(socket_path, " ".join(words))

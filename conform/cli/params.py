@@ -13,7 +13,7 @@ MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware
 
 def _variant_ids() -> list[str]:
     """The GVE tables' variants, then those of any other protocol family (conform.families)."""
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     ids = list(load_spec().variants)
     try:
@@ -26,7 +26,7 @@ def _variant_ids() -> list[str]:
 
 
 def _is_gve(variant: str) -> bool:
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     return not variant or variant in load_spec().variants
 
@@ -68,7 +68,7 @@ class TargetType(click.ParamType):
             self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
                       param, ctx)
         if len(parts) > 2 and parts[2] and _is_gve(parts[1]):  # other families say their own
-            from conform.conformance.mutants import MUTANTS
+            from conform.families.gve.conformance.mutants import MUTANTS
 
             if parts[2] not in MUTANTS:
                 self.fail(f"{text!r}: no mutant {parts[2]!r} (see conform run --mutants)",

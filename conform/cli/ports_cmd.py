@@ -33,8 +33,8 @@ def listed_ports() -> list[Port]:
 def probe(port: Port, spec: Any, baud: int, timeout: float) -> Port:
     """Ask ``?`` (harmless: it only reads the firmware string, GVE64 §13.5.1), plain and, if
     the unit wants them, with a checksum; map the firmware string to a variant."""
-    from conform.conformance.safety import Guard
     from conform.conformance.target import HarnessError, open_target, variant_for_firmware
+    from conform.families.gve.conformance.safety import Guard
 
     try:
         target, _ = open_target(port.device, spec, baud=baud, guard=Guard(False, None, False))
@@ -88,7 +88,7 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
         else list(listed.values())
     if do_probe:
         from conform.cli.progress import progress
-        from conform.spec import load_spec
+        from conform.families.gve.spec import load_spec
 
         spec = load_spec()
         with progress("conform ports", transient=True) as bar:

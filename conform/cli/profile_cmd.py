@@ -7,8 +7,8 @@ import sys
 import click
 
 from conform.cli.params import INPUT_FILE
-from conform.conformance.profile import diff_profiles, load_profile
-from conform.spec import load_spec
+from conform.families.gve.conformance.profile import diff_profiles, load_profile
+from conform.families.gve.spec import load_spec
 
 
 @click.group(name="profile")

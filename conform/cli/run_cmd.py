@@ -21,10 +21,8 @@ from conform.cli.params import (
     json_option,
 )
 from conform.cli.progress import progress as show_progress
-from conform.conformance.profile import load_profile_dialect
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.safety import run_guard
 from conform.conformance.suite import (
     PROFILE_NAMES,
     parse_replay,
@@ -35,8 +33,10 @@ from conform.conformance.suite import (
 )
 from conform.conformance.target import DEFAULT_VARIANT, identify, open_target, parse_target
 from conform.errors import UserError
+from conform.families.gve.conformance.profile import load_profile_dialect
+from conform.families.gve.conformance.safety import run_guard
+from conform.families.gve.spec import load_spec
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
-from conform.spec import load_spec
 
 
 @click.command(name="run")
@@ -172,7 +172,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
                 target.close()
         mutant_report = []
         if mutants and aborted is None:
-            from conform.conformance.mutants import mutant_targets
+            from conform.families.gve.conformance.mutants import mutant_targets
 
             variants = [r.variant for r in runs] or [DEFAULT_VARIANT]
             task = bar.task("mutants", len(list(mutant_targets(variants))))

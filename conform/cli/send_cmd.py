@@ -20,7 +20,7 @@ from conform.cli.params import (
     VARIANT,
 )
 from conform.errors import LinkError, UserError
-from conform.sender.core import POLICIES
+from conform.families.gve.sender.core import POLICIES
 
 
 def _ints(text: str, option: str) -> set[int]:
@@ -131,8 +131,8 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
       conform send captures/jobs/part.nc --target emu:gve64-v19 --checksums --packet 20
       conform send captures/jobs/raster.txt --target /dev/ttyUSB0 --allow-motion
     """
-    from conform.sender.job import load_job
-    from conform.spec import load_spec
+    from conform.families.gve.sender.job import load_job
+    from conform.families.gve.spec import load_spec
 
     spec = load_spec()
     emu = target.startswith("emu:")
@@ -161,8 +161,8 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
                    latency, timeout, allow_motion)
         return
     items = load_job(job, var, dialect, **gopts)
-    from conform.sender.links import LinkModel
-    from conform.sender.session import send_emulated
+    from conform.families.gve.sender.links import LinkModel
+    from conform.families.gve.sender.session import send_emulated
 
     link = LinkModel(baud=baud, latency=latency / 1000.0, noise=noise, seed=seed,
                      corrupt_commands=_ints(corrupt_command, "--corrupt-command"),
@@ -196,8 +196,8 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
     import serial
 
     from conform.conformance.target import variant_for_firmware
-    from conform.sender.job import load_job
-    from conform.sender.probe import probe_unit
+    from conform.families.gve.sender.job import load_job
+    from conform.families.gve.sender.probe import probe_unit
 
     # the job is read before the port is touched: a bad file or a motion job without
     # --allow-motion never reaches the unit; it is read again for the variant `?` finds
@@ -231,8 +231,8 @@ def _stream(items: list, var: object, port: object, target: str, checksums: bool
             policy: str, latency: float, timeout: float) -> None:
     import serial
 
-    from conform.sender.core import Sender
-    from conform.sender.links import halt_and_delete, run_serial
+    from conform.families.gve.sender.core import Sender
+    from conform.families.gve.sender.links import halt_and_delete, run_serial
 
     sender = Sender(items, var, policy=policy, checksums=checksums, packet=packet,  # type: ignore[arg-type]
                     timeout=timeout / 1000.0)

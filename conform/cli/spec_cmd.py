@@ -12,9 +12,9 @@ from rich.table import Table
 
 from conform.cli.params import VARIANT, echo_json, json_option
 from conform.errors import UserError
-from conform.spec import load_spec
-from conform.spec.diff import diff_variants
-from conform.spec.model import CommandSpec, Variant
+from conform.families.gve.spec import load_spec
+from conform.families.gve.spec.diff import diff_variants
+from conform.families.gve.spec.model import CommandSpec, Variant
 
 
 def _console() -> Console:
@@ -215,7 +215,7 @@ def check_cmd(root: str | None) -> None:
 
     \b
     Example:
-      conform spec check --specs specs
+      conform spec check --specs specs/gve
     """
     spec = load_spec(root)
     n = sum(len(v.commands) for v in spec.variants.values())

@@ -121,7 +121,7 @@ def pytest_configure(config: pytest.Config) -> None:
         return
     from conform.conformance.target import parse_target
     from conform.errors import UserError
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     try:
         spec = load_spec()
@@ -129,7 +129,7 @@ def pytest_configure(config: pytest.Config) -> None:
         if kind == "emu" and what is not None:
             spec.variant(what)
         if mutant is not None:
-            from conform.conformance.mutants import MUTANTS
+            from conform.families.gve.conformance.mutants import MUTANTS
 
             if mutant not in MUTANTS:
                 raise UserError(f"--conform-target {target_text}: no mutant {mutant!r}")
@@ -153,11 +153,11 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
     target_text = config.getoption("conform_target")
     if not target_text:
         return
-    from conform.conformance.safety import Guard
     from conform.conformance.suite import suite
     from conform.conformance.target import identify, open_target, parse_target
     from conform.errors import UserError
-    from conform.spec import load_spec
+    from conform.families.gve.conformance.safety import Guard
+    from conform.families.gve.spec import load_spec
 
     spec = load_spec()
     kind, _, _ = parse_target(target_text)

@@ -14,15 +14,15 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
-from conform.conformance.checks import Check
-from conform.conformance.eta import Estimate, estimate_run
-from conform.conformance.expect import Reference, judge
 from conform.conformance.results import CheckResult, Grade, TargetRun
-from conform.conformance.safety import SafetyRefusal, not_verified
-from conform.conformance.script import run_script, skip_reason
-from conform.conformance.state import StateKeeper
 from conform.conformance.target import HarnessError, LinkSilent, Target
 from conform.errors import LinkError
+from conform.families.gve.conformance.checks import Check
+from conform.families.gve.conformance.eta import Estimate, estimate_run
+from conform.families.gve.conformance.expect import Reference, judge
+from conform.families.gve.conformance.safety import SafetyRefusal, not_verified
+from conform.families.gve.conformance.script import run_script, skip_reason
+from conform.families.gve.conformance.state import StateKeeper
 
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
@@ -158,7 +158,7 @@ class Runner:
         keeper = self.target.keeper
         try:
             if check.kind == "machine":
-                from conform.conformance.machine import run_machine
+                from conform.families.gve.conformance.machine import run_machine
 
                 result = run_machine(self, check)
                 if keeper is not None:

@@ -8,13 +8,13 @@ from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from conform.conformance.checks import Check, generate, select
-from conform.conformance.machine import machine_check
 from conform.conformance.results import Grade, RunResults, TargetRun
 from conform.conformance.runner import Progress, Runner, RunOptions
-from conform.conformance.safety import Guard
 from conform.conformance.target import EmuTarget, emulator_factory
 from conform.errors import UserError
+from conform.families.gve.conformance.checks import Check, generate, select
+from conform.families.gve.conformance.machine import machine_check
+from conform.families.gve.conformance.safety import Guard
 
 PROFILE_NAMES = ("quick", "full")
 
@@ -48,7 +48,7 @@ def run_mutants(spec: Any, variant_ids: Sequence[str], *, profile: str = "quick"
                 machine: bool = False, progress: Callable[[str], None] | None = None
                 ) -> tuple[list[dict[str, Any]], list[TargetRun]]:
     """Run the suite against every mutant; which checks caught each (FAIL) and the runs."""
-    from conform.conformance.mutants import mutant_targets
+    from conform.families.gve.conformance.mutants import mutant_targets
 
     report, runs = [], []
     for m, vid in mutant_targets(variant_ids):

@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from conform.conformance.results import LogEntry
-from conform.conformance.safety import STOP_SEQUENCE, Guard, hazards
 from conform.errors import LinkError, UserError
-from conform.protocol.checksum import append_checksum
+from conform.families.gve.conformance.safety import STOP_SEQUENCE, Guard, hazards
+from conform.families.gve.protocol.checksum import append_checksum
 
 DEFAULT_VARIANT = "gve64-v19"
 DEFAULT_TIMEOUT = 0.5
@@ -73,7 +73,7 @@ class Target(ABC):
         self.checksum_on = False
         self._buffer = b""
         self.t_log0 = 0.0
-        self.keeper: Any = None  # a link's StateKeeper (conform.conformance.state)
+        self.keeper: Any = None  # a link's StateKeeper (conform.families.gve.conformance.state)
         # the host knows nothing moves and the queue is empty (read back after reaching a
         # check's state; nothing that moves sent since): G has nothing to start
         self.idle = False
@@ -379,7 +379,7 @@ class LinkTarget(Target):
         self.baud = baud
         self.ready_after = ready_after
         self._t0 = time.monotonic()
-        self.reset_stats: Any = None  # J's readiness measured (conform.conformance.state)
+        self.reset_stats: Any = None  # J's readiness measured (conform.families.gve.conformance.state)
         self.inputs: str | None = None  # an emulator's control socket that drives its inputs
 
     @property
@@ -390,7 +390,7 @@ class LinkTarget(Target):
         """Inputs of an emulator behind the link, through its control socket (``inputs``)."""
         if self.inputs is None:
             super().set_input(port, bit, active)
-        from conform.unit.control import send_control
+        from conform.emulator.control import send_control
 
         word = "press" if active else "release"
         try:
@@ -423,7 +423,7 @@ class LinkTarget(Target):
         return reply
 
     def ready_wait(self, seconds: float) -> float:
-        from conform.conformance.state import QUIET_MARGIN
+        from conform.families.gve.conformance.state import QUIET_MARGIN
 
         ready = self.keeper.stats.readiness if self.keeper is not None else None
         return seconds if ready is None else max(seconds, ready + QUIET_MARGIN)
@@ -471,7 +471,7 @@ class LinkTarget(Target):
     def _fresh(self) -> None:
         """J, then the ~2 s the unit needs (GVE64 §13.4): polled the first time, then the
         readiness measured (what follows may be about @ or >, which a poll would change)."""
-        from conform.conformance.state import StateStats, power_up
+        from conform.families.gve.conformance.state import StateStats, power_up
 
         if self.reset_stats is None:
             self.reset_stats = StateStats()
@@ -496,11 +496,11 @@ def parse_target(text: str) -> tuple[str, str | None, str | None]:
 
 
 def unit_class() -> Any:
-    """The reference unit class (``conform.unit.Unit``)."""
+    """The reference unit class (``conform.families.gve.unit.Unit``)."""
     try:
-        from conform.unit import Unit
+        from conform.families.gve.unit import Unit
     except ImportError:
-        from conform.unit.model import Unit
+        from conform.families.gve.unit.model import Unit
     return Unit
 
 
@@ -511,7 +511,7 @@ def emulator_factory(spec: Any, variant_id: str, dialect: Any = None,
     dialect = dialect if dialect is not None else spec.dialect()
     cls: Any = unit_class()
     if mutant is not None:
-        from conform.conformance.mutants import MUTANTS
+        from conform.families.gve.conformance.mutants import MUTANTS
 
         if mutant not in MUTANTS:
             raise UserError(f"unknown mutant {mutant!r} (known: {', '.join(MUTANTS)})")

@@ -2,10 +2,9 @@
 
 The engine (spec tooling, emulator adapter, conformance results and reports, capture,
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
-checks, a detector for its traffic and its analysis. ``gve`` wraps the original modules
-(conform.spec, conform.unit, conform.conformance, conform.analysis) without moving them;
-``grbl`` lives in conform.families.grbl with its tables in specs/grbl/. See
-docs/architecture.md.
+checks, a detector for its traffic and its analysis. Each family is one package,
+conform.families.gve and conform.families.grbl, with its tables in specs/gve/ and specs/grbl/
+(the GVE analyser still lives in conform.analysis). See docs/architecture.md.
 
     family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
     detect_family(host_bytes, unit_bytes, metadata)   # -> ("grbl", "why") or ("unknown", ...)

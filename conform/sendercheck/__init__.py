@@ -1,8 +1,8 @@
 """Judge a user's sender program: run it against the reference unit under scenarios, record
 each session through the proxy, and grade it per rule and manual clause.
 
-    scenarios.py   what each scenario does to the link and the unit (GVE family)
-    rules.py       the rules a sender is graded on, each citing its clause (GVE family)
+    families/gve/sendercheck/scenarios.py   what each GVE scenario does to the link and the unit
+    families/gve/sendercheck/rules.py       the GVE rules, each citing its clause
     family.py      a protocol family: its scenarios, rules and job format, in one object
     faults.py      fault injection scripted by the scenario (lost answers, a dead line)
     compare.py     the job against what the unit accepted: double moves and lost vectors

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.sendercheck import rules, scenarios
+from conform.families.gve.sendercheck import rules, scenarios
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
 from conform.sendercheck.session import Session, run_session
 
@@ -140,7 +140,7 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
           directory: Path, timeout: float | None = None, seed: int = 1,
           job_lines: list[str] | None = None,
           progress: Callable[[str], None] | None = None) -> CheckResults:
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     if not command:
         raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS...")

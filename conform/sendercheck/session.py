@@ -24,14 +24,14 @@ from pathlib import Path
 from typing import Any
 
 from conform.capture.live import ProxyCapture
+from conform.emulator.serve import Emulator
+from conform.families.gve.unit.model import run_until_idle
+from conform.families.gve.unit.truth import GroundTruth, dumps
 from conform.link.faults import FaultConfig
 from conform.link.pty import PtyEndpoint
 from conform.sendercheck.compare import Comparison, compare
 from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
-from conform.unit.model import run_until_idle
-from conform.unit.serve import Emulator
-from conform.unit.truth import GroundTruth, dumps
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL

@@ -93,9 +93,9 @@ def run_sender(command: list[str], scenario: Scenario, *, variant: str = "grbl-1
                job: list[str] | None = None, baud: int = 115200,
                timeout: float | None = None) -> SenderRun:
     """Run ``command`` once against the emulator; the traffic analysed."""
+    from conform.emulator.serve import Emulator
     from conform.families.grbl.unit import GrblUnit
     from conform.link.pty import PtyEndpoint
-    from conform.unit.serve import Emulator
 
     spec = load_grbl()
     v = spec.variant(variant)

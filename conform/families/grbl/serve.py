@@ -14,9 +14,9 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           faults: str | None = None, seed: int | None = None, link_path: str | None = None,
           record_path: str | None = None, answer_delay: float = 0.0, **_ignored: Any) -> None:
     from conform.cli.emulate_cmd import _open_endpoint, announce, check_pacing, fault_injector, report, run_until_signal
+    from conform.emulator.serve import Emulator
     from conform.families.grbl.tables import load_grbl
     from conform.families.grbl.unit import GrblUnit
-    from conform.unit.serve import Emulator
 
     spec = load_grbl()
     v = spec.variant(variant)

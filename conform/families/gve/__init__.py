@@ -1,0 +1,72 @@
+"""The GVE family as a :class:`conform.families.Family`: tables (spec/), codec (protocol/),
+reference unit (unit/), checks (conformance/ here and the runner in conform.conformance),
+reference sender (sender/), check-sender scenarios and rules (sendercheck/); its analysis
+is still conform.analysis."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from typing import Any
+
+from conform.families import Detection, VariantInfo
+
+# a GVE command line: '!', an address digit, a mnemonic (GVE64 §13.5); answers: a hex status
+# code, maybe with comma-separated fields, ended by CR (GVE64 §13.7)
+_HOST_LINE = re.compile(rb"![0-7][A-Z?$@>%*]")
+_ANSWER = re.compile(rb"(?:^|\r)[0-9A-F](?:,[^\r]*)?\r")
+
+
+class GveFamily:
+    name = "gve"
+
+    def load_tables(self, root: str | None = None) -> Any:
+        from conform.families.gve.spec import load_spec
+
+        return load_spec(root)
+
+    def variants(self) -> Sequence[VariantInfo]:
+        spec = self.load_tables()
+        return [VariantInfo(v.id, self.name, v.title, v.firmware, "".join(v.axes),
+                            f"queue {v.queue}", v.base or "") for v in spec.variants.values()]
+
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+        from conform.families.gve.unit.model import Unit
+
+        spec = self.load_tables()
+        dialect = options.pop("dialect", None) or spec.dialect()
+        return Unit(spec.variant(variant), dialect, t0=t0, **options)
+
+    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
+        from conform.conformance.runner import RunOptions
+        from conform.conformance.suite import run_one, suite
+
+        spec = self.load_tables()
+        checks = suite(spec, variant, patterns=options.get("patterns", ()),
+                       profile=options.get("profile", "quick"))
+        return run_one(spec, target, variant, checks,
+                       options=RunOptions(profile=options.get("profile", "quick")))
+
+    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+        lines = host.count(b"\r") or 1
+        hits = len(_HOST_LINE.findall(host[:65536]))
+        answers = len(_ANSWER.findall(unit[:65536]))
+        if hits == 0:
+            if answers >= 3 and not host.strip():
+                return Detection(self.name, 0.5, f"{answers} GVE-shaped answers, no host bytes")
+            return Detection(self.name, 0.0, "no '!<address><command>' lines from the host")
+        score = min(1.0, hits / min(lines, 200) * 0.8 + (0.2 if answers else 0.0))
+        return Detection(self.name, score, f"{hits} GVE command lines from the host")
+
+    def serve(self, variant: str, **options: Any) -> None:
+        from conform.errors import UserError
+
+        raise UserError("GVE units are served by `conform emulate VARIANT` itself")
+
+    def analyze(self, path: str, **options: Any) -> Any:
+        from conform.analysis.analyze import analyze
+
+        return analyze(path, **options)
+
+
+FAMILY = GveFamily()

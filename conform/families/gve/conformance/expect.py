@@ -1,0 +1,241 @@
+"""What the spec allows: the reference unit's transcript of a script, per dialect, and the
+comparison that grades a target's transcript against it.
+
+A check passes when the target answers every step as the reference unit does under the expected
+dialect. When it does not, the same script is run on references that differ in one open question
+(A-register); if one of them reproduces the target's whole transcript the check is a DEVIATION on
+that question, otherwise a FAIL at the first step that differs.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from conform.conformance.target import EmuTarget, Reply
+from conform.families.gve.conformance.script import ENVIRONMENT, POSITION, Script, Step, run_script
+from conform.families.gve.protocol.checksum import verify
+
+# open questions that bear on any script, whatever its commands
+GLOBAL_QUESTIONS = ("A24", "A10", "A11", "A22", "A21", "A14", "A20", "A25", "A26", "A23", "A9")
+
+_CACHE: dict[tuple[Any, ...], list[Reply | None]] = {}
+_CACHE_MAX = 60000
+
+
+def dialect_key(dialect: Any) -> tuple[tuple[str, str], ...]:
+    return tuple(sorted(dialect.changed().items()))
+
+
+class Reference:
+    """The reference unit of one variant; transcripts of scripts per dialect, cached."""
+
+    def __init__(self, spec: Any, variant_id: str, dialect: Any = None,
+                 unit_cls: Any = None) -> None:
+        self.spec = spec
+        self.variant = spec.variant(variant_id)
+        self.dialect = dialect if dialect is not None else spec.dialect()
+        if unit_cls is None:
+            from conform.conformance.target import unit_class
+
+            unit_cls = unit_class()
+        self.unit_cls = unit_cls
+        self._parser: dict[Any, Any] = {}
+
+    def with_choice(self, question: str, alternative: str) -> Any:
+        return self.spec.dialect(self.dialect.changed() | {question: alternative})
+
+    def transcript(self, script: Script, dialect: Any = None) -> list[Reply | None]:
+        d = self.dialect if dialect is None else dialect
+        key = (self.variant.id, self.unit_cls, dialect_key(d), script)
+        hit = _CACHE.get(key)
+        if hit is not None:
+            return hit
+        variant, cls = self.variant, self.unit_cls
+        target = EmuTarget(lambda: cls(variant, d), "reference")
+        replies = run_script(target, script)
+        if len(_CACHE) >= _CACHE_MAX:
+            _CACHE.clear()
+        _CACHE[key] = replies
+        return replies
+
+    def command_ids(self, script: Iterable[Step]) -> list[str]:
+        """The spec row ids a script's lines name (for the open questions they bear on)."""
+        from conform.families.gve.protocol import Command, CommandParser
+
+        parser = self._parser.get("p")
+        if parser is None:
+            parser = self._parser["p"] = CommandParser(self.variant, self.spec.dialect())
+        out = []
+        for step in script:
+            if not step.line:
+                continue
+            line = step.line.rstrip(b"\r\n")
+            parsed = parser.parse(line, verify(line))
+            name = parsed.name if isinstance(parsed, Command) else getattr(parsed, "name", None)
+            if name:
+                out.append(name)
+        return out
+
+    def candidate_questions(self, script: Iterable[Step], first: Sequence[str] = (),
+                            include_global: bool = True) -> list[str]:
+        seen: list[str] = []
+        for q in first:
+            if q not in seen:
+                seen.append(q)
+        for cid in self.command_ids(script):
+            cmd = self.spec.commands.get(cid)
+            for q in cmd.questions if cmd else ():
+                if q not in seen:
+                    seen.append(q)
+        for q in GLOBAL_QUESTIONS if include_global else ():
+            if q not in seen:
+                seen.append(q)
+        return [q for q in seen if q in self.spec.questions]
+
+
+# --- comparing answers --------------------------------------------------------------------------
+
+def _split(line: bytes) -> tuple[bytes, bool]:
+    """(line without a valid checksum tail, had one)."""
+    if verify(line):
+        return line[:-3], True
+    return line, False
+
+
+_FLOAT = r"-?(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?|-?inf|nan"
+_RADIX = {"dec": r"-?\d+", "float": _FLOAT, "hex": r"[0-9A-F]{%d}", "text": r".{%d}"}
+
+
+def _field_shape_ok(expected: str, actual: str, shape: tuple[str, int | None] | None = None
+                    ) -> bool:
+    """Does ``actual`` have the shape of the table's answer field (radix, width; upper-case
+    hex), or without a table entry the shape of ``expected``?"""
+    if shape is not None:
+        radix, width = shape
+        pattern = _RADIX.get(radix, r".+")
+        if "%d" in pattern:
+            pattern = pattern % width if width else pattern.replace("{%d}", "+")
+        return re.fullmatch(pattern, actual) is not None
+    if re.fullmatch(r"-?\d+", expected):
+        return re.fullmatch(r"-?\d+", actual) is not None
+    if re.fullmatch(r"[0-9A-F]+", expected):
+        return re.fullmatch(r"[0-9A-F]{%d}" % len(expected), actual) is not None
+    return bool(actual) or not expected
+
+
+def line_mismatch(step: Step, expected: bytes, actual: bytes, loose: bool,
+                  tol: float) -> str | None:
+    if expected == actual:
+        return None
+    if not loose or step.kind not in (POSITION, ENVIRONMENT):
+        return "answer differs"
+    e_body, e_sum = _split(expected)
+    a_body, a_sum = _split(actual)
+    if e_sum != a_sum:
+        return "checksum missing or wrong" if e_sum else "unexpected checksum"
+    e_f, a_f = e_body.decode("latin-1").split(","), a_body.decode("latin-1").split(",")
+    if e_f[0] != a_f[0]:
+        return "answer code differs"
+    if len(e_f) != len(a_f):
+        return f"{len(a_f) - 1} fields where {len(e_f) - 1} were expected"
+    for i, (e, a) in enumerate(zip(e_f[1:], a_f[1:], strict=True)):
+        if step.kind == POSITION:
+            try:
+                if abs(int(e) - int(a)) > tol:
+                    return f"position {a} is not within {tol:g} of {e}"
+            except ValueError:
+                return f"position field {a!r} is not an integer"
+        elif not _field_shape_ok(e, a, step.shape[i] if i < len(step.shape) else None):
+            return f"field {a!r} does not have the shape of {e!r}"
+    return None
+
+
+def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loose: bool,
+                   tol: float) -> str | None:
+    """Why ``actual`` is not an answer the reference allows for ``step`` (None if it is)."""
+    if expected is None or actual is None:
+        return None if expected is actual else "step not run"
+    if not loose and expected.stray != actual.stray:
+        return "unexpected bytes before the command" if actual.stray else "bytes missing"
+    if actual.partial and not expected.partial:
+        return "answer not terminated by CR"
+    if len(expected.lines) != len(actual.lines):
+        if not actual.lines and not actual.partial:
+            return "no answer"
+        return f"{len(actual.lines)} answer line(s) where {len(expected.lines)} were expected"
+    if expected.partial != actual.partial and not loose:
+        return "unterminated bytes differ"
+    for e, a in zip(expected.lines, actual.lines, strict=True):
+        why = line_mismatch(step, e, a, loose, tol if expected.moving else 0.0)
+        if why:
+            return why
+    if step.tolerance is not None and expected.t_rx is not None and actual.t_rx is not None:
+        d_e, d_a = expected.t_rx - expected.t_tx, actual.t_rx - actual.t_tx
+        if abs(d_a - d_e) > step.tolerance:
+            return (f"answered after {d_a * 1000:.0f} ms where the reference answers after "
+                    f"{d_e * 1000:.0f} ms (tolerance ±{step.tolerance * 1000:.0f} ms)")
+    return None
+
+
+def first_mismatch(script: Script, expected: Sequence[Reply | None], actual: Sequence[Reply | None],
+                   loose: bool, tol_of: Callable[[Reply | None, Reply | None], float]
+                   ) -> tuple[int, str] | None:
+    for i, step in enumerate(script):
+        e = expected[i] if i < len(expected) else None
+        a = actual[i] if i < len(actual) else None
+        why = reply_mismatch(step, e, a, loose, tol_of(e, a))
+        if why:
+            return i, why
+    return None
+
+
+def show(step: Step, reply: Reply | None) -> str:
+    if reply is None:
+        return "(nothing)"
+    out = reply.text()
+    if reply.stray:
+        out = f"[unasked: {reply.stray.decode('latin-1')!r}] " + out
+    return out
+
+
+@dataclass
+class Verdict:
+    grade: str  # PASS | FAIL | DEVIATION
+    step: int | None = None
+    expected: str = ""
+    actual: str = ""
+    detail: str = ""
+    question: str | None = None
+    alternative: str | None = None
+
+
+def judge(ref: Reference, script: Script, actual: Sequence[Reply | None], *, loose: bool,
+          questions: Sequence[str] = (), max_rate: float = 0.0) -> Verdict:
+    """Grade a target's transcript of ``script`` against the reference (see module doc)."""
+
+    def tol_of(e: Reply | None, a: Reply | None) -> float:
+        if not loose or e is None or a is None:
+            return 0.0
+        return max_rate * (abs(e.t_tx - a.t_tx) + 0.05)
+
+    expected = ref.transcript(script)
+    miss = first_mismatch(script, expected, actual, loose, tol_of)
+    if miss is None:
+        return Verdict("PASS")
+    index, why = miss
+    step = script[index]
+    exp_text = f"{step.describe()} → {show(step, expected[index])}"
+    act_text = f"{step.describe()} → {show(step, actual[index] if index < len(actual) else None)}"
+    for q in ref.candidate_questions(script, questions):
+        for alt in ref.spec.questions[q].alternatives:
+            if alt == ref.dialect[q]:
+                continue
+            other = ref.transcript(script, ref.with_choice(q, alt))
+            if first_mismatch(script, other, actual, loose, tol_of) is None:
+                meaning = ref.spec.questions[q].alternatives[alt]
+                return Verdict("DEVIATION", index, exp_text, act_text,
+                               f"{q}={alt}: {meaning}", q, alt)
+    return Verdict("FAIL", index, exp_text, act_text, why)

@@ -1,0 +1,146 @@
+"""Deviant units: the reference model with one deliberate fault each.
+
+The suite tests itself by running against these; each names the check that must catch it.
+A mutant is a subclass of :class:`conform.families.gve.unit.Unit` overriding one handler (or ``encode``),
+so it behaves exactly like the reference everywhere else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from conform.conformance.target import unit_class
+from conform.families.gve.protocol import Command, Rejection
+from conform.families.gve.protocol.answers import encode_answer
+
+Unit: Any = unit_class()
+
+OK, SYNTAX, RANGE, NOTHING_TO_GO = 0, 4, 5, 6
+
+
+class WrongRangeCodeV(Unit):
+    """V out of range answers 4 (syntax) instead of 5 (GVE64 §13.7)."""
+
+    def _parse(self, line: bytes) -> Any:
+        r = super()._parse(line)
+        if isinstance(r, Rejection) and r.kind == "range" and r.name == "V":
+            return dataclasses.replace(r, code=SYNTAX)
+        return r
+
+
+class QueueOneShort(Unit):
+    """The C queue holds one vector fewer than the manual's 420 (128)."""
+
+    def _cmd_C(self, args: tuple, t: float) -> Any:
+        if self.queue_len >= self.variant.queue - 1:
+            return 1
+        return super()._cmd_C(args, t)
+
+
+class IndexStuck(Unit):
+    """``@`` stops advancing after the first command."""
+
+    def _cmd_index(self, args: tuple, t: float) -> Any:
+        return (OK, (str(min(self.index, 1)),))
+
+
+class BadAnswerChecksum(Unit):
+    """Answers carry a checksum one too high when checksums are on."""
+
+    def encode(self, code: int, fields: Sequence[object] = ()) -> bytes:
+        ans = super().encode(code, fields)
+        if not self.checksum_on:
+            return ans
+        body, tail = ans[:-3], ans[-3:-1]
+        return body + b"%02X" % ((int(tail, 16) + 1) & 0xFF) + b"\r"
+
+
+class NoIntaInAnswers(Unit):
+    """The answer digit never carries INTA (bit 3)."""
+
+    def encode(self, code: int, fields: Sequence[object] = ()) -> bytes:
+        return encode_answer(code, False, fields, checksum_on=self.checksum_on)
+
+
+class GoWithoutWork(Unit):
+    """G answers 0 when there is nothing to start (instead of 6)."""
+
+    def _cmd_G(self, args: tuple, t: float) -> Any:
+        r = super()._cmd_G(args, t)
+        return OK if r == NOTHING_TO_GO else r
+
+
+class V10AcceptsVL(Unit):
+    """A v10 that accepts VL (a v19 command, GVE64 §14.1) and answers 0."""
+
+    def _parse(self, line: bytes) -> Any:
+        r = super()._parse(line)
+        if isinstance(r, Rejection) and r.kind == "absent" and r.name == "VL":
+            return Command(r.address or 0, "VL", (), False, line)
+        return r
+
+    def _execute(self, cmd: Command, t: float) -> Any:
+        if cmd.name == "VL":
+            return OK
+        return super()._execute(cmd, t)
+
+
+class FlagsWithoutCR(Unit):
+    """The answer to F comes without its CR."""
+
+    def _cmd_F(self, args: tuple, t: float) -> Any:
+        code, fields = super()._cmd_F(args, t)
+        return self.encode(code, fields)[:-1]
+
+
+class SwappedAxes(Unit):
+    """Positions report X and Y swapped."""
+
+    @property
+    def position(self) -> tuple[int, ...]:
+        pos = list(super().position)
+        pos[0], pos[1] = pos[1], pos[0]
+        return tuple(pos)
+
+
+@dataclass(frozen=True)
+class Mutant:
+    name: str
+    cls: type
+    variants: tuple[str, ...]  # variants it applies to (empty: all)
+    catches: tuple[str, ...]  # check keys (id without variant and clause) that must FAIL
+    fault: str
+
+
+MUTANTS: dict[str, Mutant] = {m.name: m for m in (
+    Mutant("v-range-code", WrongRangeCodeV, (), ("V/range/pps/hi+1",),
+           "V out of range answers 4, not 5"),
+    Mutant("queue-one-short", QueueOneShort, (), ("C/queue-full",),
+           "the queue holds one C vector too few"),
+    Mutant("index-stuck", IndexStuck, (), ("@/advance",), "@ stops advancing"),
+    Mutant("answer-checksum", BadAnswerChecksum, (), ("checksum-on",),
+           "answer checksums are wrong"),
+    Mutant("no-inta", NoIntaInAnswers, (), ("inta",), "INTA missing from answers"),
+    Mutant("go-nothing-ok", GoWithoutWork, (), ("G/nothing-left",),
+           "G answers 0 with nothing to start"),
+    Mutant("v10-accepts-vl", V10AcceptsVL, ("gve64-v10",), ("VL/absent",),
+           "a v10 that accepts VL"),
+    Mutant("answer-no-cr", FlagsWithoutCR, (), ("F/valid",), "the answer to F has no CR"),
+    Mutant("axes-swapped", SwappedAxes, (), ("position", "L/position-1"),
+           "positions with X and Y swapped"),
+)}
+
+
+def mutant_targets(variant_ids: Sequence[str]) -> list[tuple[Mutant, str]]:
+    """(mutant, variant) pairs to run: each mutant on the first variant it applies to."""
+    out = []
+    for m in MUTANTS.values():
+        vs = [v for v in variant_ids if not m.variants or v in m.variants]
+        if not vs and m.variants:
+            vs = [m.variants[0]]
+        if vs:
+            out.append((m, vs[0]))
+    return out

@@ -1,0 +1,1 @@
+"""The GVE scenarios and rules check-sender grades a sender on."""

@@ -1,6 +1,0 @@
-"""The reference sender: streams a job (vectors or G-code) with a chosen recovery policy."""
-
-from conform.sender.core import POLICIES, Sender
-from conform.sender.job import Item, load_job
-
-__all__ = ["POLICIES", "Item", "Sender", "load_job"]
