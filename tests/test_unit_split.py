@@ -261,7 +261,33 @@ def record(path: Path = FIXTURE, seed: int = 13) -> None:
             fh.write(json.dumps(s, separators=(",", ":")) + "\n")
 
 
-# ------------------------------------------------------------------------------ the test
+# ------------------------------------------------------------------------------ the tests
+PUBLIC = ("checksum_on", "deaf", "eeprom", "encode", "exchange", "executor", "index",
+          "input_level", "inta", "last_exchange", "modal", "mpg", "next_deadline", "now",
+          "outputs", "poll", "position", "queue_len", "receive", "run", "set_input", "set_level",
+          "spindle", "status")
+"""``Unit``'s public names before the split (``docs/unit-model.md``, API)."""
+
+
+def test_public_api_is_unchanged() -> None:
+    assert tuple(n for n in dir(Unit) if not n.startswith("_")) == PUBLIC
+
+
+def test_every_command_of_the_tables_has_one_handler() -> None:
+    """The dispatch covers ``specs/commands.toml`` exactly, each handler on one family module."""
+    from conform.families.gve.unit.dispatch import HANDLER_NAMES
+
+    spec = load_spec()
+    assert set(HANDLER_NAMES) == set(spec.commands)
+    for variant_id in spec.variants:
+        unit = Unit(spec.variant(variant_id))
+        assert set(unit.handlers) == set(spec.commands)
+        for cid, name in HANDLER_NAMES.items():
+            owner = next(c for c in type(unit).__mro__ if name in vars(c))
+            assert owner is not Unit and owner.__module__ != Unit.__module__, (cid, owner)
+            assert unit.handlers[cid].__func__ is vars(owner)[name], cid
+
+
 def _sessions() -> list[dict[str, Any]]:
     with lzma.open(FIXTURE, "rt", encoding="utf-8") as fh:
         return [json.loads(line) for line in fh]
