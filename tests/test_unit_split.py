@@ -7,10 +7,12 @@ random mixes), a few thousand random and directed inputs (command lines from the
 cut lines, noise, packets, checksum toggles, resets, queue filling, halts, K/R, W, inputs
 asserted) with their times, and what the unit did: the bytes and times of every answer and a
 digest of its observable state (position, queue, ST0..ST6, INTA/RUN, index, modal values,
-EEPROM, deadlines...) after each input. The test replays the inputs against today's unit and
+EEPROM, deadlines...) and of the vectors its executor finished (times, speeds) after each
+input. The test replays the inputs against today's unit and
 requires the same observations.
 
-Re-record (only for a deliberate change of behaviour): ``python tests/test_unit_split.py``.
+Re-record (only for a deliberate change of behaviour): ``python tests/test_unit_split.py``
+(with ``PYTHONPATH`` at the tree whose unit is to be recorded).
 """
 
 from __future__ import annotations
@@ -60,8 +62,14 @@ class Observer:
         self.chain = hashlib.blake2b(digest_size=8)
 
     def step(self, op: list[Any]) -> Any:
+        if self.unit.executor.log is None:  # a J makes a new executor
+            self.unit.executor.log = []
         got = apply(self.unit, op)
         self.chain.update(_state(self.unit))
+        log = self.unit.executor.log
+        if log:  # the vectors that finished: when, at what speeds, starved or not
+            self.chain.update(repr(log).encode())
+            log.clear()
         return got
 
     def digest(self) -> str:
