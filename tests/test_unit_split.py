@@ -3,13 +3,13 @@
 ``tests/data/unit_transcripts.jsonl.xz`` holds transcripts recorded from the single-class unit
 (before ``conform/families/gve/unit/model.py`` was split by command family): for every variant
 under the default dialect and under each single alternative of every open question (and a few
-random mixes), a few thousand random and directed inputs (command lines from the tables, mutated and
-cut lines, noise, packets, checksum toggles, resets, queue filling, halts, K/R, W, inputs
-asserted) with their times, and what the unit did: the bytes and times of every answer and a
-digest of its observable state (position, queue, ST0..ST6, INTA/RUN, index, modal values,
-EEPROM, deadlines...) and of the vectors its executor finished (times, speeds) after each
-input. The test replays the inputs against today's unit and
-requires the same observations.
+random mixes), a few thousand random and directed inputs (command lines from the tables,
+mutated and cut lines, noise, packets, checksum toggles, resets, queue filling, halts, K/R, W,
+inputs asserted) with their times, and what the unit did: the bytes and times of every answer
+and a digest of its observable state (position, queue, ST0..ST6, INTA/RUN, index, modal
+values, EEPROM, deadlines...) and of the vectors its executor finished (times, speeds) after
+each input. The test replays the inputs against today's unit and requires the same
+observations.
 
 Re-record (only for a deliberate change of behaviour): ``python tests/test_unit_split.py``
 (with ``PYTHONPATH`` at the tree whose unit is to be recorded).
