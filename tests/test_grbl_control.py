@@ -12,8 +12,8 @@ import time
 
 import serial
 
-from conform.families.grbl.tables import load_grbl
 from conform.emulator.control import send_control
+from conform.families.grbl.tables import load_grbl
 from tests.test_grbl_emulator import read_lines, start, stop
 
 V = load_grbl().variant("grbl-1.1f")
@@ -135,6 +135,7 @@ def test_faults_over_the_control_socket(tmp_path):
             except (serial.SerialException, OSError):
                 time.sleep(0.05)
         assert os.path.islink(link)
+        assert read_lines(port, 2, timeout=3) == ["", V.banner]   # the board restarted
         port.write(b"?")
         report = read_lines(port, 1)[0]
         assert report.startswith("<Idle|MPos:0.000,0.000,0.000"), report  # counts from zero

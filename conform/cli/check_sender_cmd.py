@@ -48,7 +48,8 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         from conform.families.grbl.sendercheck import run_cli
 
         sys.exit(run_cli(list(command), variant or "", list(scenarios), report_dir, timeout,
-                         job_file, as_json, echo=click.echo))
+                         job_file, as_json, echo=click.echo, seed=seed,
+                         progress=lambda m: click.echo(f"check-sender: {m}", err=True)))
     import json
     from pathlib import Path
 

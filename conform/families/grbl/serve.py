@@ -10,6 +10,10 @@ from typing import Any
 
 from conform.errors import UserError
 
+# seconds from power-up to the banner: an Arduino bootloader waits about half a second for an
+# upload before grbl starts (an assumption: grbl's documents give no figure)
+BOOT = 0.5
+
 
 def reopen_with_power_cycle(reopen: Callable[[], Any], unit: Any, faults: Any,
                             clock: Callable[[], float] = time.monotonic) -> Callable[[], Any]:
@@ -18,7 +22,7 @@ def reopen_with_power_cycle(reopen: Callable[[], Any], unit: Any, faults: Any,
     def again() -> Any:
         if faults.unplugged:
             faults.unplugged = False
-            unit.power_cycle(max(clock(), unit.now))
+            unit.power_cycle(max(clock(), unit.now), boot=BOOT)
         return reopen()
 
     return again
@@ -49,10 +53,10 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
     if record_path:
         from conform.capture import Recorder
 
-        try:
+        try:  # "line_baud", not "baud": see sendersession.run_sender
             recorder = Recorder(record_path, {
                 "capture_method": "emulator", "variant": v.id, "family": "grbl",
-                "baud": baud or "", "unit_port": endpoint.name, "dialect": "",
+                "line_baud": baud or "", "unit_port": endpoint.name, "dialect": "",
                 "faults": faults or "", "seed": "" if seed is None else seed}, decode=False)
         except UserError:
             endpoint.close()

@@ -530,17 +530,18 @@ class GrblUnit:
             self.state = "Alarm"
         self._reset(t)
 
-    def power_cycle(self, t: float) -> None:
+    def power_cycle(self, t: float, boot: float = 0.0) -> None:
         """Power off and on (a USB cable pulled and plugged back: the board restarts): the
         planner, the receive ring and the parser state are gone, the machine stands where it
-        stopped but grbl counts from zero; settings and EEPROM stay."""
+        stopped but grbl counts from zero; settings and EEPROM stay. The banner goes out
+        ``boot`` seconds later (a bootloader's wait)."""
         self._advance(t)
         self.state = "Idle"
         self.door_open = False
         self.pins.clear()
-        self._reset(t, power_up=True)
+        self._reset(t, power_up=True, announce=t + boot)
 
-    def _reset(self, t: float, power_up: bool = False) -> None:
+    def _reset(self, t: float, power_up: bool = False, announce: float | None = None) -> None:
         while self._n_coded < len(getattr(self, "taken", None) or ()):
             self._code_taken(None)           # lines parsed but never answered: dropped
         pos = self.planner.where(t)[0] if not power_up else [0.0] * 3
@@ -572,6 +573,7 @@ class GrblUnit:
             self.state = "Alarm"
         else:
             self.state = "Idle"
+        t = t if announce is None else announce
         self._emit(t, rp.banner(self.v))
         if self.state == "Alarm":
             self._say(t, rp.MSG["locked"])
