@@ -334,7 +334,8 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
 
 def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
-    """findings.json and summary.md in ``directory``."""
+    """index.html (:mod:`.htmlreport`), findings.json and summary.md in ``directory``."""
+    from conform.families.grbl.htmlreport import render_html
     from conform.report.render import write_files
 
     def summary() -> str:
@@ -348,8 +349,9 @@ def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     d = write_files(directory, {
         "findings.json": lambda: json.dumps(a.to_json(), indent=1, default=str),
         "summary.md": summary,
+        "index.html": lambda: render_html(a),
     })
-    return {"json": d / "findings.json", "md": d / "summary.md"}
+    return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
 
 def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:
