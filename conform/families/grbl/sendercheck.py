@@ -116,7 +116,8 @@ def run_scenarios(command: list[str], *, variant: str = "grbl-1.1f",
 
 def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: str | None,
             timeout: float | None, job_file: str | None, as_json: bool,
-            echo: Any = print, seed: int = 1, progress: Any = None) -> int:
+            echo: Any = print, seed: int = 1, progress: Any = None,
+            command_line: str | None = None) -> int:
     """``conform check-sender --variant grbl-… -- COMMAND``: exit status 0, 1 or 2."""
     import json
     import shutil
@@ -147,7 +148,7 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
         "check-sender-" + default_dir().name)
     run = check_sender(command, variant=variant, scenarios=names or None, job=job,
                        timeout=timeout, directory=out, seed=seed, progress=progress)
-    results = results_of([run], "conform check-sender " + " ".join(command))
+    results = results_of([run], command_line or "conform check-sender " + " ".join(command))
     write_reports(results, out)
     if as_json:
         echo(json.dumps(results.to_json(), indent=1, default=str))
