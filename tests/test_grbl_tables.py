@@ -128,7 +128,7 @@ def test_an_unknown_or_other_family_variant_names_every_family(tmp_path):
 
     from conform.errors import UserError
     from conform.families.grbl.tables import load_grbl
-    from conform.spec import load_spec
+    from conform.families.gve.spec import load_spec
 
     with pytest.raises(UserError) as exc:
         load_spec().variant("grbl-1.1f")          # a GVE-only path given a grbl variant
