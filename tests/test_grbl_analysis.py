@@ -116,6 +116,23 @@ def test_analyze_detects_grbl_from_the_traffic(tmp_path):
     assert found["family"] == "grbl" and found["metrics"]["hazards"] >= 1
     assert "rx-overflow-hazard" in p.stdout
     assert "not a hex digit" not in p.stdout
+    # the same report set as GVE's: index.html with the findings and the plots, Markdown, JSON
+    html = (tmp_path / "rep" / "index.html").read_text()
+    assert "report: " + str(tmp_path / "rep" / "index.html") in p.stdout
+    assert "<code>rx-overflow-hazard</code>" in html and "receive buffer 128" in html
+    assert html.count('src="data:image/png;base64,') == 2 and "http" not in html.split("<body>")[1]
+    assert (tmp_path / "rep" / "summary.md").read_text().startswith("# grbl capture analysis")
+
+
+def test_html_report_of_a_clean_session_and_of_no_traffic(tmp_path):
+    from conform.families.grbl.analysis import write_report
+
+    _u, _traffic, a = run("counting", poll=0.2)
+    html = write_report(a, str(tmp_path / "clean"))["html"].read_text()
+    assert "No findings" in html and "character-counting" in html and "line to answer" in html
+    empty = analyze_streams([], [])
+    html = write_report(empty, str(tmp_path / "empty"))["html"].read_text()
+    assert "No findings" in html and "data:image/png" not in html
 
 
 def test_unknown_protocol_is_reported_as_such(tmp_path):

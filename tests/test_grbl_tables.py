@@ -120,3 +120,45 @@ def test_gve_only_options_are_usage_errors_for_grbl():
                            text=True, timeout=60)
         assert p.returncode == 2 and "Traceback" not in p.stderr
         assert "GVE units only" in p.stderr or "expected 0..60 seconds" in p.stderr
+
+
+def test_an_unknown_or_other_family_variant_names_every_family(tmp_path):
+    import subprocess
+    import sys
+
+    from conform.errors import UserError
+    from conform.families.grbl.tables import load_grbl
+    from conform.families.gve.spec import load_spec
+
+    with pytest.raises(UserError) as exc:
+        load_spec().variant("grbl-1.1f")          # a GVE-only path given a grbl variant
+    assert "is a grbl variant" in str(exc.value) and "gve64-v19" in str(exc.value)
+    with pytest.raises(UserError) as exc:
+        load_grbl().variant("nope")
+    assert "grbl: grbl-1.1f" in str(exc.value) and "gve: gve64-v10" in str(exc.value)
+    job = tmp_path / "job.txt"
+    job.write_text("C100,0,0\n")
+    for args in (["run", "--target", "emu:nope"], ["emulate", "nope"],
+                 ["check-sender", "--variant", "nope", "--", "true"],
+                 ["send", str(job), "--target", "emu:grbl-1.1f"]):
+        p = subprocess.run([sys.executable, "-m", "conform", *args], capture_output=True,
+                           text=True, timeout=60)
+        assert p.returncode == 2 and p.stderr.count("\n") == 1, (args, p.stderr)
+        assert "grbl-1.1f" in p.stderr and "gve124" in p.stderr, (args, p.stderr)
+
+
+def test_the_report_names_the_command_as_typed(tmp_path):
+    """In-process, sys.argv is pytest's: the command comes from the root context's argv."""
+    import json
+
+    from conform.cli.main import main
+
+    args = ["run", "--target", "emu:grbl-1.1f", "--check", "*/example/help", "--report",
+            str(tmp_path), "-q"]
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code in (0, None)
+    results = json.loads((tmp_path / "results.json").read_text())
+    import shlex
+
+    assert results["command"] == "conform " + shlex.join(args)

@@ -11,7 +11,14 @@ import sys
 
 import click
 
-from conform.cli.params import INPUT_FILE, NON_NEGATIVE_INT, OUTPUT_DIR, VARIANT, json_option
+from conform.cli.params import (
+    INPUT_FILE,
+    NON_NEGATIVE_INT,
+    OUTPUT_DIR,
+    VARIANT,
+    command_line,
+    json_option,
+)
 from conform.errors import UserError
 
 
@@ -48,7 +55,9 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         from conform.families.grbl.sendercheck import run_cli
 
         sys.exit(run_cli(list(command), variant or "", list(scenarios), report_dir, timeout,
-                         job_file, as_json, echo=click.echo))
+                         job_file, as_json, echo=click.echo, seed=seed,
+                         progress=lambda m: click.echo(f"check-sender: {m}", err=True),
+                         command_line=command_line()))
     import json
     from pathlib import Path
 

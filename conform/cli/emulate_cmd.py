@@ -112,13 +112,13 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
 
     fam = family_for_variant(variant)
     if fam.name != "gve":  # another protocol family serves its own unit through the same adapter
-        if dialect_pairs or profile or switch_pairs or control_path or truth_path:
-            raise UserError("--dialect, --profile, --switch, --control and --truth apply to GVE "
-                            "units only")
+        if dialect_pairs or profile or switch_pairs or truth_path:
+            raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")
         fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
-                  link_path=link_path, record_path=record_path, answer_delay=answer_delay)
+                  link_path=link_path, record_path=record_path, answer_delay=answer_delay,
+                  control_path=control_path)
         return
-    from conform.emulator.serve import ControlServer, Emulator
+    from conform.emulator.serve import Emulator
     from conform.families.gve.unit.model import Unit
 
     spec = load_spec()
@@ -139,14 +139,7 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
     injector = fault_injector(faults, seed, t_start)
     endpoint, reopen = _open_endpoint(tcp_port, link_path)
 
-    try:
-        control = ControlServer(control_path)
-    except (OSError, UserError) as exc:
-        endpoint.close()
-        if isinstance(exc, UserError):
-            raise
-        where = control_path or "a private directory"
-        raise UserError(f"--control {where}: cannot listen: {exc.strerror or exc}") from None
+    control = control_server(control_path, endpoint)
     control_path = control.path
     recorder = None
     if record_path:
@@ -187,6 +180,21 @@ def check_pacing(baud: int | None, answer_delay: float) -> None:
         raise UserError(f"--baud {baud}: must be positive")
     if not 0 <= answer_delay <= 60:  # nan fails this too
         raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
+
+
+def control_server(control_path: str | None, endpoint: Any) -> Any:
+    """The control socket (``--control PATH`` or a fresh private path); the endpoint is
+    closed and a one-line error raised when it cannot listen."""
+    from conform.emulator.serve import ControlServer
+
+    try:
+        return ControlServer(control_path)
+    except (OSError, UserError) as exc:
+        endpoint.close()
+        if isinstance(exc, UserError):
+            raise
+        where = control_path or "a private directory"
+        raise UserError(f"--control {where}: cannot listen: {exc.strerror or exc}") from None
 
 
 def fault_injector(faults: str | None, seed: int | None, t0: float) -> Any:

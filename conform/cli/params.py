@@ -172,3 +172,14 @@ def echo_json(doc: Any) -> None:
 
 #: exit statuses every command shares (README "Exit status")
 EXIT_OK, EXIT_FINDING, EXIT_USAGE = 0, 1, 2
+
+
+def command_line() -> str:
+    """``conform ARGS`` as the user typed it (the root context's argv, else sys.argv): the
+    reports' "how to run it again"."""
+    import shlex
+    import sys
+
+    ctx = click.get_current_context(silent=True)
+    argv = ((ctx.find_root().obj if ctx else None) or {}).get("argv", sys.argv[1:])
+    return "conform " + " ".join(shlex.quote(a) for a in argv)

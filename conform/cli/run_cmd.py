@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shlex
 import sys
 from functools import partial
 from pathlib import Path
@@ -17,6 +16,7 @@ from conform.cli.params import (
     POSITIVE_INT,
     TARGET,
     VARIANT,
+    command_line,
     echo_json,
     json_option,
 )
@@ -98,8 +98,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
     if max_steps is not None and max_steps <= 0:
         raise UserError("--max-steps must be a positive number of pulses")
-    argv = (click.get_current_context().find_root().obj or {}).get("argv", sys.argv[1:])
-    command = "conform " + " ".join(shlex.quote(a) for a in argv)
+    command = command_line()
     exact = None
     if replay:
         check_id, replay_seed = parse_replay(replay)
@@ -228,8 +227,7 @@ def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profil
                        allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo)
     if list_only:
         return
-    command = "conform run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    results = results_of(runs, command)
+    results = results_of(runs, command_line())
     out = Path(report_dir) if report_dir else default_dir()
     write_reports(results, out)
     _print_summary(results, out)

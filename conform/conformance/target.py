@@ -158,6 +158,14 @@ class Target(ABC):
         self._buffer = b""
         return data
 
+    def receive(self, deadline: float) -> bytes:
+        """Bytes that arrive before ``deadline`` (as soon as some do), logged as rx: for
+        families that frame the stream themselves (grbl) instead of ``exchange``."""
+        data = self._read(deadline)
+        if data:
+            self._note("rx", data)
+        return data
+
     def send(self, data: bytes) -> tuple[float, bytes]:
         """Send bytes without waiting for an answer; returns the time and what came unasked."""
         self.guard.check(data, idle=self.idle)

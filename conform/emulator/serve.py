@@ -166,8 +166,10 @@ class Emulator:
         report: Callable[[str], None] | None = None,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
+        control_handler: Callable[[Any, str, float], str] | None = None,
     ) -> None:
         self.unit = unit
+        self.control_handler = control_handler or run_control  # another family's requests
         self.endpoint = endpoint
         self.bit_time = 10.0 / baud if baud else 0.0
         self.injector = injector
@@ -305,7 +307,7 @@ class Emulator:
                 line, reply_q = self.control.requests.get_nowait()
             except queue.Empty:
                 return
-            reply_q.put(run_control(self.unit, line, max(now, self.unit.now)))
+            reply_q.put(self.control_handler(self.unit, line, max(now, self.unit.now)))
 
     # injected disconnects -----------------------------------------------------------------
     def _disconnect(self, now: float) -> None:

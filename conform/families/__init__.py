@@ -97,6 +97,20 @@ def family_for_variant(variant: str) -> Family:
     return family("gve")
 
 
+def unknown_variant(variant_id: str, family_name: str) -> str:
+    """The one-line error for a variant ``family_name`` does not have: every family's variants,
+    and whose it is when another family has it."""
+    by_family: dict[str, list[str]] = {}
+    for f in families():
+        by_family[f.name] = [v.id for v in f.variants()]
+    owner = next((n for n, ids in by_family.items() if variant_id in ids), None)
+    known = "; ".join(f"{n}: {', '.join(ids)}" for n, ids in by_family.items())
+    if owner is not None and owner != family_name:
+        return (f"{variant_id!r} is a {owner} variant; this needs a {family_name} unit "
+                f"(known: {known})")
+    return f"unknown variant {variant_id!r} (known: {known})"
+
+
 def is_family_variant(variant: str | None, name: str) -> bool:
     return variant is not None and family_for_variant(variant).name == name
 

@@ -91,7 +91,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
         click.echo(f"note: {note}")
     if report_dir:
         paths = write_report(a, report_dir)
-        click.echo(f"report: {paths['md']}")
+        click.echo(f"report: {paths['html']}")
     if parquet_dir:
         write_parquet(a, parquet_dir)
         click.echo(f"tables: {parquet_dir}")

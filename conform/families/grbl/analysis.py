@@ -47,6 +47,7 @@ class Exchange:
     t_answer: float | None = None
     lines_in_flight: int = 0
     bytes_in_flight: int = 0
+    t_gone: float | None = None     # unanswered, flushed from grbl's buffer by a reset
 
 
 @dataclass
@@ -59,6 +60,7 @@ class GrblAnalysis:
     findings: list[Finding]
     metrics: dict[str, Any]
     notes: list[str] = field(default_factory=list)
+    realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -121,9 +123,15 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     # pair answers with lines, in order
     exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end])
                  for i, ln in enumerate(lines)]
-    answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error")]
+    answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error", "banner")]
     k = 0
     for t_ans, u in answers:
+        if u.kind == "banner":
+            # a reset empties grbl's buffers: what was sent before it is never answered
+            while k < len(exchanges) and exchanges[k].t_sent < t_ans:
+                exchanges[k].t_gone = t_ans
+                k += 1
+            continue
         if k >= len(exchanges):
             out.add("unsolicited-answer", rel(t_ans), "warning",
                     f"{u.text!r} answers no line the sender wrote",
@@ -143,7 +151,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
 
     sizes = np.fromiter((e.size for e in exchanges), np.int64, len(exchanges))
     t_sent = np.fromiter((e.t_sent for e in exchanges), float, len(exchanges))
-    done = [(e.t_answer, e.size) for e in exchanges if e.t_answer is not None]
+    done = [(e.t_answer if e.t_answer is not None else e.t_gone, e.size) for e in exchanges
+            if e.t_answer is not None or e.t_gone is not None]
     done.sort()
     t_done = np.fromiter((d[0] for d in done), float, len(done))
     cum = np.concatenate([[0], np.cumsum([d[1] for d in done], dtype=np.int64)])
@@ -196,10 +205,12 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                     f"grbl restarted unasked: {u.text!r}", "interface.md §Start Up Message")
     unanswered = [e for e in exchanges if e.answer is None]
     if unanswered:
+        flushed = sum(1 for e in unanswered if e.t_gone is not None)
         out.add("unanswered-lines", rel(unanswered[0].t_sent), "error",
                 f"{len(unanswered)} lines got no ok/error, the first line {unanswered[0].line} "
-                f"{unanswered[0].text!r} (lost bytes, a reset, or the capture ended)",
-                "interface.md §Grbl Response Messages", count=len(unanswered))
+                f"{unanswered[0].text!r} (lost bytes, a reset, or the capture ended)"
+                + (f"; {flushed} of them were flushed by a reset" if flushed else ""),
+                "interface.md §Grbl Response Messages", count=len(unanswered), flushed=flushed)
 
     # streaming method
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
@@ -262,7 +273,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "finding_counts": dict(sorted(out.counts.items())),
         "hazards": out.counts.get("rx-overflow-hazard", 0),
     }
-    return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics)
+    return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
+                        realtime=[(ht[r.offset], r.byte) for r in realtime])
 
 
 def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blocks: int,
@@ -322,7 +334,8 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
 
 def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
-    """findings.json and summary.md in ``directory``."""
+    """index.html (:mod:`.htmlreport`), findings.json and summary.md in ``directory``."""
+    from conform.families.grbl.htmlreport import render_html
     from conform.report.render import write_files
 
     def summary() -> str:
@@ -336,8 +349,9 @@ def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     d = write_files(directory, {
         "findings.json": lambda: json.dumps(a.to_json(), indent=1, default=str),
         "summary.md": summary,
+        "index.html": lambda: render_html(a),
     })
-    return {"json": d / "findings.json", "md": d / "summary.md"}
+    return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
 
 def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:

@@ -126,11 +126,10 @@ class Session:
             if t.now() >= end:
                 break
             try:
-                chunk = t._read(end)
+                chunk = t.receive(end)
             except Exception as exc:  # noqa: BLE001
                 raise HarnessError(str(exc)) from None
             if chunk:
-                t._note("rx", chunk)
                 buf += chunk
                 got, buf = split_unit(buf, self.spec)
                 lines += [g.text for g in got]
@@ -473,11 +472,11 @@ def _until_still(target: Any, seconds: float) -> None:
     """Ask '?' until grbl reports Hold:0, Idle, Alarm or Door:0 (or the time is up)."""
     deadline = target.now() + seconds
     while target.now() < deadline:
-        target._write(b"?")
+        target.send(b"?")
         buf = b""
         end = min(deadline, target.now() + 0.2)
         while target.now() < end:
-            buf += target._read(end)
+            buf += target.receive(end)
         if any(s in buf for s in (b"<Hold:0|", b"<Idle|", b"<Alarm|", b"<Door:0|")):
             return
 
@@ -488,13 +487,13 @@ def _stop(target: Any, attempts: int = 3) -> str:
     notes = []
     for _ in range(attempts):
         try:
-            target._write(b"!")
+            target.send(b"!")
             _until_still(target, 5.0)   # a reset after the stop keeps the position (no ALARM:3)
-            target._write(b"\x18")
+            target.send(b"\x18")
             deadline = target.now() + 2.0
             buf = b""
             while target.now() < deadline and b"for help]" not in buf:
-                buf += target._read(deadline)
+                buf += target.receive(deadline)
             if b"for help]" in buf:
                 return "stopped: feed hold and soft reset, acknowledged by the banner"
             notes.append("no banner after the reset")

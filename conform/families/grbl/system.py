@@ -59,6 +59,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             if u.state == "Check":
                 u._say(t, rp.MSG["disabled"], "ok")
                 u.lines_done += 1
+                u._code_taken(0)
                 u._reset(t)
                 return None
             if u.state != "Idle":
@@ -108,6 +109,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
         _restore(u, m.group(1))
         u._say(t, rp.MSG["restore"], "ok")
         u.lines_done += 1
+        u._code_taken(0)
         u._reset(t)
         return None
     if head == "N":

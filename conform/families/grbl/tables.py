@@ -148,8 +148,9 @@ class GrblSpec:
         try:
             return self.variants[vid]
         except KeyError:
-            raise UserError(f"unknown grbl variant {vid!r} (known: "
-                            f"{', '.join(self.variants)})") from None
+            from conform.families import unknown_variant
+
+            raise UserError(unknown_variant(vid, "grbl")) from None
 
     def classify(self, line: str) -> tuple[str, re.Match[str] | None]:
         """The message kind of one line from the unit (``unknown`` if none matches)."""

@@ -6,7 +6,7 @@
 
 Like the GVE ``Unit`` it never reads a clock or sleeps: ``receive(data, t)``, ``poll(t)``,
 ``next_deadline()`` and ``now`` are the whole contract the emulator adapter
-(:class:`conform.unit.serve.Emulator`) and the in-process conformance target use.
+(:class:`conform.emulator.serve.Emulator`) and the in-process conformance target use.
 
 What it models (docs/grbl.md): the 128-byte serial receive ring (bytes that find it full are
 lost, as on the hardware; realtime bytes and every byte above 0x7F never enter it), the line
@@ -37,7 +37,7 @@ class GrblUnit:
 
     def __init__(self, variant: Variant, spec: GrblSpec | None = None, *, t0: float = 0.0,
                  line_time: float = 0.0005, report_delay: float = 0.002,
-                 settings: dict[int, float] | None = None) -> None:
+                 settings: dict[int, float] | None = None, truth: bool = False) -> None:
         self.v = variant
         self.spec = spec or load_grbl()
         self.line_time = line_time
@@ -53,6 +53,11 @@ class GrblUnit:
         self._out: list[tuple[float, bytes]] = []
         self.lost = 0                       # bytes dropped because the receive ring was full
         self.lines_done = 0
+        self.pins: set[str] = set()         # input pins triggered (:mod:`.inputs`): P X Y Z D
+        self.door_open = False
+        # ground truth (``truth=True``, for check-sender): [line as the parser took it, answer]
+        self.taken: list[list[Any]] | None = [] if truth else None
+        self._n_coded = 0
         self.state = "Alarm" if self.settings[22] else "Idle"
         self._reset(self._now, power_up=True)
 
@@ -161,7 +166,15 @@ class GrblUnit:
 
     def _answer(self, t: float, code: int) -> None:
         self.lines_done += 1
+        self._code_taken(code)
         self._say(t, "ok" if code == 0 else f"error:{code}")
+
+    def _code_taken(self, code: int | None) -> None:
+        """The ground truth: the oldest line taken and not yet answered got ``code`` (None:
+        dropped unanswered by a reset)."""
+        if self.taken is not None and self._n_coded < len(self.taken):
+            self.taken[self._n_coded][1] = code
+            self._n_coded += 1
 
     # ============================================================ reading lines
     def _read_rx(self, t: float) -> None:
@@ -197,6 +210,8 @@ class GrblUnit:
                 self._line.append(ch.upper() if "a" <= ch <= "z" else ch)
 
     def _process(self, text: str, overflow: bool, t: float) -> None:
+        if self.taken is not None:
+            self.taken.append([text, None])
         if overflow:
             self._answer(t, 11)
         elif not text:
@@ -290,6 +305,13 @@ class GrblUnit:
             self._busy = ("dwell", startup)
             return
         if block.kind == "probe":
+            from conform.families.grbl.inputs import probe_blocks_start
+
+            if probe_blocks_start(self, block.probe):   # probe already in its end state
+                self.state = "Alarm"
+                self._say(t, "ALARM:4")
+                self._finish(t, 0, startup)
+                return
             self._plan(block, t, False)
             self._busy_until = None
             self._busy = ("probe", startup, block)   # the parser waits for the probe
@@ -429,7 +451,7 @@ class GrblUnit:
         elif effect == "door":
             self._feed_hold(t, "Door")
         elif effect == "resume":
-            if self.state in ("Hold", "Door") and self.hold_sub == 0:
+            if self.state in ("Hold", "Door") and self.hold_sub == 0 and not self.door_open:
                 self.state = "Idle"
                 if self.planner.blocks:
                     self.planner.resume(t)
@@ -508,7 +530,20 @@ class GrblUnit:
             self.state = "Alarm"
         self._reset(t)
 
-    def _reset(self, t: float, power_up: bool = False) -> None:
+    def power_cycle(self, t: float, boot: float = 0.0) -> None:
+        """Power off and on (a USB cable pulled and plugged back: the board restarts): the
+        planner, the receive ring and the parser state are gone, the machine stands where it
+        stopped but grbl counts from zero; settings and EEPROM stay. The banner goes out
+        ``boot`` seconds later (a bootloader's wait)."""
+        self._advance(t)
+        self.state = "Idle"
+        self.door_open = False
+        self.pins.clear()
+        self._reset(t, power_up=True, announce=t + boot)
+
+    def _reset(self, t: float, power_up: bool = False, announce: float | None = None) -> None:
+        while self._n_coded < len(getattr(self, "taken", None) or ()):
+            self._code_taken(None)           # lines parsed but never answered: dropped
         pos = self.planner.where(t)[0] if not power_up else [0.0] * 3
         a = [self.settings[120 + i] for i in range(3)]
         r = [self.settings[110 + i] / 60.0 for i in range(3)]
@@ -538,6 +573,7 @@ class GrblUnit:
             self.state = "Alarm"
         else:
             self.state = "Idle"
+        t = t if announce is None else announce
         self._emit(t, rp.banner(self.v))
         if self.state == "Alarm":
             self._say(t, rp.MSG["locked"])
@@ -562,6 +598,8 @@ class GrblUnit:
         name = self.state
         if self.state in ("Hold", "Door"):
             name = f"{self.state}:{self.hold_sub}"
+            if self.state == "Door" and self.door_open:    # ajar: 2 stopping, 1 stopped
+                name = f"Door:{2 if self.hold_sub else 1}"
         mask = int(self.settings[10])
         m = self.modal
         wco = m.wco()
@@ -575,6 +613,10 @@ class GrblUnit:
         feed = v * 60.0 / (25.4 if inches else 1.0)
         spindle = m.speed * self.ov_spindle / 100.0 if m.spindle in (3, 4) else 0.0
         parts.append(f"FS:{feed:.0f},{spindle:.0f}")
+        if self.pins:
+            from conform.families.grbl.inputs import pin_field
+
+            parts.append(str(pin_field(self)))
         busy = self.state in ("Run", "Hold", "Jog", "Home", "Door")
         refresh = self.v.status_refresh
         if self._wco_counter > 0:

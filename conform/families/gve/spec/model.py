@@ -246,8 +246,9 @@ class Spec:
         try:
             return self.variants[variant_id]
         except KeyError:
-            known = ", ".join(self.variants)
-            raise UserError(f"unknown variant {variant_id!r} (known: {known})") from None
+            from conform.families import unknown_variant
+
+            raise UserError(unknown_variant(variant_id, "gve")) from None
 
     def dialect(self, choices: Mapping[str, str] | None = None) -> Dialect:
         """The open-question choices: the defaults, overridden by ``choices``."""

@@ -1,0 +1,89 @@
+"""The grbl analysis as a self-contained ``index.html``: findings, the receive buffer (bytes in
+flight per line against its size, hazards marked) and line-to-answer latency, with the page
+pieces every analysis report shares (conform/report/templates/analysis_pieces.html.j2) and
+the plotting helpers of the GVE analysis (matplotlib, Agg, base64 PNG)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from conform.analysis.plots import _fig, _legend, _png, _thin
+
+HERE = Path(__file__).resolve().parent
+SHARED = HERE.parent.parent / "report" / "templates"
+
+
+def _times(a: Any) -> tuple[float, np.ndarray, np.ndarray]:
+    ex = a.exchanges
+    t0 = min((e.t_sent for e in ex), default=0.0)
+    t = np.fromiter((e.t_sent - t0 for e in ex), float, len(ex))
+    lat = np.fromiter((np.nan if e.t_answer is None else e.t_answer - e.t_sent for e in ex),
+                      float, len(ex))
+    return t0, t, lat
+
+
+def buffer_plot(a: Any) -> str | None:
+    ex = a.exchanges
+    if not ex:
+        return None
+    _t0, t, _lat = _times(a)
+    b = np.fromiter((e.bytes_in_flight for e in ex), float, len(ex))
+    limit = a.metrics["rx_buffer"]
+    fig, ax = _fig()
+    tt, bb = _thin(t, b)
+    ax.step(tt, bb, where="post", lw=0.8, label="bytes in flight")
+    ax.axhline(limit, color="tab:red", lw=1, ls="--", label=f"receive buffer ({limit})")
+    over = b > limit
+    if over.any():
+        ax.plot(t[over], b[over], "x", color="tab:red", ms=4, label="over the buffer")
+    ax.set_xlabel("time from the first line (s)")
+    ax.set_ylabel("bytes")
+    _legend(ax)
+    return _png(fig)
+
+
+def latency_plot(a: Any) -> str | None:
+    _t0, t, lat = _times(a)
+    ok = np.isfinite(lat)
+    if not ok.any():
+        return None
+    fig, ax = _fig()
+    tt, ll = _thin(t[ok], lat[ok] * 1000)
+    ax.plot(tt, ll, ".", ms=2, label="line to answer")
+    errs = [e for e in a.exchanges if e.answer and e.answer.startswith("error:")]
+    if errs:
+        t0 = _t0
+        ax.plot([e.t_sent - t0 for e in errs], [(e.t_answer - e.t_sent) * 1000 for e in errs],
+                "o", color="tab:red", ms=4, label="error:N")
+    ax.set_xlabel("time from the first line (s)")
+    ax.set_ylabel("ms")
+    _legend(ax)
+    return _png(fig)
+
+
+def latency_stats(a: Any) -> dict[str, float] | None:
+    _t0, _t, lat = _times(a)
+    lat = lat[np.isfinite(lat)] * 1000
+    if not len(lat):
+        return None
+    return {"median": float(np.median(lat)), "p95": float(np.percentile(lat, 95)),
+            "max": float(lat.max())}
+
+
+def render_html(a: Any) -> str:
+    import jinja2
+
+    env = jinja2.Environment(
+        loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(HERE)),
+                                    jinja2.FileSystemLoader(str(SHARED))]),
+        autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
+        trim_blocks=True, lstrip_blocks=True)
+    by_sev: dict[str, int] = {}
+    for f in a.findings:
+        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
+    plots = {"buffer": buffer_plot(a), "latency": latency_plot(a)}
+    return env.get_template("report.html.j2").render(a=a, m=a.metrics, by_sev=by_sev,
+                                                      plots=plots, latency=latency_stats(a))

@@ -1,0 +1,242 @@
+"""The rules a grbl sender is graded on, each citing where grbl's documents say it.
+
+A rule is a function of a :class:`.sendersession.SenderRun` returning (grade, expected,
+actual). The wire (the analysed capture) shows what the sender did; the ground truth (the
+lines the unit's parser took and how it answered them, bytes its receive ring dropped, when
+it restarted) shows what that did to the machine.
+
+What grbl leaves to a sender when an answer is lost or damaged: grbl 1.1 has no line numbers
+it checks, no checksums and no way to ask for an answer again (interface.md §Grbl Response
+Messages: every line gets exactly one ``ok`` or ``error:X``; §Message Summary: every message
+can be told by its form alone). A character-counting sender that misses an ``ok`` keeps those
+bytes in its count for ever: it grows slower and finally waits for ever, but never overflows.
+It must not send the line again (grbl would run it twice: a second move) and must not hang:
+once the status report says grbl is Idle with nothing answered for a while, every line it was
+sent has been taken, so the count can be cleared (the ``Bf:`` field, interface.md §Buffer
+State, says the same when ``$10`` enables it) — or it stops and says why. After grbl restarts
+(the banner, §Start Up Message: everything starts out the same) the job's state is gone: a
+sender must not go on streaming the job.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+Result = tuple[str, str, str]   # grade, expected, actual
+SHOULD = "SHOULD"
+POLL_MIN_INTERVAL = 0.1   # s: interface.md recommends at most 5 Hz; 10 Hz "may be possible"
+
+
+def norm(line: str) -> str:
+    """A line as grbl's parser takes it: comments and blanks dropped, upper case."""
+    line = re.sub(r"\([^)]*\)", "", line.split(";", 1)[0])
+    return "".join(line.split()).upper()
+
+
+@dataclass
+class Truth:
+    """The job against what the unit executed (lines answered ok, '$' commands left out)."""
+
+    job: list[str]
+    executed: list[str]
+    doubles: list[str] = field(default_factory=list)   # job lines executed more often than
+    extras: list[str] = field(default_factory=list)    # the job has them; lines not the job's
+    missing: list[str] = field(default_factory=list)   # job lines executed less often
+
+    @property
+    def whole(self) -> bool:
+        return not (self.doubles or self.missing)
+
+    def summary(self) -> str:
+        parts = [f"{len(self.executed)} lines executed for a job of {len(self.job)}"]
+        for name, items in (("twice", self.doubles), ("not the job's", self.extras),
+                            ("never executed", self.missing)):
+            if items:
+                parts.append(f"{len(items)} {name}")
+        return ", ".join(parts)
+
+
+def compare(job: list[str], taken: list[list[Any]]) -> Truth:
+    """Counts, not positions: a line sent again runs again wherever it lands."""
+    jobn = [x for x in map(norm, job) if x and not x.startswith("$")]
+    done = [t for t, code in taken if code == 0 and t and not t.startswith("$")]
+    want, got = Counter(jobn), Counter(done)
+    tr = Truth(jobn, done)
+    for x in dict.fromkeys(done):
+        if x not in want:
+            tr.extras += [x] * got[x]
+        elif got[x] > want[x]:
+            tr.doubles += [x] * (got[x] - want[x])
+    tr.missing = [x for x in dict.fromkeys(jobn) for _ in range(max(0, want[x] - got[x]))]
+    return tr
+
+
+def _answer_faults(r: Any) -> bool:
+    return bool({"answers", "restart"} & r.scenario.tags)
+
+
+def terminates(r: Any) -> Result:
+    if r.hung:
+        return "FAIL", "the program ends by itself", f"still running after {r.timeout:g} s"
+    return "PASS", "the program ends by itself", f"exit status {r.returncode}"
+
+
+def nothing_lost(r: Any) -> Result:
+    m = r.analysis.metrics
+    want = "no byte lost in grbl's receive buffer" + ("" if _answer_faults(r) else
+                                                      ", every line answered")
+    ok = r.lost == 0 and (_answer_faults(r) or m["answered"] == m["lines"])
+    return ("PASS" if ok else "FAIL", want,
+            f"{r.lost} bytes lost, {m['answered']} of {m['lines']} lines answered on the wire")
+
+
+def within_buffer(r: Any) -> Result:
+    m = r.analysis.metrics
+    wire = f"{m['max_bytes_in_flight']} bytes in flight on the wire ({m['streaming_method']})"
+    if _answer_faults(r):
+        # answers lost on the way leave their lines "in flight" on the wire for ever; what
+        # grbl's buffer really held is the truth: did it drop a byte?
+        return ("PASS" if r.lost == 0 else "FAIL", f"at most {m['rx_buffer']} bytes in grbl's "
+                "buffer (ground truth: no byte dropped)", f"{r.lost} bytes dropped; {wire}")
+    ok = m["max_bytes_in_flight"] <= m["rx_buffer"]
+    return "PASS" if ok else "FAIL", f"at most {m['rx_buffer']} bytes in flight", wire
+
+
+def realtime_not_lines(r: Any) -> Result:
+    empty = sum(1 for e in r.analysis.exchanges if e.text == "")
+    job_empty = sum(1 for x in r.job if not x.strip())
+    ok = empty <= job_empty
+    return ("PASS" if ok else "FAIL", "realtime bytes sent alone, not as lines",
+            f"{empty - job_empty} empty lines (a realtime byte followed by a newline is an extra "
+            "line grbl answers with ok)" if not ok else "no extra empty lines")
+
+
+def in_order(r: Any) -> Result:
+    """The job's lines go out once each, in order; where the sender may stop early a prefix
+    is right. Lines that are not the job's ($G polls and the like) are left out."""
+    jobn = [norm(x) for x in r.job if norm(x)]
+    known = set(jobn)
+    sent = [t for t in (norm(e.text) for e in r.analysis.exchanges) if t in known]
+    whole = "may-stop" not in r.scenario.tags and "answers" not in r.scenario.tags
+    ok = sent == jobn if whole else sent == jobn[:len(sent)]
+    want = "the whole job, in order" if whole else "a prefix of the job, in order"
+    return ("PASS" if ok else "FAIL", want, f"{len(sent)} of the job's {len(jobn)} lines sent"
+            + ("" if ok else ", not in the job's order (a line skipped or sent again)"))
+
+
+def executed_once(r: Any) -> Result:
+    tr = compare(r.job, r.taken)
+    if tr.doubles:
+        return ("FAIL", "every job line executed at most once (ground truth)",
+                f"{tr.summary()}: {tr.doubles[0]!r} ran twice (a line sent again after its "
+                "answer was lost moves the machine twice)")
+    return "PASS", "every job line executed at most once (ground truth)", tr.summary()
+
+
+def honest_exit(r: Any) -> Result:
+    if r.hung:
+        return "NOT-APPLICABLE", "", "the program was stopped"
+    tr = compare(r.job, r.taken)
+    if tr.whole and not tr.extras:
+        return "PASS", "exit status 0 only when the whole job ran", \
+            f"{tr.summary()}; exit status {r.returncode}"
+    ok = r.returncode != 0
+    return ("PASS" if ok else "FAIL", "a non-zero exit status when the job did not run whole",
+            f"{tr.summary()}; exit status {r.returncode}")
+
+
+def after_error(r: Any) -> Result:
+    errs = [f for f in r.analysis.findings if f.kind == "error-response"]
+    if not errs:
+        return "NOT-APPLICABLE", "", "no error:N in this run"
+    went_on = "went on" in errs[0].message
+    return ("FAIL" if went_on else "PASS", "stop (or let the user decide) after error:N",
+            errs[0].message)
+
+
+def after_alarm(r: Any) -> Result:
+    alarms = [f for f in r.analysis.findings if f.kind == "alarm"]
+    if not alarms:
+        return "NOT-APPLICABLE", "", "no alarm in this run"
+    seen = alarms[0].extra["t_abs"]
+    # lines already on their way when the alarm came are not the sender's fault
+    locked = [e for e in r.analysis.exchanges if e.answer == "error:9" and e.t_sent > seen]
+    return ("FAIL" if locked else "PASS", "no g-code sent after the alarm arrived",
+            f"{len(locked)} lines sent after {alarms[0].message} were answered error:9" if locked
+            else alarms[0].message)
+
+
+def restart_stops(r: Any) -> Result:
+    if not r.restarts:
+        return "NOT-APPLICABLE", "", "grbl did not restart in this run"
+    known = {norm(x) for x in r.job}
+    after = [t for t, code in r.taken[r.restarts[0]:] if code == 0 and t in known]
+    if after:
+        return ("FAIL", "no job line run after grbl restarted",
+                f"{len(after)} job lines executed after the restart, the first {after[0]!r}: "
+                "the job went on from a machine that had lost its state and position")
+    return "PASS", "no job line run after grbl restarted", "the sender stopped the job"
+
+
+def hold_respected(r: Any) -> Result:
+    """A feed hold from the machine's button is the operator's: only cycle start ends it."""
+    press = [e["t"] for e in r.events if e["request"] == "press hold"]
+    start = [e["t"] for e in r.events if e["request"] == "press start"]
+    if not press:
+        return "NOT-APPLICABLE", "", "no feed hold in this run"
+    end = start[0] if start else float("inf")
+    resumed = [t for t, b in r.analysis.realtime if b == 0x7E and press[0] < t < end]
+    if resumed:
+        return ("FAIL", "no cycle start (~) sent while the operator holds",
+                f"{len(resumed)} '~' sent {resumed[0] - press[0]:.2f} s into the hold")
+    return "PASS", "no cycle start (~) sent while the operator holds", \
+        "the sender waited for the machine's cycle start"
+
+
+def poll_rate(r: Any) -> Result:
+    m = r.analysis.metrics
+    med = m.get("poll_interval_median_s")
+    if not m.get("status_polls") or med is None:
+        return "NOT-APPLICABLE", "", "no status polls"
+    ok = med >= POLL_MIN_INTERVAL
+    return ("PASS" if ok else "FAIL", f"'?' at most every {POLL_MIN_INTERVAL:g} s (10 Hz)",
+            f"{m['status_polls']} polls, median interval {med * 1000:.0f} ms")
+
+
+MUST = "MUST"
+RULES = [
+    ("terminates", "the program ends by itself", "docs/grbl.md §Judging a sender (harness rule)",
+     MUST, terminates),
+    ("nothing-lost", "no byte lost, every line answered",
+     "interface.md §Grbl Response Messages; serial.h RX_BUFFER_SIZE", MUST, nothing_lost),
+    ("within-buffer", "character counting within the receive buffer",
+     "serial.h RX_BUFFER_SIZE; wiki Interfacing with Grbl §Streaming Protocol: "
+     "Character-Counting", MUST,
+     within_buffer),
+    ("realtime-out-of-band", "realtime bytes are not lines",
+     "realtime_cmds.md (no line feed needed); interface.md §Real-time Status reports", MUST,
+     realtime_not_lines),
+    ("job-in-order", "the job's lines are sent in order", "interface.md §Grbl Response Messages",
+     MUST, in_order),
+    ("executed-once", "no job line executed twice (ground truth)",
+     "interface.md §Grbl Response Messages (one answer per line, no resend in the protocol)",
+     MUST, executed_once),
+    ("honest-exit", "exit status says whether the job ran",
+     "docs/grbl.md §Judging a sender", SHOULD, honest_exit),
+    ("error-recovery", "after error:N the sender stops", "error_codes_en_US.csv; interface.md "
+     "§Grbl Response Messages (the line was not executed)", SHOULD, after_error),
+    ("alarm-stops", "no g-code after an alarm", "interface.md §Alarm Message; error_codes#9",
+     MUST, after_alarm),
+    ("restart-stops", "no job line after grbl restarted",
+     "interface.md §Start Up Message (everything starts out the same)", MUST, restart_stops),
+    ("hold-respected", "a machine feed hold is ended by the machine",
+     "realtime_cmds.md (~ cycle start, ! feed hold); interface.md §Machine State Hold", MUST,
+     hold_respected),
+    ("poll-rate", "status polls at most 10 Hz",
+     "wiki Interfacing with Grbl §Status Reporting (at most 5 Hz recommended, 10 Hz may "
+     "be possible)", SHOULD,
+     poll_rate),
+]
