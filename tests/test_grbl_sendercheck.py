@@ -14,15 +14,15 @@ from pathlib import Path
 import pytest
 
 from conform.conformance.results import Grade
-from conform.families.grbl.sendercheck import SCENARIOS, run_scenarios
+from conform.families.grbl.sendercheck import SCENARIOS, default_job, run_scenarios
 
 SENDER = Path(__file__).resolve().parent / "senders" / "grbl_counting.py"
 
 
-def judge(tmp_path, mode, scenarios, timeout=60):
+def judge(tmp_path, mode, scenarios, timeout=60, moves=100):
     run, sessions = run_scenarios([sys.executable, str(SENDER), "{port}", "{job}", mode],
                                   scenarios=scenarios, timeout=timeout,
-                                  directory=tmp_path / mode)
+                                  directory=tmp_path / mode, job=default_job(moves))
     return {c.id.split("/", 2)[2]: c.grade for c in run.checks}, sessions
 
 
@@ -31,7 +31,7 @@ def failed(grades):
 
 
 def test_the_right_sender_survives_lost_answers_and_a_pulled_cable(tmp_path):
-    g, sessions = judge(tmp_path, "good", ["lost-answers", "link-loss"])
+    g, sessions = judge(tmp_path, "good", ["lost-answers", "link-loss"], moves=50)
     assert not failed(g), g
     lost, unplugged = sessions
     assert lost.faults["lost_answers"] > 0 and lost.restarts == []       # answers were lost
@@ -43,8 +43,9 @@ def test_the_right_sender_survives_lost_answers_and_a_pulled_cable(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_right_sender_passes_every_scenario(tmp_path):
-    g, sessions = judge(tmp_path, "good", list(SCENARIOS))
+def test_the_right_sender_passes_every_other_scenario(tmp_path):
+    g, sessions = judge(tmp_path, "good", [n for n in SCENARIOS
+                                           if n not in ("lost-answers", "link-loss")], moves=50)
     assert not failed(g), {k: v for k, v in g.items() if v in (Grade.FAIL, Grade.DEVIATION)}
     by = {s.scenario.name: s for s in sessions}
     assert g["feed-hold/hold-respected"] is Grade.PASS
@@ -71,7 +72,8 @@ BAD = [
 @pytest.mark.parametrize("mode,scenario,rules", [
     pytest.param(*b, marks=() if b[0] == "resend" else pytest.mark.slow) for b in BAD])
 def test_each_wrong_sender_is_caught_by_its_rule(tmp_path, mode, scenario, rules):
-    g, _ = judge(tmp_path, mode, [scenario], timeout=6 if mode == "waits-forever" else 60)
+    g, _ = judge(tmp_path, mode, [scenario], timeout=4 if mode == "waits-forever" else 60,
+                 moves=40)
     assert rules <= failed(g), g
     if mode in ("fast-poll", "auto-resume", "ignore-error"):
         assert failed(g) == rules, g            # nothing else is wrong with these
@@ -99,14 +101,16 @@ def test_an_overflowing_sender_is_caught_by_check_sender_and_analyze(tmp_path):
     assert any(f["kind"] == "rx-overflow-hazard" for f in found["findings"])
 
 
-def test_usage_errors_are_one_line(tmp_path):
-    for args in (["--scenario", "nope", "--", sys.executable], ["--", "/nonexistent/x"],
-                 ["--timeout", "-1", "--", sys.executable], []):
-        p = subprocess.run([sys.executable, "-m", "conform", "check-sender", "--variant",
-                            "grbl-1.1f", "--report", str(tmp_path / "r"), *args],
-                           capture_output=True, text=True, timeout=60)
-        assert p.returncode == 2 and p.stderr.count("\n") == 1, (args, p.stderr)
-        assert "Traceback" not in p.stderr
+@pytest.mark.parametrize("args", [["--scenario", "nope", "--", sys.executable],
+                                  ["--", "/nonexistent/x"],
+                                  ["--timeout", "-1", "--", sys.executable], []])
+def test_usage_errors_are_one_line(tmp_path, args, capsys):
+    from conform.cli.main import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["check-sender", "--variant", "grbl-1.1f", "--report", str(tmp_path / "r"), *args])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
 
 
 @pytest.mark.parametrize("sent,scenario,grade", [
