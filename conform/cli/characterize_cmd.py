@@ -6,11 +6,12 @@ import click
 
 from conform.cli.params import BAUD, OUTPUT_FILE, POSITIVE_INT, TARGET, VARIANT
 from conform.cli.progress import progress
-from conform.conformance.target import identify, open_target, parse_target
+from conform.conformance.target import parse_target
 from conform.errors import UserError
 from conform.families.gve.conformance.characterize import characterize, to_profile
 from conform.families.gve.conformance.profile import write_profile
 from conform.families.gve.conformance.safety import Guard
+from conform.families.gve.conformance.target import identify, open_target
 from conform.families.gve.spec import load_spec
 
 

@@ -23,18 +23,13 @@ from conform.cli.params import (
 from conform.cli.progress import progress as show_progress
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.suite import (
-    PROFILE_NAMES,
-    parse_replay,
-    results_of,
-    run_mutants,
-    run_one,
-    suite,
-)
-from conform.conformance.target import DEFAULT_VARIANT, identify, open_target, parse_target
+from conform.conformance.suite import PROFILE_NAMES, parse_replay, results_of
+from conform.conformance.target import parse_target
 from conform.errors import UserError
 from conform.families.gve.conformance.profile import load_profile_dialect
 from conform.families.gve.conformance.safety import run_guard
+from conform.families.gve.conformance.suite import run_mutants, run_one, suite
+from conform.families.gve.conformance.target import DEFAULT_VARIANT, identify, open_target
 from conform.families.gve.spec import load_spec
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 

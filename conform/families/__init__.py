@@ -70,6 +70,21 @@ class Family(Protocol):
     def serve(self, variant: str, **options: Any) -> None:
         """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
 
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """A ``conform.conformance.runner.Runner`` for this family's checks on ``target``: the
+        engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for what is the
+        family's — grading a check, keeping the unit in a check's starting state, halting the
+        unit (retried until acknowledged) and estimating a check's duration."""
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        """A frame decoder for the capture recorder (``conform.capture.session.Decoder``) that
+        turns this family's traffic into frames while it is recorded, or None: the capture
+        then holds the raw bytes only (they are decoded when analysed)."""
+
+    pytest_plugin: str | None
+    """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
+    engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
+
 
 FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
 _loaded: dict[str, Family] = {}

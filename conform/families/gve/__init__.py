@@ -1,5 +1,6 @@
 """The GVE family as a :class:`conform.families.Family`: tables (spec/), codec (protocol/),
-reference unit (unit/), checks (conformance/ here and the runner in conform.conformance),
+reference unit (unit/), checks, grading and targets (conformance/, driven by the engine's
+runner in conform.conformance),
 reference sender (sender/), check-sender scenarios and rules (sendercheck/); its analysis
 is still conform.analysis."""
 
@@ -39,13 +40,27 @@ class GveFamily:
 
     def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
         from conform.conformance.runner import RunOptions
-        from conform.conformance.suite import run_one, suite
+        from conform.families.gve.conformance.suite import run_one, suite
 
         spec = self.load_tables()
         checks = suite(spec, variant, patterns=options.get("patterns", ()),
                        profile=options.get("profile", "quick"))
         return run_one(spec, target, variant, checks,
                        options=RunOptions(profile=options.get("profile", "quick")))
+
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """Grading against the reference unit, the state keeper, H, D, O0,FF
+        (conformance/runner.py); options: ``options`` (RunOptions), ``dialect``, ``unit_cls``."""
+        from conform.families.gve.conformance.runner import Runner
+
+        return Runner(self.load_tables(), target, variant, **options)
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        from conform.families.gve.decode import make_decoder
+
+        return make_decoder(variant, baud=baud)
+
+    pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         lines = host.count(b"\r") or 1
