@@ -219,7 +219,8 @@ def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profil
 
     runs = run_targets(list(targets) or [f"emu:{variant}"], variant, baud=baud,
                        patterns=patterns, profile=profile, allow_motion=allow_motion,
-                       allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo)
+                       allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo,
+                       announce=lambda text: click.echo(text, err=True))
     if list_only:
         return
     results = results_of(runs, command_line())

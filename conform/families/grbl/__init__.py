@@ -40,6 +40,18 @@ class GrblFamily:
 
         return run_checks(target, variant, **options)
 
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """grbl's checks in the engine's runner (checks.GrblRunner): fresh unit by soft reset,
+        halt by feed hold then soft reset."""
+        from conform.families.grbl.checks import GrblRunner
+
+        return GrblRunner(target, variant, **options)
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        return None   # recorded raw; lines are paired when the capture is analysed
+
+    pytest_plugin = None
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.codec import detect
 
