@@ -96,4 +96,5 @@ class Family:
     prepare: Callable[[Any, Scenario, float], None]  # (unit, scenario, t) before the run
     make_unit: Callable[[Any, Any, float], Any]  # (variant, dialect, t0) -> sans-I/O unit
     control_line: Callable[[str, bool, Any], str]  # (action kind, on, variant) -> control request
+    commands: Callable[[Any, str, float], str]  # the emulator's control commands (emulator.control)
     fast: tuple[str, ...] = ()  # scenarios for a quick run

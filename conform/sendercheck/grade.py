@@ -17,6 +17,7 @@ from typing import Any
 
 from conform.errors import UserError
 from conform.families.gve.sendercheck import rules, scenarios
+from conform.families.gve.unit.control import run_control
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
 from conform.sendercheck.session import Session, run_session
 
@@ -24,7 +25,7 @@ GVE = Family(
     name="gve", default_variant="gve64-v19", scenarios=scenarios.SCENARIOS, rules=rules.RULES,
     job=scenarios.make_job, vectors=scenarios.job_vectors, prepare=scenarios.prepare_unit,
     make_unit=scenarios.make_unit, control_line=scenarios.control_line,
-    fast=scenarios.FAST,
+    commands=run_control, fast=scenarios.FAST,
 )
 FAMILIES = {"gve": GVE}
 

@@ -132,7 +132,8 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
     control = _Control()
     endpoint = PtyEndpoint()
-    emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control)
+    emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control,
+                        control_handler=family.commands)
     died: list[str] = []
 
     def serve() -> None:

@@ -74,9 +74,9 @@ class GveFamily:
         return Detection(self.name, score, f"{hits} GVE command lines from the host")
 
     def serve(self, variant: str, **options: Any) -> None:
-        from conform.errors import UserError
+        from conform.families.gve.serve import serve
 
-        raise UserError("GVE units are served by `conform emulate VARIANT` itself")
+        serve(variant, **options)
 
     def analyze(self, path: str, **options: Any) -> Any:
         from conform.analysis.analyze import analyze
