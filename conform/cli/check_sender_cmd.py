@@ -62,11 +62,12 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     from pathlib import Path
 
     from conform.report.render import default_dir
-    from conform.sendercheck.grade import GVE, check
+    from conform.sendercheck.grade import check, default_family, family_for
     from conform.sendercheck.report import write_reports
 
     if "list" in scenarios:
-        for s in GVE.scenarios.values():
+        shapes = family_for(variant) if variant else default_family()
+        for s in shapes.scenarios.values():
             click.echo(f"{s.name:14} {s.title}")
         return
     if not command:

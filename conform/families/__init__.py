@@ -85,6 +85,10 @@ class Family(Protocol):
     """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
     engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
 
+    check_sender: Any
+    """check-sender's scenarios, rules and hooks for this family
+    (``conform.sendercheck.family.Family``), or None when it judges senders its own way."""
+
 
 FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
 _loaded: dict[str, Family] = {}

@@ -51,6 +51,7 @@ class GrblFamily:
         return None   # recorded raw; lines are paired when the capture is analysed
 
     pytest_plugin = None
+    check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.codec import detect

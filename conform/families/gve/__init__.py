@@ -62,6 +62,13 @@ class GveFamily:
 
     pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
 
+    @property
+    def check_sender(self) -> Any:
+        """check-sender's GVE scenarios, rules and hooks (sendercheck/family.py)."""
+        from conform.families.gve.sendercheck.family import GVE
+
+        return GVE
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         lines = host.count(b"\r") or 1
         hits = len(_HOST_LINE.findall(host[:65536]))
