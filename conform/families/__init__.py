@@ -89,8 +89,25 @@ class Family(Protocol):
     """check-sender's scenarios, rules and hooks for this family
     (``conform.sendercheck.family.Family``), or None when it judges senders its own way."""
 
+    def characterize(self, target: str, output: str, variant: str | None, **options: Any
+                     ) -> None:
+        """``conform characterize``: probe what the unit does where the source leaves a choice
+        and write the profile (options: ``baud``, ``allow_motion``, ``max_steps``,
+        ``allow_eeprom``, ``echo``)."""
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        """``conform spec show``: a variant's commands (or one) from its tables."""
+
+    def tables_summary(self, root: str | None = None) -> str:
+        """``conform spec check``: the one ``ok: ...`` line of its validated tables."""
+
+    def mutants(self) -> Sequence[str]:
+        """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
+
 
 FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
+DEFAULT_FAMILY = "gve"   # serves a variant nobody claims; its table comes first in `spec list`
 _loaded: dict[str, Family] = {}
 
 
@@ -111,9 +128,9 @@ def family_for_variant(variant: str) -> Family:
     """The family serving ``variant`` (GVE when nobody claims it, so GVE errors stay as they
     were)."""
     for f in families():
-        if f.name != "gve" and any(v.id == variant for v in f.variants()):
+        if f.name != DEFAULT_FAMILY and any(v.id == variant for v in f.variants()):
             return f
-    return family("gve")
+    return family(DEFAULT_FAMILY)
 
 
 def unknown_variant(variant_id: str, family_name: str) -> str:

@@ -53,6 +53,27 @@ class GrblFamily:
     pytest_plugin = None
     check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
 
+    def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
+                     echo: Any = print, **_options: Any) -> None:
+        from conform.families.grbl.characterize import run
+
+        run(target, output, variant, baud, echo=echo)
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        from conform.families.grbl.show import show
+
+        show(variant, command, console)
+
+    def tables_summary(self, root: str | None = None) -> str:
+        g = self.load_tables(root)
+        return (f"ok: grbl: {len(g.variants)} variant, {len(g.errors)} error codes, "
+                f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
+                f"{len(g.commands)} $ commands, {len(g.examples)} examples")
+
+    def mutants(self) -> Sequence[str]:
+        return ()
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.codec import detect
 

@@ -62,6 +62,33 @@ class GveFamily:
 
     pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
 
+    def characterize(self, target: str, output: str, variant: str | None, **options: Any
+                     ) -> None:
+        from conform.families.gve.cli import characterize
+
+        characterize(target, output, variant, **options)
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        from conform.families.gve.cli import show_spec
+
+        show_spec(variant, command, console=console, as_json=as_json)
+
+    def variant_table(self, pretty: bool = False) -> Any:
+        from conform.families.gve.cli import variant_table
+
+        return variant_table(pretty)
+
+    def tables_summary(self, root: str | None = None) -> str:
+        from conform.families.gve.cli import tables_summary
+
+        return tables_summary(root)
+
+    def mutants(self) -> Sequence[str]:
+        from conform.families.gve.conformance.mutants import MUTANTS
+
+        return list(MUTANTS)
+
     @property
     def check_sender(self) -> Any:
         """check-sender's GVE scenarios, rules and hooks (sendercheck/family.py)."""
