@@ -61,6 +61,14 @@ class Family(Protocol):
     def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
         """Run its checks on an open target; a ``conform.conformance.results.TargetRun``."""
 
+    def run_targets(self, targets: list[str], variant: str | None, **options: Any
+                    ) -> tuple[list[Any], list[dict[str, Any]]] | None:
+        """``conform run``: open each target (``emu:VARIANT`` or a port), run its checks in
+        the engine's runner; (TargetRuns, mutant report), or None after ``list_only`` printed
+        the checks. Options are the command's (``baud``, ``profile``, ``patterns``,
+        ``allow_motion``, ``echo``, ``announce``...); a family ignores those it has no use for.
+        The command writes the reports, the summary and the exit code."""
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         """Does this traffic look like this family's?"""
 

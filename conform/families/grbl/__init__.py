@@ -47,6 +47,18 @@ class GrblFamily:
 
         return GrblRunner(target, variant, **options)
 
+    def run_targets(self, targets: list[str], variant: str | None, *, baud: int = 115200,
+                    patterns: Any = (), profile: str = "quick", allow_motion: bool = False,
+                    allow_eeprom: bool = False, list_only: bool = False, echo: Any = print,
+                    announce: Any = None, **_options: Any) -> Any:
+        from conform.families.grbl.checks import run_targets
+
+        runs = run_targets(targets or [f"emu:{variant}"], variant, baud=baud,
+                           patterns=patterns, profile=profile, allow_motion=allow_motion,
+                           allow_eeprom=allow_eeprom, list_only=list_only, echo=echo,
+                           announce=announce)
+        return None if list_only else (runs, [])
+
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
 

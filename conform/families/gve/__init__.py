@@ -55,6 +55,11 @@ class GveFamily:
 
         return Runner(self.load_tables(), target, variant, **options)
 
+    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
+        from conform.families.gve.conformance.run import run_targets
+
+        return run_targets(targets, variant, **options)
+
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         from conform.families.gve.decode import make_decoder
 
