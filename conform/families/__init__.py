@@ -95,7 +95,9 @@ class Family(Protocol):
 
     check_sender: Any
     """check-sender's scenarios, rules and hooks for this family
-    (``conform.sendercheck.family.Family``), or None when it judges senders its own way."""
+    (``conform.sendercheck.family.Family``), or None when it judges senders its own way: then
+    ``check_sender_cli(command, variant, scenarios, report_dir, timeout, job_file, as_json,
+    echo=...)`` runs ``conform check-sender`` and returns the exit code."""
 
     def characterize(self, target: str, output: str, variant: str | None, **options: Any
                      ) -> None:

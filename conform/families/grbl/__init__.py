@@ -65,6 +65,12 @@ class GrblFamily:
     pytest_plugin = None
     check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
 
+    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
+        """``conform check-sender --variant grbl-…``: this family's scenarios and rules."""
+        from conform.families.grbl.sendercheck import run_cli
+
+        return run_cli(*args, **kw)
+
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
                      echo: Any = print, **_options: Any) -> None:
         from conform.families.grbl.characterize import run
