@@ -78,3 +78,11 @@ def test_the_check_sees_lazy_and_from_imports(tmp_path):
                      "from conform.families import family_for_variant\n")
     assert _family_imports(probe) == {"conform.families.grbl.checks", "conform.families.gve.spec",
                                       "conform.families.gve"}
+
+
+def test_every_registered_family_is_a_family():
+    from conform.families import DEFAULT_FAMILY, Family, families, family
+
+    for fam in families():
+        assert isinstance(fam, Family), fam.name
+    assert callable(family(DEFAULT_FAMILY).variant_table)
