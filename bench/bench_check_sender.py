@@ -18,7 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from conform.sendercheck.grade import GVE, check
+from conform.families.gve.sendercheck.family import GVE
+from conform.sendercheck.grade import check
 
 TARGET_S = 60.0
 SENDER = Path(__file__).resolve().parents[1] / "tests" / "senders" / "careful.py"

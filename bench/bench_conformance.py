@@ -10,10 +10,11 @@ from __future__ import annotations
 import sys
 import time
 
-from conform.conformance.runner import Runner, RunOptions
-from conform.conformance.suite import run_mutants, suite
-from conform.conformance.target import open_target
+from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.mutants import MUTANTS, mutant_targets
+from conform.families.gve.conformance.runner import Runner
+from conform.families.gve.conformance.suite import run_mutants, suite
+from conform.families.gve.conformance.target import open_target
 from conform.families.gve.spec import load_spec
 
 QUICK_TARGET_S = 120.0

@@ -15,9 +15,10 @@ from pathlib import Path
 import pytest
 
 from conform.cli.main import main
-from conform.sendercheck.compare import compare
+from conform.families.gve.sendercheck.compare import compare
+from conform.families.gve.sendercheck.family import GVE
 from conform.sendercheck.family import FAIL, MUST, NA, PASS, WARN
-from conform.sendercheck.grade import GVE, check
+from conform.sendercheck.grade import check
 
 SENDERS = Path(__file__).resolve().parent / "senders"
 

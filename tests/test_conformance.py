@@ -10,19 +10,20 @@ import pytest
 
 from conform.cli.main import main
 from conform.conformance.results import Grade
-from conform.conformance.runner import RunAborted, Runner, RunOptions
-from conform.conformance.suite import suite
-from conform.conformance.target import (
-    EmuTarget,
-    LinkTarget,
+from conform.conformance.runner import RunAborted, RunOptions
+from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.expect import Reference
+from conform.families.gve.conformance.runner import Runner
+from conform.families.gve.conformance.safety import Guard, SafetyRefusal, hazards
+from conform.families.gve.conformance.suite import suite
+from conform.families.gve.conformance.target import GveEmuTarget as EmuTarget
+from conform.families.gve.conformance.target import GveLinkTarget as LinkTarget
+from conform.families.gve.conformance.target import (
     emulator_factory,
     open_target,
     unit_class,
     variant_for_firmware,
 )
-from conform.families.gve.conformance.checks import generate, select
-from conform.families.gve.conformance.expect import Reference
-from conform.families.gve.conformance.safety import Guard, SafetyRefusal, hazards
 
 VARIANTS = ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124")
 

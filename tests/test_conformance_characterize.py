@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 from conform.cli.main import main
-from conform.conformance.target import open_target
 from conform.families.gve.conformance.characterize import characterize, to_profile
 from conform.families.gve.conformance.profile import (
     diff_profiles,
@@ -13,6 +12,7 @@ from conform.families.gve.conformance.profile import (
     load_profile_dialect,
     write_profile,
 )
+from conform.families.gve.conformance.target import open_target
 
 DIALECTS = [
     {},

@@ -15,12 +15,15 @@ from test_conformance import UnitEndpoint  # the reference unit behind an endpoi
 
 from conform.cli.main import main
 from conform.conformance.results import Grade
-from conform.conformance.runner import Runner, RunOptions
-from conform.conformance.suite import suite
-from conform.conformance.target import EmuTarget, LinkTarget, emulator_factory, open_target
+from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.runner import Runner
 from conform.families.gve.conformance.safety import Guard, not_verified
 from conform.families.gve.conformance.state import StateKeeper
+from conform.families.gve.conformance.suite import suite
+from conform.families.gve.conformance.target import GveEmuTarget as EmuTarget
+from conform.families.gve.conformance.target import GveLinkTarget as LinkTarget
+from conform.families.gve.conformance.target import emulator_factory, open_target
 from conform.link import open_port
 
 # a subset that exercises every way to a check's state: commands only (V, checksum), J with a
@@ -187,7 +190,7 @@ def test_machine_draws_inside_the_envelope(spec):
 def test_guard_firing_is_an_error_and_the_run_goes_on(spec, monkeypatch):
     """The send-time guard as the last defence: that check ERRORs, the unit is halted, the
     next check runs."""
-    import conform.conformance.runner as runner_mod
+    import conform.families.gve.conformance.runner as runner_mod
 
     monkeypatch.setattr(runner_mod, "skip_reason", lambda *a: None)
     endpoint = UnitEndpoint(spec, "gve64-v19")

@@ -13,10 +13,11 @@ import time
 import pytest
 from conftest import stop_emulator
 
-from conform.emulator.control import run_control, send_control
+from conform.emulator.control import send_control
 from conform.emulator.serve import ControlServer, Emulator
 from conform.errors import UserError
 from conform.families.gve.unit import Unit
+from conform.families.gve.unit.control import run_control
 from conform.link.faults import FaultConfig, FaultInjector, FaultyEndpoint
 
 # ---------------------------------------------------------------- fault injection (sans-I/O)
@@ -199,7 +200,7 @@ def test_control_socket(spec, tmp_path):
     control = ControlServer(path)
     try:
         unit = Unit(spec.variant("gve64-v19"), t0=clock.t)
-        emu = Emulator(unit, FakePort(clock), control=control, clock=clock)
+        emu = Emulator(unit, FakePort(clock), control=control, control_handler=run_control, clock=clock)
         import threading
 
         reply = {}

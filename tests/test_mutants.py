@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from conform.conformance.suite import run_mutants
 from conform.families.gve.conformance.mutants import MUTANTS, mutant_targets
+from conform.families.gve.conformance.suite import run_mutants
 
 
 @pytest.fixture(scope="module")

@@ -14,9 +14,9 @@ import time
 import pytest
 
 from conform.cli.main import main
-from conform.conformance.target import open_target
 from conform.emulator.serve import Emulator
 from conform.families.gve.conformance.characterize import characterize
+from conform.families.gve.conformance.target import open_target
 from conform.families.gve.unit.model import Unit
 from conform.families.gve.unit.truth import GroundTruth
 from conform.link.pty import PtyEndpoint

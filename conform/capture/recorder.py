@@ -273,20 +273,19 @@ class Recorder:
 
 
 def _make_decoder(variant: str, baud: int | None) -> tuple[Decoder | None, str]:
-    """A frame decoder for ``variant``, or ``None`` and the reason it is unavailable."""
+    """The live frame decoder of the family serving ``variant`` (``Family.live_decoder``), or
+    ``None`` and the reason: a family without one is recorded raw and decoded when analysed."""
     from conform.families import family_for_variant
 
-    if family_for_variant(variant).name != "gve":  # e.g. grbl: paired from the raw bytes later
-        return None, f"frames not decoded while recording: {variant} traffic is decoded by " \
-                     "conform analyze from the raw bytes"
     try:
-        from conform.families.gve.decode import make_decoder
-    except ImportError as exc:
-        return None, f"frames not decoded: {exc}"
-    try:
-        return make_decoder(variant, baud=baud), ""
+        fam = family_for_variant(variant)
+        decoder = fam.live_decoder(variant, baud=baud)
     except (ImportError, UserError, KeyError, LookupError) as exc:
         return None, f"frames not decoded: {exc}"
+    if decoder is None:
+        return None, f"frames not decoded while recording: {variant} traffic is decoded by " \
+                     "conform analyze from the raw bytes"
+    return decoder, ""
 
 
 def _int_or_none(value: object) -> int | None:

@@ -36,7 +36,7 @@ class Record:
 
 
 class Decoder(Protocol):
-    """What ``CaptureSession`` needs from a frame decoder (see ``conform.families.gve.decode``)."""
+    """What ``CaptureSession`` needs from a frame decoder (a family's ``live_decoder``)."""
 
     def feed(
         self, direction: str, data: bytes, offset: int, t_read: float, t_first: float

@@ -5,13 +5,7 @@ from __future__ import annotations
 import click
 
 from conform.cli.params import BAUD, OUTPUT_FILE, POSITIVE_INT, TARGET, VARIANT
-from conform.cli.progress import progress
-from conform.conformance.target import identify, open_target, parse_target
-from conform.errors import UserError
-from conform.families.gve.conformance.characterize import characterize, to_profile
-from conform.families.gve.conformance.profile import write_profile
-from conform.families.gve.conformance.safety import Guard
-from conform.families.gve.spec import load_spec
+from conform.conformance.target import parse_target
 
 
 @click.command(name="characterize")
@@ -32,45 +26,8 @@ def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: 
       conform characterize emu:gve64-v19 -o unit.toml
       conform characterize /dev/ttyUSB0 -o unit.toml --allow-motion --max-steps 2000
     """
-    from conform.families import is_family_variant
+    from conform.families import family_for_variant
 
-    if is_family_variant(variant or parse_target(target)[1], "grbl"):
-        from conform.families.grbl.characterize import run
-
-        run(target, output, variant, baud, echo=click.echo)
-        return
-    spec = load_spec()
-    if allow_motion and max_steps is None:
-        raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
-    kind, _, _ = parse_target(target)
-    guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps, allow_eeprom)
-    tgt, implied = open_target(target, spec, baud=baud, guard=guard)
-    try:
-        vid = variant or implied
-        if vid is None:
-            vid, how = identify(tgt, spec)
-            click.echo(f"variant: {how}", err=True)
-        spec.variant(vid)
-
-        def show(f):  # noqa: ANN001, ANN202
-            mark = {"determined": "=", "ambiguous": "~", "no-match": "!", "not-probed": "-"}
-            click.echo(f"{f.question:>4} {mark[f.status]} {f.choice:<28} {f.status}"
-                       + (f" ({', '.join(f.matches)})" if f.status == "ambiguous" else "")
-                       + (f" — {f.note}" if f.status == "not-probed" else ""))
-
-        with progress("conform characterize") as bar:
-            task = bar.task(f"{target} ({vid})", len(spec.questions))
-
-            def step(f):  # noqa: ANN001, ANN202
-                task.update(advance=1, step=f.question)
-                show(f)
-
-            dialect, findings = characterize(spec, tgt, vid, progress=step)
-        if not tgt.emulated and allow_motion:
-            click.echo(tgt.safe_stop(), err=True)
-    finally:
-        tgt.close()
-    write_profile(to_profile(spec, dialect, findings, target=target, variant=vid), output)
-    changed = dialect.changed()
-    click.echo(f"{output}: {len(changed)} answer(s) differ from the defaults"
-               + (": " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else ""))
+    family_for_variant(variant or parse_target(target)[1] or "").characterize(
+        target, output, variant, baud=baud, allow_motion=allow_motion, max_steps=max_steps,
+        allow_eeprom=allow_eeprom, echo=click.echo)

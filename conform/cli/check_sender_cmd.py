@@ -49,24 +49,25 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
       conform check-sender --scenario list
       conform check-sender --scenario clean -- python tests/senders/careful.py {port} {job}
     """
-    from conform.families import is_family_variant
+    from conform.families import family_for_variant
 
-    if is_family_variant(variant, "grbl"):  # grbl senders: that family's scenarios and rules
-        from conform.families.grbl.sendercheck import run_cli
-
-        sys.exit(run_cli(list(command), variant or "", list(scenarios), report_dir, timeout,
-                         job_file, as_json, echo=click.echo, seed=seed,
-                         progress=lambda m: click.echo(f"check-sender: {m}", err=True),
-                         command_line=command_line()))
+    fam = family_for_variant(variant or "")
+    if fam.check_sender is None:  # a family that judges senders its own way (grbl)
+        sys.exit(fam.check_sender_cli(
+            list(command), variant or "", list(scenarios), report_dir, timeout, job_file,
+            as_json, echo=click.echo, seed=seed,
+            progress=lambda m: click.echo(f"check-sender: {m}", err=True),
+            command_line=command_line()))
     import json
     from pathlib import Path
 
     from conform.report.render import default_dir
-    from conform.sendercheck.grade import GVE, check
+    from conform.sendercheck.grade import check, default_family, family_for
     from conform.sendercheck.report import write_reports
 
     if "list" in scenarios:
-        for s in GVE.scenarios.values():
+        shapes = family_for(variant) if variant else default_family()
+        for s in shapes.scenarios.values():
             click.echo(f"{s.name:14} {s.title}")
         return
     if not command:

@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import signal
 import sys
-import time
 from typing import Any
 
 import click
 
 from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
 from conform.errors import UserError
-from conform.families.gve.conformance.profile import load_profile
-from conform.families.gve.spec import load_spec
 
 
 class _EmulateGroup(click.Group):
@@ -46,27 +43,6 @@ def cli() -> None:
       conform emulate gve124 --tcp 5024             # socket://localhost:5024
       conform emulate control SOCKET press stop     # SOCKET: shown on the emulator's stderr
     """
-
-
-def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, str]:
-    choices: dict[str, str] = dict(load_profile(profile).dialect) if profile else {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key or not value:
-            raise UserError(f"--dialect {pair!r:.40}: expected A<n>=<alternative>")
-        choices[key.strip().upper()] = value.strip()
-    return choices
-
-
-def _switches(pairs: tuple[str, ...]) -> dict[str, int]:
-    out = {}
-    for pair in pairs:
-        axis, sep, value = pair.partition("=")
-        value = value.strip()
-        if not sep or not value.lstrip("-").isdigit() or len(value) > 11:
-            raise UserError(f"--switch {pair!r:.40}: expected AXIS=PULSES (e.g. X=3000)")
-        out[axis.strip().upper()] = int(value)
-    return out
 
 
 @cli.command("serve")
@@ -111,67 +87,12 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
     from conform.families import family_for_variant
 
     fam = family_for_variant(variant)
-    if fam.name != "gve":  # another protocol family serves its own unit through the same adapter
-        if dialect_pairs or profile or switch_pairs or truth_path:
-            raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")
-        fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
-                  link_path=link_path, record_path=record_path, answer_delay=answer_delay,
-                  control_path=control_path)
-        return
-    from conform.emulator.serve import Emulator
-    from conform.families.gve.unit.model import Unit
-
-    spec = load_spec()
-    v = spec.variant(variant)
-    dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
-    check_pacing(baud, answer_delay)
-    t_start = time.monotonic()  # the unit runs on the monotonic wall clock
-    try:
-        unit = Unit(v, dialect, t0=t_start, switches=_switches(switch_pairs),
-                    answer_delay=answer_delay)
-    except ValueError as exc:
-        raise UserError(f"--switch: {exc}") from None
-    truth = None
-    if truth_path:
-        from conform.families.gve.unit.truth import GroundTruth
-
-        truth = GroundTruth(unit, t0=t_start)
-    injector = fault_injector(faults, seed, t_start)
-    endpoint, reopen = _open_endpoint(tcp_port, link_path)
-
-    control = control_server(control_path, endpoint)
-    control_path = control.path
-    recorder = None
-    if record_path:
-        from conform.capture import Recorder
-
-        try:
-            recorder = Recorder(record_path, {
-                "capture_method": "emulator", "variant": v.id, "baud": baud or "",
-                "unit_port": endpoint.name, "dialect": ",".join(
-                    f"{k}={x}" for k, x in dialect.changed().items()),
-                "faults": faults or "", "seed": "" if seed is None else seed})
-        except UserError:
-            endpoint.close()
-            control.close()
-            raise
-
-    emulator = Emulator(unit, endpoint, baud=baud, injector=injector, recorder=recorder,
-                        control=control, reopen=reopen, report=report)
-    announce(endpoint, f"{v.id} on {endpoint.name}; control: {control_path}"
-             + (f"; dialect {dialect.changed()}" if dialect.changed() else ""))
-    try:
-        run_until_signal(emulator)
-    finally:
-        control.close()
-        if recorder is not None:
-            recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out})
-        if truth is not None and truth_path:
-            try:
-                truth.write(truth_path)
-            except OSError as exc:
-                report(f"--truth {truth_path}: cannot write: {exc.strerror or exc}")
-        report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out)")
+    if fam.name != "gve" and (dialect_pairs or profile or switch_pairs or truth_path):
+        raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")
+    fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
+              link_path=link_path, record_path=record_path, answer_delay=answer_delay,
+              dialect_pairs=dialect_pairs, profile=profile, switch_pairs=switch_pairs,
+              control_path=control_path, truth_path=truth_path)
 
 
 def check_pacing(baud: int | None, answer_delay: float) -> None:

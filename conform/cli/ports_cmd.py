@@ -33,8 +33,9 @@ def listed_ports() -> list[Port]:
 def probe(port: Port, spec: Any, baud: int, timeout: float) -> Port:
     """Ask ``?`` (harmless: it only reads the firmware string, GVE64 §13.5.1), plain and, if
     the unit wants them, with a checksum; map the firmware string to a variant."""
-    from conform.conformance.target import HarnessError, open_target, variant_for_firmware
+    from conform.conformance.target import HarnessError
     from conform.families.gve.conformance.safety import Guard
+    from conform.families.gve.conformance.target import open_target, variant_for_firmware
 
     try:
         target, _ = open_target(port.device, spec, baud=baud, guard=Guard(False, None, False))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -20,22 +21,10 @@ from conform.cli.params import (
     echo_json,
     json_option,
 )
-from conform.cli.progress import progress as show_progress
-from conform.conformance.results import Grade, TargetRun
-from conform.conformance.runner import RunAborted, RunOptions
-from conform.conformance.suite import (
-    PROFILE_NAMES,
-    parse_replay,
-    results_of,
-    run_mutants,
-    run_one,
-    suite,
-)
-from conform.conformance.target import DEFAULT_VARIANT, identify, open_target, parse_target
+from conform.conformance.results import Grade
+from conform.conformance.suite import PROFILE_NAMES, results_of
+from conform.conformance.target import parse_target
 from conform.errors import UserError
-from conform.families.gve.conformance.profile import load_profile_dialect
-from conform.families.gve.conformance.safety import run_guard
-from conform.families.gve.spec import load_spec
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 
 
@@ -85,99 +74,23 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
       conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
       xdg-open reports/latest/index.html            # the last run's report
     """
-    if _other_family(targets, variant):
-        if mutants or matrix or replay or dialect_file:
-            raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
-        _run_family(targets, variant, baud, profile, report_dir, patterns, list_only,
-                    allow_motion, allow_eeprom)
-        return
-    spec = load_spec()
-    if variant is not None:
-        spec.variant(variant)
-    if allow_motion and max_steps is None:
-        raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
-    if max_steps is not None and max_steps <= 0:
-        raise UserError("--max-steps must be a positive number of pulses")
+    from conform.families import DEFAULT_FAMILY
+
+    fam = _family_of(targets, variant)
+    if fam.name != DEFAULT_FAMILY and (mutants or matrix or replay or dialect_file):
+        raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
     command = command_line()
-    exact = None
-    if replay:
-        check_id, replay_seed = parse_replay(replay)
-        exact = check_id
-        if replay_seed is not None:
-            seed = replay_seed
-        if variant is None and "/" in check_id:
-            variant = check_id.split("/", 1)[0]
-            spec.variant(variant)
-    plan = list(targets) or ([f"emu:{v}" for v in spec.variants] if matrix else ["emu"])
-    if matrix and targets:
-        plan += [f"emu:{v}" for v in spec.variants if f"emu:{v}" not in plan]
-    dialect = load_profile_dialect(spec, dialect_file) if dialect_file else None
-
-    if list_only:
-        listed = []
-        for t in plan:
-            kind, what, _ = parse_target(t)
-            vid = variant or (what if kind == "emu" and what else DEFAULT_VARIANT)
-            for c in suite(spec, vid, patterns=patterns, machine=not no_machine,
-                           profile=profile):
-                listed.append({"id": c.id, "level": c.level, "clause": c.clause,
-                               "title": c.title})
-                if not as_json:
-                    click.echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
-        if as_json:
-            echo_json({"checks": listed})
+    planned = fam.run_targets(
+        list(targets), variant, baud=baud, profile=profile, patterns=patterns,
+        list_only=list_only, matrix=matrix, mutants=mutants, replay=replay, seed=seed,
+        dialect_file=dialect_file, allow_motion=allow_motion, max_steps=max_steps,
+        allow_eeprom=allow_eeprom, no_machine=no_machine, inputs_control=inputs_control,
+        quiet=quiet, as_json=as_json, echo=click.echo,
+        announce=None if quiet else (lambda text: click.echo(text, err=True)))
+    if planned is None:   # --list: the family printed the checks
         return
-
-    runs: list[TargetRun] = []
-    aborted = None
-    with show_progress("conform run", quiet=quiet) as bar:
-        for t in plan:
-            kind, what, _ = parse_target(t)
-            guard = run_guard(kind == "emu", allow_motion, max_steps, allow_eeprom)
-            target, implied = open_target(t, spec, baud=baud, guard=guard)
-            if inputs_control and not target.emulated:
-                target.inputs = inputs_control  # type: ignore[attr-defined]
-            notes = []
-            try:
-                vid = variant or implied
-                if vid is None:
-                    vid, how = identify(target, spec)
-                    notes.append(f"variant: {how}")
-                checks = suite(spec, vid, patterns=patterns, guard=guard,
-                               machine=not no_machine, profile=profile)
-                if exact is not None:  # ids hold glob characters (?, *S): match exactly
-                    checks = [c for c in checks if c.id == exact]
-                if not checks:
-                    wanted = exact or " ".join(patterns) or "(all)"
-                    raise UserError(f"no check of {vid} matches {wanted} (see --list)")
-                if not target.emulated and not allow_motion:
-                    notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
-                options = RunOptions(profile=profile, seed=seed, notes=notes,
-                                     announce=None if quiet else
-                                     (lambda text: click.echo(text, err=True)))
-                progress = _step(bar.task(f"{target.name} ({vid})", len(checks)), checks)
-                try:
-                    run = run_one(spec, target, vid, checks, options=options, dialect=dialect,
-                                  progress=progress)
-                    runs.append(run)
-                    if run.aborted:
-                        aborted = run.aborted
-                        break
-                except RunAborted as exc:
-                    runs.append(exc.run)
-                    aborted = exc.run.aborted
-                    break
-            finally:
-                target.close()
-        mutant_report = []
-        if mutants and aborted is None:
-            from conform.families.gve.conformance.mutants import mutant_targets
-
-            variants = [r.variant for r in runs] or [DEFAULT_VARIANT]
-            task = bar.task("mutants", len(list(mutant_targets(variants))))
-            mutant_report, _ = run_mutants(
-                spec, variants, profile=profile, seed=seed,
-                progress=lambda s: task.update(advance=1, step=s))
+    runs, mutant_report = planned
+    aborted = next((r.aborted for r in runs if r.aborted), None)
     results = results_of(runs, command, mutant_report)
     out = Path(report_dir) if report_dir else default_dir()
     write_reports(results, out)
@@ -193,49 +106,16 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         sys.exit(code)
 
 
-def _step(task, checks):  # noqa: ANN001, ANN202 - a progress Task, the checks in run order
-    """The runner's per-check callback: advance, count FAILs, name the check now running."""
-    fails = [0]
-
-    def step(result):  # noqa: ANN001, ANN202
-        fails[0] += result.grade is Grade.FAIL
-        done = int(task.completed) + 1
-        upcoming = checks[done].id if done < len(checks) else "writing the report"
-        task.update(advance=1, step=(f"FAIL {fails[0]} · " if fails[0] else "") + upcoming)
-
-    if checks:
-        task.update(step=checks[0].id)
-    return step
-
-
-def _other_family(targets: tuple[str, ...], variant: str | None) -> bool:
-    """Does this run address a non-GVE protocol family (conform.families)?"""
-    from conform.families import is_family_variant
+def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
+    """The family whose units this run addresses (conform.families); one per run."""
+    from conform.families import DEFAULT_FAMILY, family, family_for_variant
 
     wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
-    return any(is_family_variant(v, "grbl") for v in wanted)
-
-
-def _run_family(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
-                report_dir: str | None, patterns: tuple[str, ...], list_only: bool,
-                allow_motion: bool, allow_eeprom: bool) -> None:
-    """grbl targets: the family's checks, the engine's results, reports and exit codes."""
-    from conform.families.grbl.checks import run_targets
-
-    runs = run_targets(list(targets) or [f"emu:{variant}"], variant, baud=baud,
-                       patterns=patterns, profile=profile, allow_motion=allow_motion,
-                       allow_eeprom=allow_eeprom, list_only=list_only, echo=click.echo)
-    if list_only:
-        return
-    results = results_of(runs, command_line())
-    out = Path(report_dir) if report_dir else default_dir()
-    write_reports(results, out)
-    _print_summary(results, out)
-    aborted = next((r.aborted for r in runs if r.aborted), None)
-    if aborted is not None:
-        raise UserError(f"run aborted: {aborted}", exit_code=2)
-    if results.failed():
-        sys.exit(1)
+    named = {family_for_variant(v).name for v in wanted if v}
+    if len(named) > 1:
+        raise UserError(f"this run names units of {' and '.join(sorted(named))}: run each "
+                        "family's targets separately")
+    return family(named.pop() if named else DEFAULT_FAMILY)
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001

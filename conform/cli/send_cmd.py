@@ -195,7 +195,7 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
     """A real port (or any pyserial URL): ``?`` first (variant, checksum mode), then stream."""
     import serial
 
-    from conform.conformance.target import variant_for_firmware
+    from conform.families.gve.conformance.target import variant_for_firmware
     from conform.families.gve.sender.job import load_job
     from conform.families.gve.sender.probe import probe_unit
 

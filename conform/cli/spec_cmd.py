@@ -11,10 +11,6 @@ from rich.console import Console
 from rich.table import Table
 
 from conform.cli.params import VARIANT, echo_json, json_option
-from conform.errors import UserError
-from conform.families.gve.spec import load_spec
-from conform.families.gve.spec.diff import diff_variants
-from conform.families.gve.spec.model import CommandSpec, Variant
 
 
 def _console() -> Console:
@@ -38,24 +34,6 @@ def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json
     _console().print(table)
 
 
-def _params(cmd: CommandSpec, variant: Variant) -> str:
-    out = []
-    for p in cmd.params:
-        if p.kind == "sign":
-            rng = "|".join(p.choices)
-        elif p.kind == "axis":
-            rng = "/".join(variant.axes)
-        elif p.kind == "hex":
-            rng = f"{p.lo:02X}..{p.hi:02X}h"
-        else:
-            rng = f"{p.lo}..{p.hi}"
-        name = f"{p.name}×{len(variant.axes)}" if p.per_axis else p.name
-        if p.per_axis and p.min_count and p.min_count < len(variant.axes):
-            name = f"{p.name}×{p.min_count}-{len(variant.axes)}"
-        out.append(f"{name} {p.kind} {rng}")
-    return "; ".join(out) or "-"
-
-
 @click.group()
 def cli() -> None:
     """The protocol tables: variants, commands, ranges and differences.
@@ -76,30 +54,25 @@ def list_cmd(as_json: bool) -> None:
     Example:
       conform spec list --json | jq -r '.variants[].variant'
     """
-    spec = load_spec()
-    rows = [(v.id, v.title, v.firmware, "".join(v.axes), v.queue, v.max_rate, len(v.commands),
-             v.base or "-") for v in spec.variants.values()]
-    if not as_json:
-        rows = [(*r[:5], f"{r[5]:,}", *r[6:]) for r in rows]
+    from conform.families import DEFAULT_FAMILY, families, family
+
+    title, columns, rows = family(DEFAULT_FAMILY).variant_table(pretty=not as_json)
     others = {}
     if as_json:
-        from conform.families import families
-
         others = {f.name: [{"variant": v.id, "title": v.title, "firmware": v.firmware,
                             "axes": v.axes, "buffers": v.buffer, "notes": v.notes}
-                           for v in f.variants()] for f in families() if f.name != "gve"}
-    _emit("GVE variants", ("variant", "title", "firmware", "axes", "queue", "max rate",
-                           "commands", "base"), rows, as_json, "variants", other_families=others)
+                           for v in f.variants()] for f in families() if f.name != DEFAULT_FAMILY}
+    _emit(title, columns, rows, as_json, "variants", other_families=others)
     if not as_json:
         _other_families()
 
 
 def _other_families() -> None:
     """Variants of the other protocol families (conform.families), one table each."""
-    from conform.families import families
+    from conform.families import DEFAULT_FAMILY, families
 
     for fam in families():
-        if fam.name == "gve":
+        if fam.name == DEFAULT_FAMILY:
             continue
         table = Table(title=f"{fam.name} variants")
         for col in ("variant", "title", "firmware", "axes", "buffers", "notes"):
@@ -123,52 +96,7 @@ def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
     """
     from conform.families import family_for_variant
 
-    if family_for_variant(variant).name == "grbl":
-        from conform.families.grbl.show import show
-
-        show(variant, command, _console())
-        return
-    spec = load_spec()
-    v = spec.variant(variant)
-    console = _console()
-    if command is not None:
-        cmd = v.command(command)
-        if cmd is None:
-            known = spec.commands.get(command)
-            if known is None:
-                raise UserError(f"no command {command!r} in the tables")
-            raise UserError(f"{v.id} has no command {command!r} (absent in this version)")
-        rows = [
-            ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),
-            ("family", cmd.family), ("parameters", _params(cmd, v)),
-            ("answer", ", ".join(f"{f.name}:{f.radix}" for f in cmd.answer) or "code only"),
-            ("modal", "yes" if cmd.modal else "no"),
-            ("while running", "yes" if cmd.while_running else "no (7)"),
-            ("moves the machine", "yes" if cmd.motion else "no"),
-            ("effect", cmd.effect), ("clause", cmd.clause_for(v.manual)),
-            ("all clauses", ", ".join(cmd.clauses)),
-            ("open questions", ", ".join(cmd.questions) or "-"),
-            ("variants", ", ".join(x.id for x in spec.variants.values() if x.has(cmd.id))),
-        ]
-        if as_json:
-            echo_json({"variant": v.id, "command": cmd.id, **dict(rows)})
-            return
-        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
-        table.add_column("field")
-        table.add_column("value")
-        for k, val in rows:
-            table.add_row(k, val)
-        console.print(table)
-        return
-    rows = [(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
-             ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
-             "" if cmd.while_running else "7", cmd.clause_for(v.manual))
-            for cmd in v.commands.values()]
-    _emit(f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
-          f"max {v.max_rate:,} pulses/s",
-          ("command", "addr", "parameters", "answer", "modal", "running", "clause"), rows,
-          as_json, "commands", variant=v.id, axes="".join(v.axes), queue=v.queue,
-          max_rate=v.max_rate)
+    family_for_variant(variant).show_spec(variant, command, console=_console(), as_json=as_json)
 
 
 @cli.command("diff")
@@ -182,6 +110,9 @@ def diff_cmd(a: str, b: str, as_json: bool) -> None:
     Example:
       conform spec diff gve64-v19 gve124
     """
+    from conform.families.gve.spec import load_spec  # GVE-only: the variant diff of its tables
+    from conform.families.gve.spec.diff import diff_variants
+
     spec = load_spec()
     va, vb = spec.variant(a), spec.variant(b)
     diffs = diff_variants(va, vb)
@@ -199,6 +130,8 @@ def questions_cmd() -> None:
     Example:
       conform spec questions
     """
+    from conform.families.gve.spec import load_spec  # GVE-only: its A-register
+
     spec = load_spec()
     table = Table(title="Open questions (A-register)")
     for col in ("id", "question", "default", "alternatives", "settled"):
@@ -217,14 +150,10 @@ def check_cmd(root: str | None) -> None:
     Example:
       conform spec check --specs specs/gve
     """
-    spec = load_spec(root)
-    n = sum(len(v.commands) for v in spec.variants.values())
-    click.echo(f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
-               f"({n} variant commands), {len(spec.questions)} open questions, {len(spec.examples)} examples")
-    if root is None:
-        from conform.families.grbl.tables import load_grbl
+    from conform.families import DEFAULT_FAMILY, families, family
 
-        g = load_grbl()
-        click.echo(f"ok: grbl: {len(g.variants)} variant, {len(g.errors)} error codes, "
-                   f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
-                   f"{len(g.commands)} $ commands, {len(g.examples)} examples")
+    click.echo(family(DEFAULT_FAMILY).tables_summary(root))
+    if root is None:   # a folder given is checked as the default family's tables
+        for fam in families():
+            if fam.name != DEFAULT_FAMILY:
+                click.echo(fam.tables_summary())

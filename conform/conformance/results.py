@@ -105,12 +105,13 @@ class TargetRun:
     checks: list[CheckResult] = field(default_factory=list)
     aborted: str | None = None        # why the run stopped early (and what was sent to stop it)
     notes: list[str] = field(default_factory=list)
-    # a link's costs: how the checks' states were reached (conform.families.gve.conformance.state), the
-    # estimate printed before starting and the state machine's wall-time budget (s)
+    # a link's costs: how the checks' states were reached (the family's state keeping, set by
+    # its Runner.finish), the estimate printed before starting and the budget of the family's
+    # open-ended checks (the GVE state machine) in s
     state: dict[str, Any] = field(default_factory=dict)
     estimate_s: float | None = None
     machine_budget_s: float | None = None
-    # what this run did not verify and how to enable it (conform.families.gve.conformance.safety)
+    # what this run did not verify and how to enable it (the family's Runner.finish)
     not_verified: list[dict[str, Any]] = field(default_factory=list)
 
     @property

@@ -1,35 +1,16 @@
-"""The whole suite of one variant (directed, examples, state machine), profiles, replay tokens
-and the mutant run — what ``conform run`` and the pytest plugin share."""
+"""What every family's conformance run shares: profile names, replay tokens, the results of a
+``conform run`` (``results_of``) and its timestamps. A family's suite of checks is its own
+(GVE: conform.families.gve.conformance.suite)."""
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from conform.conformance.results import Grade, RunResults, TargetRun
-from conform.conformance.runner import Progress, Runner, RunOptions
-from conform.conformance.target import EmuTarget, emulator_factory
+from conform.conformance.results import RunResults, TargetRun
 from conform.errors import UserError
-from conform.families.gve.conformance.checks import Check, generate, select
-from conform.families.gve.conformance.machine import machine_check
-from conform.families.gve.conformance.safety import Guard
 
 PROFILE_NAMES = ("quick", "full")
-
-
-def suite(spec: Any, variant_id: str, *, patterns: Sequence[str] = (),
-          guard: Guard | None = None, machine: bool = True, profile: str = "quick"
-          ) -> list[Check]:
-    """Every check of a variant for a profile (filtered by globs)."""
-    travel = 100000
-    if guard is not None and guard.max_steps is not None:
-        travel = min(travel, guard.max_steps)
-    checks = generate(spec, variant_id, travel=travel, deep=profile == "full")
-    if machine:
-        checks.append(machine_check(spec, variant_id))
-    return select(checks, patterns)
 
 
 def parse_replay(token: str) -> tuple[str, int | None]:
@@ -44,38 +25,6 @@ def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def run_mutants(spec: Any, variant_ids: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                machine: bool = False, progress: Callable[[str], None] | None = None
-                ) -> tuple[list[dict[str, Any]], list[TargetRun]]:
-    """Run the suite against every mutant; which checks caught each (FAIL) and the runs."""
-    from conform.families.gve.conformance.mutants import mutant_targets
-
-    report, runs = [], []
-    for m, vid in mutant_targets(variant_ids):
-        t0 = time.perf_counter()
-        target = EmuTarget(emulator_factory(spec, vid, None, m.name), f"emu:{vid}:{m.name}")
-        runner = Runner(spec, target, vid, options=RunOptions(profile=profile, seed=seed))
-        run = runner.run(suite(spec, vid, machine=machine, profile=profile))
-        failed = [c for c in run.checks if c.grade is Grade.FAIL]
-        caught_by = [c.id for c in failed]
-        expected_hit = [c.id for c in failed if c.key in m.catches]
-        report.append({"name": m.name, "variant": vid, "fault": m.fault,
-                       "catches": list(m.catches), "caught_by": caught_by,
-                       "expected_hit": expected_hit, "killed": bool(failed),
-                       "seconds": round(time.perf_counter() - t0, 3)})
-        runs.append(run)
-        if progress is not None:
-            progress(f"mutant {m.name} on {vid}: "
-                     f"{'killed by ' + str(len(caught_by)) + ' checks' if failed else 'SURVIVED'}")
-    return report, runs
-
-
 def results_of(runs: list[TargetRun], command: str, mutants: list[dict[str, Any]] | None = None
                ) -> RunResults:
     return RunResults(runs, command, now_iso(), mutants or [])
-
-
-def run_one(spec: Any, target: Any, variant_id: str, checks: Sequence[Check], *,
-            options: RunOptions, dialect: Any = None, progress: Progress | None = None
-            ) -> TargetRun:
-    return Runner(spec, target, variant_id, dialect=dialect, options=options).run(checks, progress)

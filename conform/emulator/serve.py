@@ -1,10 +1,11 @@
 """Serve the reference unit on a real byte stream (a pty or TCP) on wall-clock time.
 
-The thin I/O adapter around the sans-I/O :class:`conform.families.gve.unit.Unit`: it reads what the host
-writes, hands it to the unit with the time it arrived, and writes the unit's answers when
-they are due. Options add wire pacing (``baud``: 10 bits per byte, both directions), fault
+The thin I/O adapter around any family's sans-I/O unit (:class:`SansIOUnit`): it reads what
+the host writes, hands it to the unit with the time it arrived, and writes the unit's answers
+when they are due. Options add wire pacing (``baud``: 10 bits per byte, both directions), fault
 injection (:mod:`conform.link.faults`), a recording (:class:`conform.capture.Recorder`) and a
-control socket to change inputs while it runs (:mod:`conform.emulator.control`).
+control socket to change inputs while it runs (:mod:`conform.emulator.control`; the requests
+are the family's ``control_handler`` hook).
 
 What is recorded is what crosses the emulator's port: ``host`` chunks as read from it,
 ``unit`` chunks as written to it (after faults), plus link events for injected disconnects.
@@ -20,15 +21,32 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
-from conform.emulator.control import run_control
+from conform.emulator.control import ControlHandler, no_commands
 from conform.errors import LinkError, UserError
-from conform.families.gve.unit.model import Unit
 from conform.link.endpoint import PortGone
 from conform.link.faults import FaultInjector
 
 MAX_WAIT = 0.02  # the loop wakes at least this often (control commands, stop requests)
+
+
+class SansIOUnit(Protocol):
+    """What the emulator needs from a family's unit: bytes and a time in, bytes out when due.
+    Inputs (buttons, limit switches) are the family's: its ``control_handler`` hook drives them."""
+
+    @property
+    def now(self) -> float:
+        """The unit's clock (the last time it was given)."""
+
+    def receive(self, data: bytes, t: float) -> None:
+        """Bytes from the host that arrived at ``t``."""
+
+    def poll(self, t: float) -> list[tuple[float, bytes]]:
+        """Everything due by ``t``: (due time, bytes to the host)."""
+
+    def next_deadline(self) -> float | None:
+        """When the unit next has something to do (None: only when bytes arrive)."""
 
 
 class ControlServer:
@@ -149,13 +167,14 @@ def _claim(path: str, private: str) -> None:
 class Emulator:
     """Run ``unit`` behind ``endpoint`` until :meth:`stop` (or a signal handler) is called.
 
+    ``control_handler`` answers the requests of ``control`` (the family's control commands);
     ``reopen`` builds a fresh endpoint after an injected disconnect (pty: same symlink;
     TCP: same port); ``report`` receives one-line notices (new device paths, link events).
     """
 
     def __init__(
         self,
-        unit: Unit,
+        unit: SansIOUnit,
         endpoint: Any,
         *,
         baud: int | None = None,
@@ -166,10 +185,10 @@ class Emulator:
         report: Callable[[str], None] | None = None,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
-        control_handler: Callable[[Any, str, float], str] | None = None,
+        control_handler: ControlHandler | None = None,
     ) -> None:
         self.unit = unit
-        self.control_handler = control_handler or run_control  # another family's requests
+        self.control_handler: ControlHandler = control_handler or no_commands
         self.endpoint = endpoint
         self.bit_time = 10.0 / baud if baud else 0.0
         self.injector = injector

@@ -2,9 +2,11 @@
 
 The engine (spec tooling, emulator adapter, conformance results and reports, capture,
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
-checks, a detector for its traffic and its analysis. Each family is one package,
-conform.families.gve and conform.families.grbl, with its tables in specs/gve/ and specs/grbl/
-(the GVE analyser still lives in conform.analysis). See docs/architecture.md.
+checks graded in the engine's runner, its emulator and control commands, a live decoder for
+captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
+one package, conform.families.gve and conform.families.grbl, with its tables in specs/gve/ and
+specs/grbl/ (the GVE analyser still lives in conform.analysis). The engine reaches a family
+only through this registry (tests/test_family_boundary.py). See docs/architecture.md.
 
     family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
     detect_family(host_bytes, unit_bytes, metadata)   # -> ("grbl", "why") or ("unknown", ...)
@@ -44,7 +46,10 @@ class Detection:
 
 @runtime_checkable
 class Family(Protocol):
-    """What a protocol family provides to the engine."""
+    """What a protocol family provides to the engine (docs/architecture.md).
+
+    The default family (``DEFAULT_FAMILY``) also gives ``variant_table(pretty)``: its own
+    columns for the first table of ``conform spec list`` (title, columns, rows)."""
 
     name: str
 
@@ -61,6 +66,14 @@ class Family(Protocol):
     def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
         """Run its checks on an open target; a ``conform.conformance.results.TargetRun``."""
 
+    def run_targets(self, targets: list[str], variant: str | None, **options: Any
+                    ) -> tuple[list[Any], list[dict[str, Any]]] | None:
+        """``conform run``: open each target (``emu:VARIANT`` or a port), run its checks in
+        the engine's runner; (TargetRuns, mutant report), or None after ``list_only`` printed
+        the checks. Options are the command's (``baud``, ``profile``, ``patterns``,
+        ``allow_motion``, ``echo``, ``announce``...); a family ignores those it has no use for.
+        The command writes the reports, the summary and the exit code."""
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         """Does this traffic look like this family's?"""
 
@@ -70,8 +83,46 @@ class Family(Protocol):
     def serve(self, variant: str, **options: Any) -> None:
         """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
 
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """A ``conform.conformance.runner.Runner`` for this family's checks on ``target``: the
+        engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for what is the
+        family's — grading a check, keeping the unit in a check's starting state, halting the
+        unit (retried until acknowledged) and estimating a check's duration."""
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        """A frame decoder for the capture recorder (``conform.capture.session.Decoder``) that
+        turns this family's traffic into frames while it is recorded, or None: the capture
+        then holds the raw bytes only (they are decoded when analysed)."""
+
+    pytest_plugin: str | None
+    """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
+    engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
+
+    check_sender: Any
+    """check-sender's scenarios, rules and hooks for this family
+    (``conform.sendercheck.family.Family``), or None when it judges senders its own way: then
+    ``check_sender_cli(command, variant, scenarios, report_dir, timeout, job_file, as_json,
+    echo=...)`` runs ``conform check-sender`` and returns the exit code."""
+
+    def characterize(self, target: str, output: str, variant: str | None, **options: Any
+                     ) -> None:
+        """``conform characterize``: probe what the unit does where the source leaves a choice
+        and write the profile (options: ``baud``, ``allow_motion``, ``max_steps``,
+        ``allow_eeprom``, ``echo``)."""
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        """``conform spec show``: a variant's commands (or one) from its tables."""
+
+    def tables_summary(self, root: str | None = None) -> str:
+        """``conform spec check``: the one ``ok: ...`` line of its validated tables."""
+
+    def mutants(self) -> Sequence[str]:
+        """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
+
 
 FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
+DEFAULT_FAMILY = "gve"   # serves a variant nobody claims; its table comes first in `spec list`
 _loaded: dict[str, Family] = {}
 
 
@@ -92,9 +143,9 @@ def family_for_variant(variant: str) -> Family:
     """The family serving ``variant`` (GVE when nobody claims it, so GVE errors stay as they
     were)."""
     for f in families():
-        if f.name != "gve" and any(v.id == variant for v in f.variants()):
+        if f.name != DEFAULT_FAMILY and any(v.id == variant for v in f.variants()):
             return f
-    return family("gve")
+    return family(DEFAULT_FAMILY)
 
 
 def unknown_variant(variant_id: str, family_name: str) -> str:

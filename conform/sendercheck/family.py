@@ -1,9 +1,11 @@
 """The family-agnostic shapes of check-sender: scenarios, rules, verdicts, a family.
 
-A protocol family (GVE today, grbl next) supplies one :class:`Family`: its scenarios (what
-is done to the link and the unit, and the job the program streams), its rules (each citing
-its manual clause) and how to set a unit up for a scenario. The session runner, the grading
-and the reports only use these shapes.
+A protocol family (GVE today, grbl next) supplies one :class:`Family` (``check_sender`` of
+its ``conform.families`` entry): its scenarios (what is done to the link and the unit, and the
+job the program streams), its rules (each citing its manual clause), how to set a unit up for
+a scenario, and what it knows afterwards — the ground truth of what the unit accepted, the job
+compared with it, the capture analysed. The session runner, the grading and the reports only
+use these shapes.
 """
 
 from __future__ import annotations
@@ -96,4 +98,12 @@ class Family:
     prepare: Callable[[Any, Scenario, float], None]  # (unit, scenario, t) before the run
     make_unit: Callable[[Any, Any, float], Any]  # (variant, dialect, t0) -> sans-I/O unit
     control_line: Callable[[str, bool, Any], str]  # (action kind, on, variant) -> control request
+    commands: Callable[[Any, str, float], str]  # the emulator's control commands (emulator.control)
+    variant: Callable[[str], tuple[Any, Any]]  # variant id -> (variant, dialect); UserError if unknown
+    observe: Callable[[Any, float], Any]  # (unit, t0) -> its ground truth (``accepted``, ``to_dict()``)
+    # (session, unit, ground truth) after the program: run the unit out, set ``truth`` (and
+    # write truth.json) and ``comparison`` (the job against what the unit accepted)
+    settle: Callable[[Any, Any, Any], None]
+    analyze: Callable[[Any, str], Any]  # (capture path, variant id) -> the capture's analysis
+    truth_findings: Callable[[Any], list[dict[str, Any]]]  # session -> ground-truth findings
     fast: tuple[str, ...] = ()  # scenarios for a quick run

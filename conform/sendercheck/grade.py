@@ -16,22 +16,24 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.gve.sendercheck import rules, scenarios
+from conform.families import family as registered_family
+from conform.families import family_for_variant
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
 from conform.sendercheck.session import Session, run_session
 
-GVE = Family(
-    name="gve", default_variant="gve64-v19", scenarios=scenarios.SCENARIOS, rules=rules.RULES,
-    job=scenarios.make_job, vectors=scenarios.job_vectors, prepare=scenarios.prepare_unit,
-    make_unit=scenarios.make_unit, control_line=scenarios.control_line,
-    fast=scenarios.FAST,
-)
-FAMILIES = {"gve": GVE}
+
+def default_family() -> Family:
+    """check-sender's family when no variant is given: GVE's, as it always was."""
+    return registered_family("gve").check_sender  # type: ignore[attr-defined]
 
 
 def family_for(variant_id: str) -> Family:
-    """The family of a variant (every variant modelled today is GVE)."""
-    return GVE
+    """The check-sender scenarios and rules of the family serving ``variant_id``."""
+    fam = family_for_variant(variant_id)
+    shapes = getattr(fam, "check_sender", None)
+    if shapes is None:
+        raise UserError(f"check-sender has no scenarios for {variant_id} ({fam.name})")
+    return shapes
 
 
 @dataclass
@@ -105,20 +107,7 @@ def session_findings(s: Session) -> list[dict[str, Any]]:
         d = f.to_dict()
         d.update(scenario=s.scenario.name, source="capture")
         out.append(d)
-    c = s.comparison
-    if c is not None:
-        for kind, items, clause in (
-                ("double-move", c.doubles, "GVE64 §13.5.2 (relative vectors: executed twice "
-                                           "moves twice)"),
-                ("extra-vector", c.extras, "GVE64 §13.5.2"),
-                ("lost-vector", c.lost, "GVE64 §13.5.2, §13.7 (a vector not accepted is not "
-                                        "executed)"),
-                ("altered-vector", c.altered, "GVE64 §13.3.2 (a damaged line is executed "
-                                              "unless checksums are on)")):
-            for it in items:
-                out.append({"kind": kind, "severity": "hazard", "clause": clause,
-                            "scenario": s.scenario.name, "source": "ground-truth",
-                            "confirmed": True, "message": f"{kind}: {it}", **it})
+    out += s.family.truth_findings(s)
     if s.hung:
         out.append({"kind": "timeout", "severity": "error", "scenario": s.scenario.name,
                     "clause": "none (harness rule: a run must end)", "source": "harness",
@@ -140,15 +129,13 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
           directory: Path, timeout: float | None = None, seed: int = 1,
           job_lines: list[str] | None = None,
           progress: Callable[[str], None] | None = None) -> CheckResults:
-    from conform.families.gve.spec import load_spec
-
     if not command:
         raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS...")
     if shutil.which(command[0]) is None:
         raise UserError(f"{command[0]}: no such program (not found or not executable)")
-    spec = load_spec()
-    var = spec.variant(variant or GVE.default_variant)
-    family = family_for(var.id)
+    shapes = family_for(variant) if variant else default_family()
+    var, dialect = shapes.variant(variant or shapes.default_variant)
+    family = shapes
     chosen = [n.strip() for x in (names or list(family.scenarios)) for n in x.split(",")
               if n.strip()]
     unknown = [n for n in chosen if n not in family.scenarios]
@@ -161,7 +148,7 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
     for name in chosen:
         scn = family.scenarios[name]
         say(f"{name}: {scn.title} ...")
-        s = run_session(family, scn, var, spec.dialect(), command, directory / name,
+        s = run_session(family, scn, var, dialect, command, directory / name,
                         timeout=timeout, seed=seed, job_lines=job_lines)
         verdicts = grade_session(family, s)
         results.append(ScenarioResult(name, scn.title, verdicts, s, session_findings(s)))

@@ -7,8 +7,8 @@
 The scenario's actions (press stop, kill the link) fire when a share of the job's vectors
 has been accepted. A program still running at the timeout is stopped (SIGTERM, then
 SIGKILL to its process group). Afterwards the unit's remaining queue is run out in virtual
-time, the ground truth is written beside the capture, and the capture is analysed with
-``conform.analysis.analyze``.
+time, the ground truth is written beside the capture, and the capture is analysed — each by
+the family's hooks (``observe``, ``settle``, ``analyze``: conform.sendercheck.family).
 """
 
 from __future__ import annotations
@@ -25,11 +25,8 @@ from typing import Any
 
 from conform.capture.live import ProxyCapture
 from conform.emulator.serve import Emulator
-from conform.families.gve.unit.model import run_until_idle
-from conform.families.gve.unit.truth import GroundTruth, dumps
 from conform.link.faults import FaultConfig
 from conform.link.pty import PtyEndpoint
-from conform.sendercheck.compare import Comparison, compare
 from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
 
@@ -72,7 +69,7 @@ class Session:
     events: list[dict[str, Any]] = field(default_factory=list)
     analysis: Any = None
     analysis_error: str = ""
-    comparison: Comparison | None = None
+    comparison: Any = None  # the family's job-against-truth comparison (``summary()``)
     faults: dict[str, int] = field(default_factory=dict)
     error: str = ""  # the harness failed (not the program)
     started: float = 0.0  # monotonic time the program was started
@@ -126,13 +123,14 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
                 family.vectors(lines), timeout=timeout if timeout is not None else scn.timeout)
     t0 = time.monotonic()
     unit = family.make_unit(variant, dialect, t0)
-    truth = GroundTruth(unit, t0=t0)
+    truth = family.observe(unit, t0)
     family.prepare(unit, scn, t0)
     cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
     faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
     control = _Control()
     endpoint = PtyEndpoint()
-    emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control)
+    emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control,
+                        control_handler=family.commands)
     died: list[str] = []
 
     def serve() -> None:
@@ -158,26 +156,18 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
         thread.join(5.0)
     if died and not s.error:
         s.error = died[0]
-    if not unit.inta:
-        run_until_idle(unit, unit.now, unit.now + 3600.0)  # the queue runs out
-    s.truth = truth.to_dict()
     s.faults = dict(faults.counts)
-    (directory / "truth.json").write_text(dumps(s.truth), "utf-8")
-    accepted = [(a["kind"], tuple(a["vector"])) for a in s.truth["accepted"]]
-    deleted = any(e["command"] == "D" and e["code"] == 0 for e in s.truth["events"])
-    s.comparison = compare(s.job, accepted, tail_may_be_missing="stop" in scn.tags and deleted)
+    family.settle(s, unit, truth)
     if s.capture.exists():
         try:
-            from conform.analysis.analyze import analyze
-
-            s.analysis = analyze(s.capture, variant=variant.id, whatif_replays=False)
+            s.analysis = family.analyze(s.capture, variant.id)
         except Exception as exc:  # noqa: BLE001 - reported, the truth still grades
             s.analysis_error = f"{type(exc).__name__}: {exc}"
     return s
 
 
 def _run_program(s: Session, proxy: ProxyCapture, control: _Control, faults: ScriptedFaults,
-                 truth: GroundTruth, job_path: Path) -> None:
+                 truth: Any, job_path: Path) -> None:
     scn = s.scenario
     env = dict(os.environ, CONFORM_PORT=proxy.host_path, CONFORM_JOB=str(job_path),
                CONFORM_VARIANT=s.variant.id, CONFORM_SCENARIO=scn.name)

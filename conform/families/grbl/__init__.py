@@ -40,6 +40,58 @@ class GrblFamily:
 
         return run_checks(target, variant, **options)
 
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """grbl's checks in the engine's runner (checks.GrblRunner): fresh unit by soft reset,
+        halt by feed hold then soft reset."""
+        from conform.families.grbl.checks import GrblRunner
+
+        return GrblRunner(target, variant, **options)
+
+    def run_targets(self, targets: list[str], variant: str | None, *, baud: int = 115200,
+                    patterns: Any = (), profile: str = "quick", allow_motion: bool = False,
+                    allow_eeprom: bool = False, list_only: bool = False, echo: Any = print,
+                    announce: Any = None, **_options: Any) -> Any:
+        from conform.families.grbl.checks import run_targets
+
+        runs = run_targets(targets or [f"emu:{variant}"], variant, baud=baud,
+                           patterns=patterns, profile=profile, allow_motion=allow_motion,
+                           allow_eeprom=allow_eeprom, list_only=list_only, echo=echo,
+                           announce=announce)
+        return None if list_only else (runs, [])
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        return None   # recorded raw; lines are paired when the capture is analysed
+
+    pytest_plugin = None
+    check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
+
+    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
+        """``conform check-sender --variant grbl-…``: this family's scenarios and rules."""
+        from conform.families.grbl.sendercheck import run_cli
+
+        return run_cli(*args, **kw)
+
+    def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
+                     echo: Any = print, **_options: Any) -> None:
+        from conform.families.grbl.characterize import run
+
+        run(target, output, variant, baud, echo=echo)
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        from conform.families.grbl.show import show
+
+        show(variant, command, console)
+
+    def tables_summary(self, root: str | None = None) -> str:
+        g = self.load_tables(root)
+        return (f"ok: grbl: {len(g.variants)} variant, {len(g.errors)} error codes, "
+                f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
+                f"{len(g.commands)} $ commands, {len(g.examples)} examples")
+
+    def mutants(self) -> Sequence[str]:
+        return ()
+
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.codec import detect
 

@@ -87,7 +87,7 @@ def write_profile(obs: list[Observation], path: str, *, target: str, variant: st
 def run(target_text: str, output: str, variant: str | None, baud: int,
         echo: Any = print) -> None:
     """The command: open the target, probe, print one line per item, write the profile."""
-    from conform.conformance.target import EmuTarget, open_target, parse_target
+    from conform.conformance.target import EmuTarget, open_link, parse_target
     from conform.families import family
 
     kind, what, _ = parse_target(target_text)
@@ -97,7 +97,7 @@ def run(target_text: str, output: str, variant: str | None, baud: int,
     if kind == "emu":
         target: Any = EmuTarget(lambda: family("grbl").make_unit(vid), f"emu:{vid}", baud=baud)
     else:
-        target, _ = open_target(target_text, None, baud=baud)
+        target = open_link(target_text, baud=baud)
     try:
         obs = characterize(target, vid)
     finally:

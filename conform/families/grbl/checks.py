@@ -12,7 +12,9 @@ default and prints it back), ``realtime`` (status, hold/resume, reset, overrides
 
 A real unit is driven only as far as it is allowed: checks that move the machine need
 ``allow_motion``, checks that write settings (EEPROM) need ``allow_eeprom``; otherwise they are
-SKIPPED. An interrupted run sends feed hold and a soft reset.
+SKIPPED. The checks run in the engine's runner (:class:`GrblRunner`), like every family's:
+the estimate and ETA on a link, the abort after consecutive link failures, and the halt on
+Ctrl-C — here feed hold then a soft reset, retried until the banner acknowledges it.
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from typing import Any
 
 from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
+from conform.conformance.runner import Estimate, Runner, RunOptions
+from conform.conformance.target import HarnessError
 from conform.families.grbl.codec import split_unit
 from conform.families.grbl.tables import GrblSpec, Variant, load_grbl
 
@@ -33,10 +36,6 @@ STOP = (b"!", b"\x18")
 _SETTING = re.compile(r"^\$(\d+)=(.*)$")
 _NUM = re.compile(r"-?\d+\.\d+")
 _WRITE = re.compile(rb"\$(\d+|RST)=")
-
-
-class HarnessError(Exception):
-    """The link or the harness failed (ERROR, never the unit's fault)."""
 
 
 @dataclass
@@ -415,31 +414,75 @@ def select(checks: list[GrblCheck], patterns: Sequence[str]) -> list[GrblCheck]:
     return [c for c in checks if any(fnmatch.fnmatchcase(c.id, p) for p in patterns)]
 
 
+RESET_COST = 0.15  # s a check's fresh start takes on a link beyond the model: Ctrl-X, banner
+
+
+class GrblRunner(Runner):
+    """grbl's part of the engine's runner: a fresh unit per check (soft reset), grading by the
+    check's own comparison, checks beyond what the run may do SKIPPED, and the halt."""
+
+    def __init__(self, target: Any, vid: str, *, spec: GrblSpec | None = None,
+                 allow_motion: bool = False, allow_eeprom: bool = False,
+                 options: RunOptions | None = None) -> None:
+        super().__init__(target, vid, options)
+        self.spec = spec or load_grbl()
+        self.session = Session(target, self.spec, self.spec.variant(vid))
+        self.motion_ok = allow_motion or target.emulated
+        self.eeprom_ok = allow_eeprom or target.emulated
+
+    def run_check(self, check: GrblCheck) -> CheckResult:
+        result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
+        result.variant, result.target = self.variant_id, self.target.name
+        return result
+
+    def halt(self, after_silence: bool = False) -> str:
+        return _stop(self.target)
+
+    def stop_at_end(self) -> bool:
+        return not self.target.emulated and self.motion_ok
+
+    def estimate_run(self, checks: Sequence[GrblCheck]) -> Estimate:
+        """Each check as long as it takes the reference unit on its virtual clock at the
+        target's baud, plus the soft reset before it."""
+        from conform.conformance.target import EmuTarget
+        from conform.families import family
+
+        vid = self.variant_id
+        sim = EmuTarget(lambda: family("grbl").make_unit(vid), "estimate", baud=self.target.baud)
+        s = Session(sim, self.spec, self.session.v)
+        est = Estimate()
+        for c in checks:
+            cost = 0.0
+            if not (c.motion and not self.motion_ok) and not (c.eeprom and not self.eeprom_ok):
+                s.fresh()
+                t0 = sim.now()
+                try:
+                    c.run(s)
+                except HarnessError:
+                    pass
+                cost = sim.now() - t0 + RESET_COST
+            est.per_check[c.id] = cost
+            est.total += cost
+        return est
+
+
 def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: str = "quick",
                allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
                progress: Callable[[CheckResult], None] | None = None,
-               spec: GrblSpec | None = None) -> TargetRun:
-    """Run the checks on an open target (EmuTarget or LinkTarget)."""
-    spec = spec or load_grbl()
-    v = spec.variant(vid)
-    checks = select(generate(spec, vid), patterns)
-    run = TargetRun(target.name, vid, target.emulated, profile,
-                    datetime.now(UTC).isoformat(timespec="seconds"), notes=list(notes or []))
-    session = Session(target, spec, v)
-    t_run = time.perf_counter()
+               spec: GrblSpec | None = None,
+               announce: Callable[[str], None] | None = None) -> TargetRun:
+    """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
+    interrupted run comes back with ``aborted`` saying what was sent to stop the unit."""
+    from conform.conformance.runner import RunAborted
+
+    runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
+                        allow_eeprom=allow_eeprom,
+                        options=RunOptions(profile=profile, notes=list(notes or []),
+                                           announce=announce))
     try:
-        for c in checks:
-            result = _one(session, c, allow_motion or target.emulated,
-                          allow_eeprom or target.emulated)
-            result.variant, result.target = vid, target.name
-            run.checks.append(result)
-            if progress is not None:
-                progress(result)
-    except KeyboardInterrupt:
-        run.aborted = "interrupted; " + _stop(target)
-    finally:
-        run.duration = time.perf_counter() - t_run
-    return run
+        return runner.run(select(generate(runner.spec, vid), patterns), progress)
+    except RunAborted as exc:
+        return exc.run
 
 
 def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckResult:
@@ -461,7 +504,7 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
         if not s.target.emulated:
             s.restore()
     except HarnessError as exc:
-        grade, expected, actual, detail = Grade.ERROR, "", "", str(exc)
+        grade, expected, actual, detail = Grade.ERROR, "", "", f"HarnessError: {exc}"
     if grade is not Grade.PASS and not s.target.emulated and c.motion:
         detail = (detail + "; " if detail else "") + _stop(s.target)
     return CheckResult(grade=grade, expected=expected, actual=actual, detail=detail,
@@ -505,9 +548,10 @@ def _stop(target: Any, attempts: int = 3) -> str:
 def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
                 patterns: Sequence[str] = (), profile: str = "quick", allow_motion: bool = False,
                 allow_eeprom: bool = False, list_only: bool = False,
-                echo: Callable[[str], None] = print) -> list[TargetRun]:
+                echo: Callable[[str], None] = print,
+                announce: Callable[[str], None] | None = None) -> list[TargetRun]:
     """``conform run`` for grbl targets: ``emu:grbl-…`` or a serial port / URL."""
-    from conform.conformance.target import EmuTarget, open_target, parse_target
+    from conform.conformance.target import EmuTarget, open_link, parse_target
     from conform.errors import UserError
     from conform.families import family
 
@@ -530,7 +574,7 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
         if kind == "emu":
             target: Any = EmuTarget(lambda vid=vid: fam.make_unit(vid), f"emu:{vid}", baud=baud)
         else:
-            target, _ = open_target(text, None, baud=baud)
+            target = open_link(text, baud=baud)
         notes = []
         if not target.emulated and not allow_motion:
             notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
@@ -541,7 +585,7 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
                 raise UserError(f"no check of {vid} matches {' '.join(patterns)} (see --list)")
             runs.append(run_checks(target, vid, patterns=patterns, profile=profile,
                                    allow_motion=allow_motion, allow_eeprom=allow_eeprom,
-                                   notes=notes, spec=spec))
+                                   notes=notes, spec=spec, announce=announce))
         finally:
             target.close()
         if runs[-1].aborted:

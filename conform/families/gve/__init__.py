@@ -1,5 +1,6 @@
 """The GVE family as a :class:`conform.families.Family`: tables (spec/), codec (protocol/),
-reference unit (unit/), checks (conformance/ here and the runner in conform.conformance),
+reference unit (unit/), checks, grading and targets (conformance/, driven by the engine's
+runner in conform.conformance),
 reference sender (sender/), check-sender scenarios and rules (sendercheck/); its analysis
 is still conform.analysis."""
 
@@ -39,13 +40,66 @@ class GveFamily:
 
     def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
         from conform.conformance.runner import RunOptions
-        from conform.conformance.suite import run_one, suite
+        from conform.families.gve.conformance.suite import run_one, suite
 
         spec = self.load_tables()
         checks = suite(spec, variant, patterns=options.get("patterns", ()),
                        profile=options.get("profile", "quick"))
         return run_one(spec, target, variant, checks,
                        options=RunOptions(profile=options.get("profile", "quick")))
+
+    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+        """Grading against the reference unit, the state keeper, H, D, O0,FF
+        (conformance/runner.py); options: ``options`` (RunOptions), ``dialect``, ``unit_cls``."""
+        from conform.families.gve.conformance.runner import Runner
+
+        return Runner(self.load_tables(), target, variant, **options)
+
+    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
+        from conform.families.gve.conformance.run import run_targets
+
+        return run_targets(targets, variant, **options)
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        from conform.families.gve.decode import make_decoder
+
+        return make_decoder(variant, baud=baud)
+
+    pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
+
+    def characterize(self, target: str, output: str, variant: str | None, **options: Any
+                     ) -> None:
+        from conform.families.gve.cli import characterize
+
+        characterize(target, output, variant, **options)
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        from conform.families.gve.cli import show_spec
+
+        show_spec(variant, command, console=console, as_json=as_json)
+
+    def variant_table(self, pretty: bool = False) -> Any:
+        from conform.families.gve.cli import variant_table
+
+        return variant_table(pretty)
+
+    def tables_summary(self, root: str | None = None) -> str:
+        from conform.families.gve.cli import tables_summary
+
+        return tables_summary(root)
+
+    def mutants(self) -> Sequence[str]:
+        from conform.families.gve.conformance.mutants import MUTANTS
+
+        return list(MUTANTS)
+
+    @property
+    def check_sender(self) -> Any:
+        """check-sender's GVE scenarios, rules and hooks (sendercheck/family.py)."""
+        from conform.families.gve.sendercheck.family import GVE
+
+        return GVE
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         lines = host.count(b"\r") or 1
@@ -59,9 +113,9 @@ class GveFamily:
         return Detection(self.name, score, f"{hits} GVE command lines from the host")
 
     def serve(self, variant: str, **options: Any) -> None:
-        from conform.errors import UserError
+        from conform.families.gve.serve import serve
 
-        raise UserError("GVE units are served by `conform emulate VARIANT` itself")
+        serve(variant, **options)
 
     def analyze(self, path: str, **options: Any) -> Any:
         from conform.analysis.analyze import analyze

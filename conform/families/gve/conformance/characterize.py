@@ -15,10 +15,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from conform.conformance.suite import now_iso
-from conform.conformance.target import HarnessError, Target
+from conform.conformance.target import HarnessError
 from conform.families.gve.conformance.expect import Reference, first_mismatch, show
 from conform.families.gve.conformance.profile import Profile
 from conform.families.gve.conformance.script import ENVIRONMENT, Script, Step, run_script, skip_reason
+from conform.families.gve.conformance.target import GveTarget as Target
 from conform.families.gve.protocol.checksum import append_checksum
 
 RESET = Step(reset=True)

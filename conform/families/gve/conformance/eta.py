@@ -10,34 +10,15 @@ While running, the remaining estimate is scaled by how the finished checks compa
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
-from conform.conformance.target import EmuTarget
+from conform.conformance.runner import Estimate
 from conform.families.gve.conformance.script import run_steps, skip_reason
 from conform.families.gve.conformance.state import StateKeeper
+from conform.families.gve.conformance.target import GveEmuTarget
 
 TURNAROUND = 0.0025  # s per exchange beyond the wire time (pty/USB converter, host)
 ANSWER_BYTES = 6  # a typical answer line
-
-
-@dataclass
-class Estimate:
-    per_check: dict[str, float] = field(default_factory=dict)
-    total: float = 0.0
-    _done_est: float = 0.0
-    _done_wall: float = 0.0
-
-    def done(self, check_id: str, elapsed: float) -> None:
-        self._done_est += self.per_check.get(check_id, 0.0)
-        self._done_wall = elapsed
-
-    def eta(self) -> float:
-        """Seconds left, scaled by the pace so far."""
-        left = max(0.0, self.total - self._done_est)
-        if self._done_est > 5.0:
-            left *= self._done_wall / self._done_est
-        return left
 
 
 def _line_cost(line: bytes, baud: int) -> float:
@@ -61,7 +42,7 @@ def estimate_run(runner: Any, checks: Sequence[Any]) -> Estimate:
                 sim.done(False)
         elif skip_reason(check.script, target.guard, target.drives_inputs) is None:
             ref = runner.ref
-            t = EmuTarget(lambda r=ref: r.unit_cls(r.variant, r.dialect), "estimate")
+            t = GveEmuTarget(lambda r=ref: r.unit_cls(r.variant, r.dialect), "estimate")
             body = check.script[1:] if check.script and check.script[0].reset else check.script
             run_steps(t, body)
             cost = t.now() + sum(_line_cost(s.line, baud) for s in body if s.line)

@@ -14,8 +14,9 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from conform.conformance.target import EmuTarget, Reply
+from conform.conformance.target import Reply
 from conform.families.gve.conformance.script import ENVIRONMENT, POSITION, Script, Step, run_script
+from conform.families.gve.conformance.target import GveEmuTarget
 from conform.families.gve.protocol.checksum import verify
 
 # open questions that bear on any script, whatever its commands
@@ -38,7 +39,7 @@ class Reference:
         self.variant = spec.variant(variant_id)
         self.dialect = dialect if dialect is not None else spec.dialect()
         if unit_cls is None:
-            from conform.conformance.target import unit_class
+            from conform.families.gve.conformance.target import unit_class
 
             unit_cls = unit_class()
         self.unit_cls = unit_cls
@@ -54,7 +55,7 @@ class Reference:
         if hit is not None:
             return hit
         variant, cls = self.variant, self.unit_cls
-        target = EmuTarget(lambda: cls(variant, d), "reference")
+        target = GveEmuTarget(lambda: cls(variant, d), "reference")
         replies = run_script(target, script)
         if len(_CACHE) >= _CACHE_MAX:
             _CACHE.clear()

@@ -23,12 +23,13 @@ from hypothesis.errors import HypothesisException
 from hypothesis.stateful import RuleBasedStateMachine, get_state_machine_test, rule
 
 from conform.conformance.results import INFO, CheckResult, Grade, LogEntry
-from conform.conformance.target import POLL_LINE, EmuTarget, HarnessError, Reply
+from conform.conformance.target import HarnessError, Reply
 from conform.errors import LinkError
 from conform.families.gve.conformance.checks import Check, answer_kind, answer_shape, clause_number
 from conform.families.gve.conformance.expect import first_mismatch, reply_mismatch, show
 from conform.families.gve.conformance.safety import SafetyRefusal, hazards
 from conform.families.gve.conformance.script import ENVIRONMENT, Step
+from conform.families.gve.conformance.target import POLL_LINE, GveEmuTarget
 from conform.families.gve.protocol import encode_command
 from conform.families.gve.protocol.checksum import append_checksum
 
@@ -131,7 +132,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
         def __init__(self) -> None:
             super().__init__()
             d = shared.dialect
-            self.ref = EmuTarget(lambda: unit_cls(v, d), "reference")
+            self.ref = GveEmuTarget(lambda: unit_cls(v, d), "reference")
             self.script: list[Step] = [Step(reset=True)]
             self.actual: list[Reply | None] = [None]
             self.off = (shared.deadline is not None and shared.failure is None
@@ -225,7 +226,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
 
         def _rebuild(self, d: Any) -> None:
             """A reference in the state the adopted dialect reaches after the same steps."""
-            self.ref = EmuTarget(lambda: unit_cls(v, d), "reference")
+            self.ref = GveEmuTarget(lambda: unit_cls(v, d), "reference")
             for step in self.script[1:]:
                 if step.wait:
                     self.ref.wait(step.wait)

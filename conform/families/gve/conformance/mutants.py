@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from conform.conformance.target import unit_class
+from conform.families.gve.conformance.target import unit_class
 from conform.families.gve.protocol import Command, Rejection
 from conform.families.gve.protocol.answers import encode_answer
 

@@ -119,6 +119,10 @@ class Guard:
             allowed.add("eeprom")
         return risks - allowed
 
+    def moves(self, line: bytes) -> bool:
+        """Does ``line`` set axes moving (the host no longer knows the unit idle)?"""
+        return "motion" in hazards(line)
+
     def check(self, line: bytes, idle: bool = False) -> None:
         bad = self.blocked(hazards(line, idle))
         if bad:

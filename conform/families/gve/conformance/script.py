@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from conform.conformance.target import Reply, Target
+from conform.conformance.target import Reply
 from conform.families.gve.conformance.safety import (
     INPUTS_SKIP,
     Guard,
@@ -18,6 +18,7 @@ from conform.families.gve.conformance.safety import (
     envelope_reason,
     hazards,
 )
+from conform.families.gve.conformance.target import GveTarget as Target
 
 # answer kinds whose fields are compared loosely on a real unit
 POSITION = "position"  # changes while moving: compared within a tolerance

@@ -30,14 +30,15 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from conform.conformance.target import POLL_LINE, EmuTarget, HarnessError, LinkSilent, Reply
+from conform.conformance.target import HarnessError, LinkSilent, Reply
 from conform.families.gve.conformance.expect import first_mismatch
 from conform.families.gve.conformance.script import Script, run_steps
+from conform.families.gve.conformance.target import POLL_LINE, GveEmuTarget
 from conform.families.gve.protocol.checksum import append_checksum
 
 if TYPE_CHECKING:
-    from conform.conformance.target import Target
     from conform.families.gve.conformance.expect import Reference
+    from conform.families.gve.conformance.target import GveTarget as Target
 
 POLL_EVERY = 0.1  # seconds between readiness polls after J
 READY_MARGIN = 3.0  # seconds past the table's deaf time before a silent unit is a lost link
@@ -63,9 +64,9 @@ class StateStats:
                 "reset_reasons": dict(sorted(self.reasons.items(), key=lambda kv: -kv[1]))}
 
 
-def _fresh_target(ref: Reference) -> EmuTarget:
+def _fresh_target(ref: Reference) -> GveEmuTarget:
     variant, cls, d = ref.variant, ref.unit_cls, ref.dialect
-    return EmuTarget(lambda: cls(variant, d), "reference")
+    return GveEmuTarget(lambda: cls(variant, d), "reference")
 
 
 def _line(body: str, checksum: bool = False) -> bytes:
@@ -81,8 +82,8 @@ class StateKeeper:
         self.target = target
         self.v = ref.variant
         # the reference mirroring the unit since its last J (None: the unit's state is unknown)
-        self.shadow: EmuTarget | None = None
-        self.pending: EmuTarget | None = None  # the shadow once the check being run passes
+        self.shadow: GveEmuTarget | None = None
+        self.pending: GveEmuTarget | None = None  # the shadow once the check being run passes
         self.stats = StateStats()
         fresh = _fresh_target(ref).unit
         self._fresh = fresh
@@ -98,7 +99,7 @@ class StateKeeper:
     def _body(self, script: Script) -> Script:
         return script[1:] if script and script[0].reset else script
 
-    def _same_as_fresh(self, script: Script, t: EmuTarget) -> bool:
+    def _same_as_fresh(self, script: Script, t: GveEmuTarget) -> bool:
         """Run ``script``'s steps on ``t`` as it is: are the answers a fresh unit's?"""
         body = self._body(script)
         got = run_steps(t, body)
@@ -177,7 +178,7 @@ class StateKeeper:
         self.pending = self._after_reset(script)
         return None, why
 
-    def _after_reset(self, script: Script) -> EmuTarget:
+    def _after_reset(self, script: Script) -> GveEmuTarget:
         """The reference as the unit will be after J (and its poll, if any) and the script."""
         sim = _fresh_target(self.ref)
         if not self.poll_shows(script):

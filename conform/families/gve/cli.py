@@ -1,0 +1,151 @@
+"""GVE's side of the commands that serve every family: what ``conform characterize`` probes
+and writes, and what ``conform spec show`` prints for a GVE variant. The commands
+(conform/cli/) reach these through the family registry (``Family.characterize``,
+``Family.show_spec``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import click
+from rich.table import Table
+
+from conform.cli.progress import progress
+from conform.conformance.target import parse_target
+from conform.errors import UserError
+from conform.families.gve.conformance.characterize import characterize as probe
+from conform.families.gve.conformance.profile import write_profile
+from conform.families.gve.conformance.safety import Guard
+from conform.families.gve.conformance.target import identify, open_target
+from conform.families.gve.spec import load_spec
+from conform.families.gve.spec.model import CommandSpec, Variant
+
+
+def characterize(target: str, output: str, variant: str | None, *, baud: int = 115200,
+                 allow_motion: bool = False, max_steps: int | None = None,
+                 allow_eeprom: bool = False, echo: Callable[..., None] = click.echo) -> None:
+    """Probe the open questions A1–A29 on ``target`` and write the profile to ``output``."""
+    from conform.families.gve.conformance.characterize import to_profile
+
+    spec = load_spec()
+    if allow_motion and max_steps is None:
+        raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
+    kind, _, _ = parse_target(target)
+    guard = Guard.emulated() if kind == "emu" else Guard(allow_motion, max_steps, allow_eeprom)
+    tgt, implied = open_target(target, spec, baud=baud, guard=guard)
+    try:
+        vid = variant or implied
+        if vid is None:
+            vid, how = identify(tgt, spec)
+            echo(f"variant: {how}", err=True)
+        spec.variant(vid)
+
+        def show(f):  # noqa: ANN001, ANN202
+            mark = {"determined": "=", "ambiguous": "~", "no-match": "!", "not-probed": "-"}
+            echo(f"{f.question:>4} {mark[f.status]} {f.choice:<28} {f.status}"
+                 + (f" ({', '.join(f.matches)})" if f.status == "ambiguous" else "")
+                 + (f" — {f.note}" if f.status == "not-probed" else ""))
+
+        with progress("conform characterize") as bar:
+            task = bar.task(f"{target} ({vid})", len(spec.questions))
+
+            def step(f):  # noqa: ANN001, ANN202
+                task.update(advance=1, step=f.question)
+                show(f)
+
+            dialect, findings = probe(spec, tgt, vid, progress=step)
+        if not tgt.emulated and allow_motion:
+            echo(tgt.safe_stop(), err=True)
+    finally:
+        tgt.close()
+    write_profile(to_profile(spec, dialect, findings, target=target, variant=vid), output)
+    changed = dialect.changed()
+    echo(f"{output}: {len(changed)} answer(s) differ from the defaults"
+         + (": " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else ""))
+
+
+def show_spec(variant: str, command: str | None, *, console: Any, as_json: bool) -> None:
+    """A variant's commands with ranges and clauses, or one command in detail."""
+    from conform.cli.params import echo_json
+    from conform.cli.spec_cmd import _emit
+
+    spec = load_spec()
+    v = spec.variant(variant)
+    if command is not None:
+        cmd = v.command(command)
+        if cmd is None:
+            known = spec.commands.get(command)
+            if known is None:
+                raise UserError(f"no command {command!r} in the tables")
+            raise UserError(f"{v.id} has no command {command!r} (absent in this version)")
+        rows = [
+            ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),
+            ("family", cmd.family), ("parameters", _params(cmd, v)),
+            ("answer", ", ".join(f"{f.name}:{f.radix}" for f in cmd.answer) or "code only"),
+            ("modal", "yes" if cmd.modal else "no"),
+            ("while running", "yes" if cmd.while_running else "no (7)"),
+            ("moves the machine", "yes" if cmd.motion else "no"),
+            ("effect", cmd.effect), ("clause", cmd.clause_for(v.manual)),
+            ("all clauses", ", ".join(cmd.clauses)),
+            ("open questions", ", ".join(cmd.questions) or "-"),
+            ("variants", ", ".join(x.id for x in spec.variants.values() if x.has(cmd.id))),
+        ]
+        if as_json:
+            echo_json({"variant": v.id, "command": cmd.id, **dict(rows)})
+            return
+        table = Table(title=f"{v.id}: {cmd.id}", show_header=False)
+        table.add_column("field")
+        table.add_column("value")
+        for k, val in rows:
+            table.add_row(k, val)
+        console.print(table)
+        return
+    rows = [(cmd.id, ",".join(map(str, cmd.addresses)), _params(cmd, v),
+             ",".join(f.name for f in cmd.answer) or "-", "yes" if cmd.modal else "",
+             "" if cmd.while_running else "7", cmd.clause_for(v.manual))
+            for cmd in v.commands.values()]
+    _emit(f"{v.title} ({v.id}): axes {''.join(v.axes)}, queue {v.queue}, "
+          f"max {v.max_rate:,} pulses/s",
+          ("command", "addr", "parameters", "answer", "modal", "running", "clause"), rows,
+          as_json, "commands", variant=v.id, axes="".join(v.axes), queue=v.queue,
+          max_rate=v.max_rate)
+
+
+def _params(cmd: CommandSpec, variant: Variant) -> str:
+    out = []
+    for p in cmd.params:
+        if p.kind == "sign":
+            rng = "|".join(p.choices)
+        elif p.kind == "axis":
+            rng = "/".join(variant.axes)
+        elif p.kind == "hex":
+            rng = f"{p.lo:02X}..{p.hi:02X}h"
+        else:
+            rng = f"{p.lo}..{p.hi}"
+        name = f"{p.name}×{len(variant.axes)}" if p.per_axis else p.name
+        if p.per_axis and p.min_count and p.min_count < len(variant.axes):
+            name = f"{p.name}×{p.min_count}-{len(variant.axes)}"
+        out.append(f"{name} {p.kind} {rng}")
+    return "; ".join(out) or "-"
+
+
+def variant_table(pretty: bool) -> tuple[str, tuple[str, ...], list[Sequence[Any]]]:
+    """``conform spec list``'s GVE table: title, columns, rows (``pretty``: for a terminal)."""
+    spec = load_spec()
+    rows: list[Sequence[Any]] = [
+        (v.id, v.title, v.firmware, "".join(v.axes), v.queue, v.max_rate, len(v.commands),
+         v.base or "-") for v in spec.variants.values()]
+    if pretty:
+        rows = [(*r[:5], f"{r[5]:,}", *r[6:]) for r in rows]
+    return "GVE variants", ("variant", "title", "firmware", "axes", "queue", "max rate",
+                            "commands", "base"), rows
+
+
+def tables_summary(root: str | None = None) -> str:
+    """``conform spec check``'s line: the tables loaded and validated."""
+    spec = load_spec(root)
+    n = sum(len(v.commands) for v in spec.variants.values())
+    return (f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
+            f"({n} variant commands), {len(spec.questions)} open questions, "
+            f"{len(spec.examples)} examples")
