@@ -84,10 +84,10 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
       conform emulate serve gve64-v19 --baud 115200
       conform emulate serve gve64-v19 --faults "corrupt=1e-3,latency=1-16" --seed 1
     """
-    from conform.families import family_for_variant
+    from conform.families import DEFAULT_FAMILY, family_for_variant
 
     fam = family_for_variant(variant)
-    if fam.name != "gve" and (dialect_pairs or profile or switch_pairs or truth_path):
+    if fam.name != DEFAULT_FAMILY and (dialect_pairs or profile or switch_pairs or truth_path):
         raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")
     fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
               link_path=link_path, record_path=record_path, answer_delay=answer_delay,

@@ -162,10 +162,6 @@ def unknown_variant(variant_id: str, family_name: str) -> str:
     return f"unknown variant {variant_id!r} (known: {known})"
 
 
-def is_family_variant(variant: str | None, name: str) -> bool:
-    return variant is not None and family_for_variant(variant).name == name
-
-
 def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = None
                   ) -> Detection:
     """The family whose traffic this is: the capture's declared variant first, then the bytes.
