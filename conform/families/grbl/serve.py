@@ -32,7 +32,7 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           faults: str | None = None, seed: int | None = None, link_path: str | None = None,
           record_path: str | None = None, answer_delay: float = 0.0,
           control_path: str | None = None, **_ignored: Any) -> None:
-    from conform.cli.emulate_cmd import _open_endpoint, announce, check_pacing, control_server, report, run_until_signal
+    from conform.emulator.launch import announce, check_pacing, control_server, open_endpoint, report, run_until_signal
     from conform.emulator.serve import Emulator
     from conform.families.grbl.control import GrblControl
     from conform.families.grbl.faults import GrblFaults
@@ -47,7 +47,7 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
     t_start = time.monotonic()
     unit = GrblUnit(v, spec, t0=t_start, line_time=max(answer_delay, 0.0005))
     injector = GrblFaults(config, seed, t_start)
-    endpoint, reopen = _open_endpoint(tcp_port, link_path)
+    endpoint, reopen = open_endpoint(tcp_port, link_path)
     control = control_server(control_path, endpoint)
     recorder = None
     if record_path:

@@ -20,12 +20,12 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           switch_pairs: tuple[str, ...] = (), answer_delay: float = 0.0,
           truth_path: str | None = None, **_ignored: Any) -> None:
     """Serve until SIGINT/SIGTERM; the first line of stdout is the device path."""
-    from conform.cli.emulate_cmd import (
-        _open_endpoint,
+    from conform.emulator.launch import (
         announce,
         check_pacing,
         control_server,
         fault_injector,
+        open_endpoint,
         report,
         run_until_signal,
     )
@@ -49,7 +49,7 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
 
         truth = GroundTruth(unit, t0=t_start)
     injector = fault_injector(faults, seed, t_start)
-    endpoint, reopen = _open_endpoint(tcp_port, link_path)
+    endpoint, reopen = open_endpoint(tcp_port, link_path)
 
     control = control_server(control_path, endpoint)
     control_path = control.path
