@@ -10,6 +10,7 @@ first out. Packet members (``*S`` … ``*E<n>``, §13.3.3) expect no answer of t
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -17,7 +18,10 @@ import pandas as pd
 from conform.analysis.frames import (
     ANSWER,
     BITS_PER_BYTE,
+    COMMA,
     COMMAND,
+    CS_MISSING,
+    CS_NONE,
     ECHO,
     GARBLED,
     PARTIAL,
@@ -46,27 +50,37 @@ class Packets:
     member: np.ndarray  # bool per host line
     packet: np.ndarray  # int32 packet number (-1 outside)
     role: np.ndarray  # object: start/member/end/None
+    open_before: np.ndarray | None = None  # bool: a packet was open before the line
+    started: np.ndarray | None = None  # packets started up to and including the line
 
 
-def find_packets(host: DecodedLines) -> Packets:
+def find_packets(host: DecodedLines, open0: bool = False, pid0: int = 0) -> Packets:
+    """Packet roles; ``open0``: a packet was open before the first line, ``pid0``: the
+    number of packets started before it (a stream of windows carries both)."""
     n = len(host)
     name = host.name
     is_s = (name == "*S") & (host.kind == COMMAND)
     is_e = (name == "*E") & (host.kind != PARTIAL)
     ev = np.flatnonzero(is_s | is_e)
-    open_before = np.zeros(n, bool)
+    open_before = np.full(n, open0, bool)
     if len(ev):
         pos = np.searchsorted(ev, np.arange(n), side="left") - 1
         has = pos >= 0
         open_before[has] = is_s[ev[pos[has]]]
-    pid = np.cumsum(is_s) - 1
+    pid = np.cumsum(is_s) - 1 + pid0
     member = open_before & ~is_s & ~is_e
     role = np.full(n, None, object)
     role[is_s] = "start"
     role[member] = "member"
     role[is_e & open_before] = "end"
     packet = np.where(is_s | member | (is_e & open_before), pid, -1).astype(np.int32)
-    return Packets(member, packet, role)
+    return Packets(member, packet, role, open_before, pid + 1)
+
+
+def expecting(host: DecodedLines, packets: Packets) -> np.ndarray:
+    """Host lines that expect an answer of their own."""
+    e = (host.kind == COMMAND) | ((host.kind == REJECTION) & (host.code >= 0))
+    return e & ~packets.member & (packets.role != "start")
 
 
 def pair(host: DecodedLines, unit: DecodedLines, packets: Packets,
@@ -77,9 +91,7 @@ def pair(host: DecodedLines, unit: DecodedLines, packets: Packets,
     ``extra`` counts further non-echo lines that came for the same command.
     """
     n = len(host)
-    expects = ((host.kind == COMMAND) | ((host.kind == REJECTION) & (host.code >= 0)))
-    expects &= ~packets.member & (packets.role != "start")
-    exp_idx = np.flatnonzero(expects)
+    exp_idx = np.flatnonzero(expecting(host, packets))
     hr, ur = merged_rank(host, unit) if ranks is None else ranks
     # for each unit line, the last expecting command before it (index into exp_idx)
     c = np.searchsorted(hr[exp_idx], ur, side="left") - 1
@@ -127,11 +139,15 @@ def _fifo_fix(exp_idx: np.ndarray, cs: np.ndarray, sel: np.ndarray, counts: np.n
 
 
 def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, baud: float | None,
-                    ranks: tuple[np.ndarray, np.ndarray] | None = None
+                    ranks: tuple[np.ndarray, np.ndarray] | None = None,
+                    next_t_first: float = np.nan,
+                    paired: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                     ) -> tuple[pd.DataFrame, np.ndarray]:
     """One row per host line (the exchange it opened) and the unsolicited unit lines;
-    ``ranks``: ``merged_rank(host, unit)`` if the caller has it already."""
-    answer, extra, unsolicited = pair(host, unit, packets, ranks)
+    ``ranks``: ``merged_rank(host, unit)`` if the caller has it already; ``next_t_first``:
+    the first-byte time of the host line after the last one (a window of a stream);
+    ``paired``: ``pair``'s result if the caller has it."""
+    answer, extra, unsolicited = paired or pair(host, unit, packets, ranks)
     n = len(host)
     has = answer >= 0
     a = np.where(has, answer, 0)
@@ -141,8 +157,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
             return np.full(n, fill)
         return np.where(has, col[a], fill)
 
-    expects = ((host.kind == COMMAND) | ((host.kind == REJECTION) & (host.code >= 0)))
-    expects &= ~packets.member & (packets.role != "start")
+    expects = expecting(host, packets)
     status = np.full(n, SILENT, np.int8)
     status[expects] = UNANSWERED
     status[has] = ANSWERED
@@ -157,7 +172,7 @@ def build_exchanges(host: DecodedLines, unit: DecodedLines, packets: Packets, ba
     wire_ans = np.where(has, ans_bytes * BITS_PER_BYTE / baud, np.nan) if baud else np.full(n, np.nan)
     rtt = t_al - host.t_first
     unit_time = rtt - wire_cmd - wire_ans
-    nxt = np.concatenate([host.t_first[1:], [np.nan]])
+    nxt = np.concatenate([host.t_first[1:], [next_t_first]])
     host_time = np.where(has, nxt - t_al, np.nan)
     ans_kind = np.full(n, None, object)
     if len(unit):
@@ -204,3 +219,191 @@ def uncertain_mask(df: pd.DataFrame) -> np.ndarray:
     bad_answer = answered & ((df["answer_kind"].to_numpy() != ANSWER)
                              | (df["answer_checksum"].to_numpy() >= 2))
     return expects & (~answered | bad_answer)
+
+
+FIRST_LINES = 50  # host lines that decide the checksum mode at the start (frames)
+WINDOW_LINES = 65_536  # host lines decoded and paired at a time
+
+
+def check_answer_shapes(ex: pd.DataFrame, unit: DecodedLines, data: np.ndarray,
+                        variant: Any) -> None:
+    """An OK answer with the wrong number of fields for its command is garbled (§13.7)."""
+    if len(unit) == 0:
+        return
+    commas = np.flatnonzero(data == COMMA)  # a few per line, not a count per byte
+    nf = (np.searchsorted(commas, unit.lines.end) - np.searchsorted(commas, unit.lines.start))
+    nf = nf - ((unit.checksum != CS_NONE) & (unit.checksum != CS_MISSING))
+    want = {cid: len(c.answer) for cid, c in variant.commands.items()
+            if cid not in _FREE_ANSWERS}
+    want["*E"] = 1
+    names = ex["name"].to_numpy()
+    a = ex["answer_frame"].to_numpy()
+    expect = pd.Series(names, dtype=object).map(want).fillna(-1).to_numpy(np.int64)
+    ok = (a >= 0) & (ex["answer_kind"].to_numpy() == ANSWER) & (expect >= 0)
+    ok &= ex["code"].to_numpy() == 0
+    bad = np.flatnonzero(ok & (nf[np.maximum(a, 0)] != expect))
+    if len(bad) == 0:
+        return
+    for r in bad.tolist():
+        u = int(a[r])
+        unit.kind[u] = GARBLED
+        unit.detail[u] = f"{expect[r]} field(s) expected after a {names[r]} command"
+    ex.loc[bad, "answer_kind"] = GARBLED
+    ex.loc[bad, "code"] = -1
+    ex["uncertain"] = uncertain_mask(ex)
+
+
+_FREE_ANSWERS = {">", "?", "Q", "Y", "EFR", "EUR", "@", "J"}
+
+
+@dataclass
+class Window:
+    """Host lines ``host_base`` … and the unit lines that came before the next window's
+    first command: decoded and paired, final (nothing later changes them)."""
+
+    host: DecodedLines
+    unit: DecodedLines
+    ex: pd.DataFrame  # ``frame`` and ``answer_frame`` numbered over the whole capture
+    unsolicited: np.ndarray  # capture-wide unit line numbers
+    cmd_row: np.ndarray  # per unit line: the row of the command it came after, -1 none
+    host_base: int
+    unit_base: int
+    host_offset: int  # stream offset of the byte ``host.lines.start`` counts from
+    unit_offset: int
+    next_text: bytes | None  # the host line after the window, if any
+    final: bool
+
+
+def _prefix_below(t: np.ndarray, w: float) -> int:
+    """How many leading entries of ``t`` are below ``w``."""
+    bad = np.flatnonzero(~(t < w))
+    return int(bad[0]) if len(bad) else len(t)
+
+
+class ExchangeStream:
+    """Decode and pair a capture a window at a time (see docs/analysis.md, Pipeline).
+
+    Raw parts go in (``feed``); windows come out (``windows``). Carried from one window to
+    the next: each direction's bytes after the last consumed line with the reads under
+    them (``stream.LineBuffer``), the checksum mode, whether a packet is open and how many
+    have started. A window ends just before a command whose previous command was answered
+    inside the window: pairing never looks past that point (an answer belongs to the last
+    command before it, surplus answers go back only over unanswered commands), so the
+    result is the whole capture's, whatever the parts.
+    """
+
+    def __init__(self, variant: Any, dialect: Any, parser: Any, baud: float | None,
+                 trust: bool, host_exact: bool = False, window_lines: int = WINDOW_LINES
+                 ) -> None:
+        from conform.analysis.stream import LineBuffer
+
+        self.variant, self.dialect, self.parser, self.baud = variant, dialect, parser, baud
+        self.mode_a1 = dialect["A1"]
+        self.host = LineBuffer("host", baud, trust or host_exact)
+        self.unit = LineBuffer("unit", baud, trust)
+        self.mode: bool | None = None
+        self.open, self.started = False, 0
+        self.rows = self.ulines = 0
+        self.window_lines = window_lines
+        self.done = False
+
+    def feed(self, part: Any) -> None:
+        (self.host if part.name == "host" else self.unit).append(part)
+
+    def end(self) -> None:
+        self.host.ended = self.unit.ended = True
+
+    def windows(self) -> Any:
+        """Every window that can be made final with the bytes fed so far."""
+        while not self.done:
+            w = self._next()
+            if w is None:
+                return
+            yield w
+
+    def _next(self) -> Window | None:  # noqa: PLR0915 - one pass, in order
+        from conform.analysis.frames import (
+            decode_host,
+            decode_unit,
+            infer_initial_mode,
+            line_times,
+            mode_events,
+            order_only,
+            split_lines,
+            step_state,
+        )
+
+        hd, ud = self.host.view(), self.unit.view()
+        hl_all, ul_all = split_lines(hd.data, self.mode_a1), split_lines(ud.data, self.mode_a1)
+        w = min(self.host.horizon(), self.unit.horizon())
+        hl = hl_all if w == np.inf else hl_all.head(int((hl_all.term > 0).sum()))
+        ul = ul_all if w == np.inf else ul_all.head(int((ul_all.term > 0).sum()))
+        ht = line_times(hd, hl, hd.t_first)
+        ut = line_times(ud, ul, ud.t_first)
+        kk = _prefix_below(ht[1], w)
+        limit = self.window_lines
+        while True:
+            k = min(kk, limit)
+            wc = w if k == kk else min(w, float(ht[1][k]))
+            j = _prefix_below(ut[1], wc)
+            hk = hl.head(k)
+            ev_idx, ev_state = mode_events(hd.data, hk)
+            mode = self.mode
+            if mode is None:
+                if w != np.inf and not len(ev_idx) and k < FIRST_LINES:
+                    return None
+                mode = infer_initial_mode(hd.data, hk, int(ev_idx[0]) if len(ev_idx) else -1)
+            host_mode = step_state(ev_idx, ev_state, np.arange(k), mode)
+            host = decode_host(hd, hk, (ht[0][:k], ht[1][:k]), self.variant, self.dialect,
+                               self.parser, host_mode)
+            uk = ul.head(j)
+            utj = (ut[0][:j], ut[1][:j])
+            hr, ur = merged_rank(host, order_only(ud, uk, utj))
+            unit_mode = step_state(hr[ev_idx] if len(ev_idx) else ev_idx, ev_state, ur, mode,
+                                   strict=True)
+            unit = decode_unit(ud, uk, utj, unit_mode)
+            packets = find_packets(host, self.open, self.started)
+            answer, extra, unsolicited = pair(host, unit, packets, (hr, ur))
+            exp_idx = np.flatnonzero(expecting(host, packets))
+            final = w == np.inf and k == kk
+            if final:
+                cut = k
+            else:
+                ok = np.flatnonzero(answer[exp_idx[:-1]] >= 0) + 1
+                cands = exp_idx[ok]
+                cands = cands[ht[1][cands] < wc]
+                if len(cands) == 0:
+                    if k < kk:
+                        limit *= 2  # no place to cut yet: look further
+                        continue
+                    return None
+                cut = int(cands[-1])
+            break
+        self.mode = mode
+        jc = int((ur < hr[cut]).sum()) if cut < k else j
+        hw, uw = host.head(cut), unit.head(jc)
+        pk = Packets(packets.member[:cut], packets.packet[:cut], packets.role[:cut])
+        uns = unsolicited[unsolicited < jc]
+        next_t = float(ht[0][cut]) if cut < len(hl) else np.nan
+        ex, _ = build_exchanges(hw, uw, pk, self.baud, next_t_first=next_t,
+                                paired=(answer[:cut], extra[:cut], uns))
+        check_answer_shapes(ex, uw, ud.data, self.variant)
+        c = np.searchsorted(hr[exp_idx], ur[:jc], side="left") - 1
+        cmd_row = np.where(c >= 0, exp_idx[np.maximum(c, 0)] + self.rows, -1) \
+            if len(exp_idx) else np.full(jc, -1)
+        ex["frame"] += self.rows
+        a = ex["answer_frame"].to_numpy()
+        ex["answer_frame"] = np.where(a >= 0, a + self.ulines, a).astype(np.int32)
+        out = Window(hw, uw, ex, uns + self.ulines, cmd_row, self.rows, self.ulines,
+                     self.host.base, self.unit.base,
+                     hl.bodies[cut].as_py() if cut < len(hl) else None, final)
+        if cut < k:
+            self.mode = bool(host_mode[cut])
+            self.open = bool(packets.open_before[cut])
+        self.started = int(packets.started[cut - 1]) if cut else self.started
+        self.host.consume(int(hl_all.start[cut]) if cut < len(hl_all) else len(hd.data))
+        self.unit.consume(int(ul_all.start[jc]) if jc < len(ul_all) else len(ud.data))
+        self.rows += cut
+        self.ulines += jc
+        self.done = final
+        return out

@@ -71,6 +71,10 @@ class Lines:
     def __len__(self) -> int:
         return len(self.start)
 
+    def head(self, n: int) -> Lines:
+        """The first ``n`` lines."""
+        return Lines(self.start[:n], self.end[:n], self.term[:n], self.bodies.slice(0, n))
+
 
 def split_lines(data: np.ndarray, mode: str = "cr") -> Lines:
     """Cut the stream into lines (A1: ``cr``, ``cr-or-lf`` or ``crlf``)."""
@@ -170,6 +174,14 @@ class DecodedLines:
 
     def raw(self, i: int) -> bytes:
         return self.lines.bodies[i].as_py()
+
+    def head(self, n: int) -> DecodedLines:
+        """The first ``n`` lines (a window of a stream)."""
+        return DecodedLines(self.direction, self.lines.head(n), self.t_first[:n],
+                            self.t_last[:n], self.order[:n], self.kind[:n], self.name[:n],
+                            self.code[:n], self.inta[:n], self.checksum[:n],
+                            self.checksum_mode[:n], self.detail[:n], self.vec[:n],
+                            self.parsed, self.parsed_id[:n])
 
 
 def _vector_regex(variant: Variant, dialect: Dialect, cmd_id: str) -> tuple[str, int, int] | None:
@@ -399,3 +411,21 @@ def infer_initial_mode(data: np.ndarray, lines: Lines, first_event: int) -> bool
     sl = slice(0, upto)
     _has, ok, _ = checksum_tails(data, csum, lines.start[sl], lines.end[sl])
     return bool(ok.mean() > 0.5)
+
+
+def step_state(ev_pos: np.ndarray, ev_state: np.ndarray, at: np.ndarray, init: bool,
+               strict: bool = False) -> np.ndarray:
+    """The state set by the last event strictly before each position (``init`` before)."""
+    if len(ev_pos) == 0:
+        return np.full(len(at), init, bool)
+    k = np.searchsorted(ev_pos, at, side="left") - 1
+    return np.where(k >= 0, ev_state[np.maximum(k, 0)] == 1, init)
+
+
+def order_only(d: Direction, lines: Lines, times: tuple) -> DecodedLines:
+    """Just enough of a DecodedLines to rank unit lines before they are decoded."""
+    n = len(lines)
+    z = np.zeros(n, object)
+    return DecodedLines("unit", lines, times[0], times[1], _term_order(d, lines), z, z,
+                        np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, np.int8),
+                        np.zeros(n, bool), z, np.zeros((n, 4), np.int64))

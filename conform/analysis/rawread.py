@@ -17,7 +17,7 @@ import io
 import json
 import os
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -286,6 +286,13 @@ def _chunk_data(body: bytes) -> bytes:
 
 
 def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None) -> None:
+    for _ in walk_iter(path, status, col, progress):
+        pass
+
+
+def walk_iter(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None
+              ) -> Iterator[None]:
+    """``_walk`` one record at a time: the caller takes ``col.parts`` between records."""
     walk = Walk()
     with open(path, "rb") as f:
         size = status.size = os.fstat(f.fileno()).st_size
@@ -307,6 +314,7 @@ def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | 
                         try:
                             data = _chunk_data(body)
                             col.records(data, 0, len(data))
+                            yield
                         except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
                             status.damaged_chunks += 1
                             status.notes.append(f"damaged chunk at byte {pos} skipped: {exc}")
@@ -314,6 +322,7 @@ def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | 
                         col.metadata_record(body)
                     elif op in (OP_CHANNEL, OP_MESSAGE, OP_SCHEMA):
                         col.records(head + body, 0, 9 + len(body))
+                        yield
                 except (ValueError, struct.error, UnicodeDecodeError) as exc:
                     status.problem = f"damaged record (opcode 0x{op:02x}) at byte {pos}: {exc}"
                     return
