@@ -19,6 +19,16 @@ def isin(values: np.ndarray, choices: Iterable[object]) -> np.ndarray:
 AXES = ("dx", "dy", "dz", "da")
 
 
+def packet_numbers(ex: pd.DataFrame) -> np.ndarray:
+    """The packet column numbered from 0 within the table (a window of a long capture
+    numbers its packets from wherever the capture had got to), -1 outside packets."""
+    packet = ex["packet"].to_numpy()
+    inside = packet >= 0
+    if not inside.any():
+        return packet
+    return np.where(inside, packet - packet[inside].min(), -1)
+
+
 def vectors(ex: pd.DataFrame, rows: np.ndarray | None = None) -> np.ndarray:
     """The (rows, 4) pulses of the exchange table, taken column by column (no copy of the
     whole table's four columns when only some rows are wanted)."""

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.columns import AXES, isin, vectors
+from conform.analysis.columns import AXES, isin, packet_numbers, vectors
 from conform.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
 
 MAX_LISTED = 50
@@ -67,12 +67,22 @@ class Finding:
 
 
 class Findings:
-    """Collects findings, keeping the full count of each kind but listing at most a few."""
+    """Collects findings, keeping the full count of each kind but listing at most a few.
 
-    def __init__(self, t0: float) -> None:
+    Times are given absolute and made relative to ``t0`` by ``finish`` (a stream knows its
+    start only at the end). ``many`` lists at most ``limit`` rows per kind and call site
+    over the whole capture, however many calls (windows) feed it; the rest are counted and
+    summed up in one "… and N more" finding per site.
+    """
+
+    def __init__(self, t0: float = 0.0) -> None:
         self.t0 = t0
         self.items: list[Finding] = []
         self.counts: dict[str, int] = {}
+        self.listed: dict[tuple[str, str], int] = {}
+        self.more: dict[tuple[str, str], list[Any]] = {}  # site -> [severity, after, count]
+        self.last: dict[tuple[str, str], Finding] = {}  # the last finding listed per site
+        self.finished = False
 
     def add(self, kind: str, t: float, severity: str, message: str, *,
             frames: list[str] | None = None, row: int | None = None, count: int = 1,
@@ -81,31 +91,87 @@ class Findings:
         self.counts[kind] = self.counts.get(kind, 0) + count
         if not listed:
             return
-        t_rel = float(t - self.t0) if t == t else float("nan")
-        self.items.append(Finding(kind, round(t_rel, 6), severity, message,
-                                  CLAUSES.get(kind, ""), frames or [], row, count, extra))
+        self.items.append(Finding(kind, float(t), severity, message, CLAUSES.get(kind, ""),
+                                  frames or [], row, count, extra))
 
     def many(self, kind: str, rows: np.ndarray, severity: str, make: Any,
-             limit: int = MAX_LISTED) -> None:
-        """One finding per row, listing the first ``limit``; ``make(row) -> (t, msg, frames,
-        extra)``."""
-        rows = np.asarray(rows)
-        for k, r in enumerate(rows.tolist()):
-            if k >= limit:
-                self.counts[kind] = self.counts.get(kind, 0) + len(rows) - k
-                self.items.append(Finding(kind, self.items[-1].t if self.items else 0.0,
-                                          severity, f"… and {len(rows) - k} more like these",
-                                          CLAUSES.get(kind, ""), [], None, len(rows) - k))
-                return
+             limit: int = MAX_LISTED, side: str | None = None) -> None:
+        """One finding per row, listing the first ``limit`` of this kind and call site;
+        ``make(row) -> (t, msg, frames, extra)``; ``side``: see ``Shifted``."""
+        site = (kind, getattr(make, "__qualname__", ""))
+        for r in np.asarray(rows).tolist():
+            n = self.listed.get(site, 0)
+            if n >= limit:
+                self.counts[kind] = self.counts.get(kind, 0) + 1
+                self.more.setdefault(site, [severity, self.last.get(site), 0])[2] += 1
+                continue
             t, msg, frames, extra = make(r)
             row = int(extra.pop("row", r))
             self.add(kind, t, severity, msg, frames=frames, row=row, **extra)
+            self.listed[site] = n + 1
+            self.last[site] = self.items[-1]
+
+    def finish(self, t0: float) -> None:
+        """Times relative to ``t0``; the "… and N more" findings added."""
+        if self.finished:
+            return
+        self.t0 = t0
+        for f in self.items:
+            f.t = round(float(f.t - t0), 6) if f.t == f.t else float("nan")
+        for (kind, _), (severity, after, n) in self.more.items():
+            t = after.t if after is not None else 0.0
+            self.items.insert(self.items.index(after) + 1 if after is not None else 0,
+                              Finding(kind, t, severity, f"… and {n} more like these",
+                                      CLAUSES.get(kind, ""), [], None, n))
+        self.finished = True
 
     def sorted(self) -> list[Finding]:
         return sorted(self.items, key=lambda f: (f.t if f.t == f.t else 0.0, f.kind))
 
     def hazards(self) -> list[Finding]:
         return [f for f in self.items if f.severity == "hazard"]
+
+
+class Shifted:
+    """A window's view of the capture's :class:`Findings`: detectors number rows and unit
+    lines within the table they are given; this adds the window's bases (``host:N``,
+    ``unit:N``, ``row`` and ``*_row`` fields) and drops the rows the window does not own
+    (``own_host`` / ``own_unit``: masks over the window's rows and unit lines)."""
+
+    def __init__(self, out: Findings, host_base: int, unit_base: int,
+                 own_host: np.ndarray, own_unit: np.ndarray) -> None:
+        self.out, self.hb, self.ub = out, host_base, unit_base
+        self.own_host, self.own_unit = own_host, own_unit
+
+    def _frames(self, frames: list[str]) -> list[str]:
+        out = []
+        for f in frames:
+            side, _, n = f.partition(":")
+            out.append(f"{side}:{int(n) + (self.hb if side == 'host' else self.ub)}")
+        return out
+
+    def _extra(self, extra: dict[str, Any]) -> dict[str, Any]:
+        return {k: (v + self.hb if k.endswith("_row") and isinstance(v, int) else v)
+                for k, v in extra.items()}
+
+    def add(self, kind: str, t: float, severity: str, message: str, *,
+            frames: list[str] | None = None, row: int | None = None, **extra: Any) -> None:
+        self.out.add(kind, t, severity, message, frames=self._frames(frames or []),
+                     row=None if row is None else row + self.hb, **self._extra(extra))
+
+    def many(self, kind: str, rows: np.ndarray, severity: str, make: Any,
+             limit: int = MAX_LISTED, side: str | None = None) -> None:
+        rows = np.asarray(rows, np.int64)
+        if side is not None:
+            rows = rows[(self.own_host if side == "host" else self.own_unit)[rows]]
+
+        def shifted(r: int) -> tuple:
+            t, msg, frames, extra = make(r)
+            extra["row"] = int(extra.get("row", r)) + (self.ub if side == "unit" else self.hb)
+            return t, msg, self._frames(frames), self._extra(extra)
+
+        shifted.__qualname__ = getattr(make, "__qualname__", "")
+        self.out.many(kind, rows, severity, shifted, limit)
 
 
 def _fr(side: str, i: int) -> str:
@@ -127,6 +193,8 @@ class Context:
         self.code = ex["code"].to_numpy()
         self.t = ex["t_cmd_first"].to_numpy()
         self.answer = ex["answer_frame"].to_numpy()
+        self.base = 0  # the capture's number of row 0 (a window of a stream)
+        self.unit_base = 0  # and of unit line 0
         self._units: pd.DataFrame | None = None
 
     def motion_units(self) -> pd.DataFrame:
@@ -155,7 +223,7 @@ def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
     ``sig`` identifies the content (same vector or same packet content = same signature).
     """
     name = ex["name"].to_numpy()
-    packet = ex["packet"].to_numpy()
+    packet = packet_numbers(ex)
     role = ex["packet_role"].to_numpy()
     single = isin(name, MOTION) & (packet < 0) & (ex["kind"].to_numpy() == "command")
     end = role == "end"
@@ -179,11 +247,17 @@ def motion_units(ex: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"row": rows, **cols}, copy=False)
 
 
-def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
-    """blind-resend, lost-vector (possible), index-checked, repeat-used, queue-full polling."""
+def recovery_analysis(ctx: Context, out: Findings, decide: np.ndarray | None = None,
+                      polls: QueueFull | None = None) -> dict[str, np.ndarray]:
+    """blind-resend, lost-vector (possible), index-checked, repeat-used, queue-full polling.
+
+    ``decide`` (per motion unit): the units to judge now, in a window of a stream (the
+    others were judged before or wait for the unit after them); ``polls`` gathers the
+    queue-full polls over the windows (without it they are reported at once)."""
     ex = ctx.ex
     mu = ctx.motion_units()
     rows = mu["row"].to_numpy()
+    dec = np.ones(len(rows), bool) if decide is None else decide
     uncertain = ex["uncertain"].to_numpy()
     name = ctx.name
     expects = isin(ctx.status, ("answered", "unanswered"))
@@ -222,16 +296,16 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
         went_on[i], unclear[i] = said is True, said is None
     resent = same_next & ~went_on
 
-    blind = unc & same_next & ~rec_between
-    moved_on = unc & has_next & ~same_next & ~rec_between
-    refused = answered_clean & isin(code, (1, 2, 4, 5, 7)) & has_next & ~same_next
-    checked = unc & rec_between
+    blind = unc & same_next & ~rec_between & dec
+    moved_on = unc & has_next & ~same_next & ~rec_between & dec
+    refused = answered_clean & isin(code, (1, 2, 4, 5, 7)) & has_next & ~same_next & dec
+    checked = unc & rec_between & dec
 
     def mk_blind(i: int) -> tuple:
         r = rows[i]
         return (ctx.t[nxt[i]],
                 f"`{ctx.cmd(r)}` got {ctx.ans(r)}; the sender sent the same motion again "
-                f"(host:{nxt[i]}) without asking `@` or `>` first: if the first one was "
+                f"(host:{nxt[i] + ctx.base}) without asking `@` or `>` first: if the first one was "
                 "accepted the machine moves twice",
                 [_fr("host", r), _fr("host", nxt[i])], {"resent_row": int(nxt[i]), "row": int(r)})
 
@@ -276,15 +350,20 @@ def recovery_analysis(ctx: Context, out: Findings) -> dict[str, np.ndarray]:
         uses_at[j] = bool((seg == "@").any())
     out.many("index-checked", idx_checked[uses_at], "info", mk_checked)
     _repeat_used(ctx, out, uncertain, is_rec)
-    _queue_full(ctx, out, rows, code, answered_clean)
+    own = polls is None
+    polls = polls or QueueFull()
+    polls.feed(ctx, rows[dec], code[dec], answered_clean[dec])
+    if own:
+        polls.report(out, int(ex["cmd_bytes"].sum()),
+                     float(np.nanmax(ex["t_cmd_first"]) - np.nanmin(ex["t_cmd_first"])))
 
     # what the sender meant to move: every unit once, except one replaced by a resend
     contrib = np.zeros(len(ex), bool)
-    contrib[rows] = (answered_clean & (code == 0)) | (unc & ~resent)
+    contrib[rows] = ((answered_clean & (code == 0)) | (unc & ~resent)) & dec
     res["contrib"] = contrib
     # uncertain, then checked with @ / > and not sent again: the unit had taken it
     recovered = np.zeros(len(ex), bool)
-    recovered[rows] = unc & rec_between & ~resent & has_next
+    recovered[rows] = unc & rec_between & ~resent & has_next & dec
     res["recovered"] = recovered
     res["doubles"] = rows[blind]
     # sent again after asking `@`/`>`: safe only if the answers said it had not arrived, so
@@ -335,35 +414,67 @@ def _repeat_used(ctx: Context, out: Findings, uncertain: np.ndarray, is_rec: np.
         return (ctx.t[r], f"after `{ctx.cmd(p)}` got {ctx.ans(p)}, the sender asked `>` "
                 f"and got {ctx.ans(r)}", [_fr("host", p)] + ctx.frames(r), {})
 
-    out.many("repeat-used", rep[good], "info", mk)
+    out.many("repeat-used", rep[good], "info", mk, side="host")
 
 
-def _queue_full(ctx: Context, out: Findings, rows: np.ndarray, code: np.ndarray,
-                clean: np.ndarray) -> None:
-    full = clean & (code == 1)
-    if not full.any():
-        return
-    ex = ctx.ex
-    polls = rows[full]
-    starts = full & ~np.concatenate([[False], full[:-1]])
-    runs = int(starts.sum())
-    nbytes = int(ex["cmd_bytes"].to_numpy()[polls].sum() + ex["ans_bytes"].to_numpy()[polls].sum())
-    host_total = int(ex["cmd_bytes"].sum()) or 1
-    span = float(np.nanmax(ex["t_cmd_first"]) - np.nanmin(ex["t_cmd_first"])) or 1.0
-    line_time = nbytes * 10.0 / ctx.baud if ctx.baud else float("nan")
-    ht = ex["host_time"].to_numpy()[polls]
-    gap = float(np.nanmedian(ht)) if np.isfinite(ht).any() else float("nan")
-    pattern = "immediate" if gap == gap and gap < 0.002 else "paced"
-    share = float(ex["cmd_bytes"].to_numpy()[polls].sum()) / host_total
-    sev = "warning" if share > 0.10 else "info"
-    out.add("queue-full-polling", ctx.t[polls[0]], sev,
-            f"{len(polls)} vector(s) answered 1 (queue full) in {runs} run(s), "
-            f"{len(polls) / max(runs, 1):.1f} tries per run, resent {pattern} "
-            f"(median {gap * 1000:.2f} ms after the answer); the retries took "
-            f"{share:.0%} of the bytes sent and {line_time / span:.1%} of the line time",
-            frames=[_fr("host", polls[0])], row=int(polls[0]), count=len(polls),
-            runs=runs, polls=len(polls), bytes=nbytes, share_of_host_bytes=share,
-            pattern=pattern, median_retry_gap_s=gap)
+class QueueFull:
+    """Vectors answered 1 (queue full), gathered over the windows of a capture and reported
+    once: polls, runs, bytes, the median retry gap (``summaries.Quantiles``)."""
+
+    def __init__(self) -> None:
+        from conform.analysis.summaries import Quantiles
+
+        self.polls = 0
+        self.runs = 0
+        self.bytes = 0
+        self.cmd_bytes = 0
+        self.first: tuple[float, int] | None = None  # (t, row) of the first poll
+        self.gaps = Quantiles()
+        self.prev_full = False  # the last unit judged was a poll (a run goes on)
+        self.baud: float | None = None
+
+    def feed(self, ctx: Context, rows: np.ndarray, code: np.ndarray, clean: np.ndarray
+             ) -> None:
+        self.baud = ctx.baud
+        full = clean & (code == 1)
+        if len(full) == 0:
+            return
+        starts = full & ~np.concatenate([[self.prev_full], full[:-1]])
+        self.prev_full = bool(full[-1])
+        if not full.any():
+            return
+        ex = ctx.ex
+        polls = rows[full]
+        self.runs += int(starts.sum())
+        self.polls += len(polls)
+        cb = int(ex["cmd_bytes"].to_numpy()[polls].sum())
+        self.cmd_bytes += cb
+        self.bytes += cb + int(ex["ans_bytes"].to_numpy()[polls].sum())
+        if self.first is None:
+            self.first = (float(ctx.t[polls[0]]), int(polls[0]) + ctx.base)
+        self.gaps.add(ex["host_time"].to_numpy()[polls])
+
+    def report(self, out: Any, host_total: int, span: float) -> None:
+        if not self.polls:
+            return
+        assert self.first is not None
+        host_total = host_total or 1
+        span = span or 1.0
+        line_time = self.bytes * 10.0 / self.baud if self.baud else float("nan")
+        gap = self.gaps.median() if self.gaps.n else float("nan")
+        pattern = "immediate" if gap == gap and gap < 0.002 else "paced"
+        share = float(self.cmd_bytes) / host_total
+        sev = "warning" if share > 0.10 else "info"
+        t, row = self.first
+        runs = self.runs
+        out.add("queue-full-polling", t, sev,
+                f"{self.polls} vector(s) answered 1 (queue full) in {runs} run(s), "
+                f"{self.polls / max(runs, 1):.1f} tries per run, resent {pattern} "
+                f"(median {gap * 1000:.2f} ms after the answer); the retries took "
+                f"{share:.0%} of the bytes sent and {line_time / span:.1%} of the line time",
+                frames=[_fr("host", row)], row=row, count=self.polls,
+                runs=runs, polls=self.polls, bytes=self.bytes, share_of_host_bytes=share,
+                pattern=pattern, median_retry_gap_s=gap)
 
 
 def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarray,
@@ -383,7 +494,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
                 f"`{ctx.cmd(r)}` ({ctx.ans(r)}) had arrived",
                 [_fr("host", r), _fr("host", r + 1)] + ctx.frames(r)[1:], {})
 
-    out.many("simplex-violation", np.flatnonzero(viol), "error", mk_viol)
+    out.many("simplex-violation", np.flatnonzero(viol), "error", mk_viol, side="host")
 
     # checksum errors, both directions
     bad_cmd = np.flatnonzero(isin(host.checksum, (CS_BAD, CS_MISSING)))
@@ -393,7 +504,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         return (host.t_first[r], f"command `{ctx.cmd(r)}`: checksum {what}; the unit "
                 f"answered {ctx.ans(r)}", ctx.frames(r), {"direction": "host"})
 
-    out.many("checksum-error", bad_cmd, "warning", mk_cs_cmd)
+    out.many("checksum-error", bad_cmd, "warning", mk_cs_cmd, side="host")
     bad_ans = np.flatnonzero(isin(unit.checksum, (CS_BAD, CS_MISSING))
                              & (unit.kind == ANSWER))
 
@@ -402,7 +513,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         return (unit.t_first[u], f"answer `{ctx.unit_text(u)}`: checksum {what}",
                 [_fr("unit", u)], {"direction": "unit"})
 
-    out.many("checksum-error", bad_ans, "warning", mk_cs_ans)
+    out.many("checksum-error", bad_ans, "warning", mk_cs_ans, side="unit")
 
     garbled = np.flatnonzero(isin(unit.kind, (GARBLED, PARTIAL)))
 
@@ -410,7 +521,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         return (unit.t_first[u], f"`{ctx.unit_text(u)}` is not an answer: {unit.detail[u]}",
                 [_fr("unit", u)], {})
 
-    out.many("garbled-answer", garbled, "warning", mk_garbled)
+    out.many("garbled-answer", garbled, "warning", mk_garbled, side="unit")
 
     # error codes (queue-full on motion is reported as polling)
     clean = answered & (ex["answer_kind"].to_numpy() == ANSWER)
@@ -432,7 +543,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         return (ctx.t[r], f"`{ctx.cmd(r)}`{prev} answered {ctx.ans(r)}: error {c}, {why}"
                 f"{cause}", ctx.frames(r), {"code": c})
 
-    out.many("error-code", np.flatnonzero(err), "warning", mk_err)
+    out.many("error-code", np.flatnonzero(err), "warning", mk_err, side="host")
 
     # unanswered commands
     unans = np.flatnonzero((ctx.status == "unanswered") & (ctx.name != "J"))
@@ -440,14 +551,14 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
     def mk_unans(r: int) -> tuple:
         return (ctx.t[r], f"`{ctx.cmd(r)}` got no answer", [_fr("host", r)], {})
 
-    out.many("no-answer", unans, "warning", mk_unans)
+    out.many("no-answer", unans, "warning", mk_unans, side="host")
 
     def mk_unsol(u: int) -> tuple:
         return (unit.t_first[u], f"`{ctx.unit_text(u)}` arrived before any command",
                 [_fr("unit", u)], {})
 
     out.many("unsolicited-answer", unsolicited[unit.kind[unsolicited] != ECHO]
-             if len(unsolicited) else unsolicited, "warning", mk_unsol)
+             if len(unsolicited) else unsolicited, "warning", mk_unsol, side="unit")
 
     garbage = np.flatnonzero((host.kind == "rejection") & (host.code < 0))
 
@@ -455,7 +566,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
         return (ctx.t[r], f"`{ctx.cmd(r)}` is not a command the unit answers: "
                 f"{host.detail[r]}", [_fr("host", r)], {})
 
-    out.many("garbage-sent", garbage, "warning", mk_garbage)
+    out.many("garbage-sent", garbage, "warning", mk_garbage, side="host")
 
     # long waits: HALT and W answer when the motion has ended
     lw = np.flatnonzero(isin(ctx.name, ("H", "W")) & answered
@@ -467,7 +578,7 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
                 "(it answers when the motion has stopped; the line is busy meanwhile)",
                 ctx.frames(r), {"wait_s": ut})
 
-    out.many("long-wait", lw, "info", mk_lw)
+    out.many("long-wait", lw, "info", mk_lw, side="host")
 
     resets = np.flatnonzero((ctx.name == "J") & (ex["kind"].to_numpy() == "command"))
 
@@ -476,5 +587,5 @@ def protocol_findings(ctx: Context, host: Any, unit: Any, unsolicited: np.ndarra
                 "values return to the reset state and it is deaf for about 2 s",
                 ctx.frames(r), {"cause": "J"})
 
-    out.many("reset", resets, "info", mk_reset)
+    out.many("reset", resets, "info", mk_reset, side="host")
     del n

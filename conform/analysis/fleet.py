@@ -65,8 +65,16 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
     p = Path(path)
     row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)
     row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error")
+    sink = None
+    if parquet_dir:  # this capture's exchanges: one file of the fleet's dataset, as it streams
+        from conform.analysis.tables import ParquetStream
+
+        root = Path(parquet_dir)
+        part = root / "exchanges" / f"machine={_safe(row['machine'])}" / f"{_safe(p.stem)}.parquet"
+        sink = ParquetStream(root, only=("exchanges",), files={"exchanges": part},
+                             const={"session": p.stem, "t0": None})
     try:
-        a = analyze(p, whatif_replays=False, **options)
+        a = analyze(p, whatif_replays=False, parquet=sink, **options)
     except UserError as exc:
         row["error"] = str(exc)
         return row
@@ -75,6 +83,11 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
         return row
     m = a.metrics
     row["machine"] = machine_of(p, a.raw.metadata)
+    if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
+        d = Path(parquet_dir) / "exchanges" / f"machine={_safe(row['machine'])}"
+        d.mkdir(parents=True, exist_ok=True)
+        for path in a.tables.values():
+            path.replace(d / path.name)
     row["state"] = "clean" if a.raw.status.clean else "damaged"
     rtt = m.get("latency", {}).get("rtt", {})
     q = m.get("queue") or {}
@@ -88,27 +101,11 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
         starvations=q.get("starvations"), starved_s=q.get("starved_s"),
         standstill_s=q.get("standstill_s"),
     )
-    if parquet_dir:
-        _write_part(a, Path(parquet_dir), row["machine"], row["session"])
     return row
 
 
 def _ms(v: Any) -> float | None:
     return None if v is None else round(float(v) * 1000, 4)
-
-
-def _write_part(a: Any, root: Path, machine: str, session: str) -> None:
-    """This capture's exchanges as one file of the fleet's hive-partitioned dataset."""
-    from conform.analysis.report import coded
-
-    ex = a.exchanges.copy()
-    for col in ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"):
-        ex[col] = ex[col] - a.t0
-    ex.insert(0, "t0", a.t0)
-    ex.insert(0, "session", session)
-    d = root / "exchanges" / f"machine={_safe(machine)}"
-    d.mkdir(parents=True, exist_ok=True)
-    coded(ex).to_parquet(d / f"{_safe(session)}.parquet", index=False)
 
 
 Runner = Callable[[list[str], str | None, dict[str, Any]], list[dict[str, Any]]]

@@ -177,11 +177,43 @@ class DecodedLines:
 
     def head(self, n: int) -> DecodedLines:
         """The first ``n`` lines (a window of a stream)."""
-        return DecodedLines(self.direction, self.lines.head(n), self.t_first[:n],
-                            self.t_last[:n], self.order[:n], self.kind[:n], self.name[:n],
-                            self.code[:n], self.inta[:n], self.checksum[:n],
-                            self.checksum_mode[:n], self.detail[:n], self.vec[:n],
-                            self.parsed, self.parsed_id[:n])
+        return self.take(0, n)
+
+    def take(self, lo: int, hi: int, compact: bool = False) -> DecodedLines:
+        """Lines ``lo:hi``; ``compact``: keep only the parse results they use."""
+        sl = slice(lo, hi)
+        lines = Lines(self.lines.start[sl], self.lines.end[sl], self.lines.term[sl],
+                      self.lines.bodies.slice(lo, max(min(hi, len(self)) - lo, 0)))
+        parsed, pid = self.parsed, self.parsed_id[sl]
+        if compact:
+            used = np.unique(pid[pid >= 0])
+            parsed = [self.parsed[i] for i in used.tolist()]
+            pid = np.where(pid >= 0, np.searchsorted(used, pid), -1).astype(np.int32)
+        return DecodedLines(self.direction, lines, self.t_first[sl], self.t_last[sl],
+                            self.order[sl], self.kind[sl], self.name[sl], self.code[sl],
+                            self.inta[sl], self.checksum[sl], self.checksum_mode[sl],
+                            self.detail[sl], self.vec[sl], parsed, pid)
+
+    @classmethod
+    def join(cls, parts: list[DecodedLines]) -> DecodedLines:
+        """Consecutive windows of one direction as one."""
+        if len(parts) == 1:
+            return parts[0]
+        parsed: list[Any] = []
+        ids = []
+        for p in parts:
+            pid = p.parsed_id.astype(np.int32)
+            ids.append(np.where(pid >= 0, pid + len(parsed), -1).astype(np.int32))
+            parsed.extend(p.parsed)
+        cat = lambda f: np.concatenate([getattr(p, f) for p in parts])  # noqa: E731
+        lines = Lines(np.concatenate([p.lines.start for p in parts]),
+                      np.concatenate([p.lines.end for p in parts]),
+                      np.concatenate([p.lines.term for p in parts]),
+                      pa.concat_arrays([p.lines.bodies for p in parts]))
+        return cls(parts[0].direction, lines, cat("t_first"), cat("t_last"), cat("order"),
+                   cat("kind"), cat("name"), cat("code"), cat("inta"), cat("checksum"),
+                   cat("checksum_mode"), cat("detail"), cat("vec"), parsed,
+                   np.concatenate(ids))
 
 
 def _vector_regex(variant: Variant, dialect: Dialect, cmd_id: str) -> tuple[str, int, int] | None:

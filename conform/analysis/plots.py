@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import io
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -71,7 +72,25 @@ def _thin(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(a[::step] for a in arrays)
 
 
+def _latency_values(a: Any, col: str) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted values in ms, counts) of a latency column: every answered exchange of a
+    whole analysis, the summary's grid for a streamed one."""
+    if a.whole:
+        ex = a.exchanges
+        ok = ex["status"].to_numpy() == "answered"
+        v = ex[col].to_numpy()[ok] * 1000
+        v = np.sort(v[np.isfinite(v)])
+        return v, np.ones(len(v), np.int64)
+    q = a.plot.latency[col]
+    if q.n == 0:
+        return np.zeros(0), np.zeros(0, np.int64)
+    v, c = q.grid()
+    return v * 1000, c
+
+
 def latency_plots(a: Any) -> str | None:
+    if not a.whole:
+        return _latency_plots_summary(a)
     ex = a.exchanges
     ok = ex["status"].to_numpy() == "answered"
     rtt = ex["rtt"].to_numpy()[ok] * 1000
@@ -103,11 +122,90 @@ def latency_plots(a: Any) -> str | None:
     return _png(fig)
 
 
+def _latency_plots_summary(a: Any) -> str | None:
+    """Histogram and CDF of a streamed analysis, from its latency summaries."""
+    rtt, n = _latency_values(a, "rtt")
+    if len(rtt) == 0:
+        return None
+    _use_agg()
+    import matplotlib.pyplot as plt
+
+    fig, (h, c) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=100)
+    hi = a.plot.rtt_values.quantile([0.995])[0] * 1000
+    h.hist(np.clip(rtt, 0, hi), bins=60, weights=n, color="#4477aa")
+    h.set_xlabel("round trip, ms (clipped at p99.5)")
+    h.set_ylabel("exchanges")
+    h.set_title("Latency histogram")
+    for col, label, color in (("rtt", "round trip", "#4477aa"), ("unit_time", "unit", "#228833"),
+                              ("host_time", "host turnaround", "#cc6677")):
+        v, k = _latency_values(a, col)
+        if len(v):
+            xs, ys = _thin(v, np.cumsum(k) / k.sum())
+            c.plot(xs, ys, label=label, color=color)
+    c.set_xscale("symlog", linthresh=0.1)
+    c.set_xlabel("ms")
+    c.set_ylabel("fraction")
+    c.set_title("Latency CDF")
+    _legend(c)
+    return _png(fig)
+
+
 ERROR_CODES = (2, 3, 4, 5, 6, 7)
+
+
+def _marks(a: Any, bins: Any) -> tuple[np.ndarray, int, bool]:
+    """(times from the start, total, bucketed) of events kept in a ``TimeBins``: every event
+    while few, else the grid bins that hold any."""
+    t = bins.times()
+    if t is not None:
+        return t - a.t0, len(t), False
+    width = bins.width
+    has = np.flatnonzero(bins.bins > 0)
+    return bins.origin + (has + 0.5) * width - a.t0, int(bins.bins.sum()), True
+
+
+def _latency_time_summary(a: Any) -> str | None:
+    """Per time bin the fastest and slowest round trip (the whole range, not samples), with
+    every error and every missing or garbled answer marked (or, when there are more than
+    the summaries keep, every bin that holds any)."""
+    t, n, lo, hi = a.plot.rtt
+    if len(t) == 0:
+        return None
+    t = t - a.t0
+    w = _window(a, t)
+    fig, ax = _fig(9.0, 3.4)
+    ax.fill_between(t[w], lo[w], hi[w], step="post", color="#4477aa", alpha=0.5, lw=0,
+                    label="round trip, min to max per bin")
+    top = float(hi[w].max()) if w.any() else 1.0
+    for bins, color, marker, label in ((a.plot.errors, "#cc3311", "x", "error answer"),
+                                       (a.plot.bad, "#aa3377", "|", "no or garbled answer")):
+        et, total, bucketed = _marks(a, bins)
+        et = et[_window(a, et)]
+        if total:
+            ax.plot(et, np.full(len(et), top * 1.05), marker, ms=8, color=color, ls="",
+                    label=f"{label} ({total}{', bins with any' if bucketed else ''})")
+    if a.plot.starvations is not None:
+        st, total, bucketed = _marks(a, a.plot.starvations)
+        st = st[_window(a, st)]
+        for k, x in enumerate(_thin(st)[0]):
+            ax.axvline(x, color="#ee7733", lw=0.8, alpha=0.5,
+                       label=f"starvation ({total}{', bins with any' if bucketed else ''})"
+                       if k == 0 else None)
+    pos = lo[w][lo[w] > 0]
+    if len(pos) and hi[w].max() / pos.min() > 30:
+        ax.set_yscale("log")
+    ax.set_xlabel("s from the start")
+    ax.set_ylabel("round trip, ms")
+    ax.set_title("Latency over time")
+    _limit(ax, a)
+    _legend(ax)
+    return _png(fig)
 
 
 def latency_time_plot(a: Any) -> str | None:
     """Round trip of every exchange over time, errors and starvations marked."""
+    if not a.whole:
+        return _latency_time_summary(a)
     ex = a.exchanges
     t = ex["t_cmd_first"].to_numpy() - a.t0
     rtt = ex["rtt"].to_numpy() * 1000
@@ -176,7 +274,34 @@ def throughput_plot(a: Any) -> str | None:
     return _png(fig)
 
 
+def _queue_summary(a: Any) -> str | None:
+    p = a.plot
+    if p.depth is None or len(p.depth[0]) == 0:
+        return None
+    t, _n, lo, hi = p.depth
+    t = t - a.t0
+    w = _window(a, t)
+    fig, ax = _fig(9.0, 3.4)
+    ax.fill_between(t[w], lo[w], hi[w], step="post", color="#4477aa", alpha=0.6, lw=0,
+                    label="predicted queue depth, min to max per bin")
+    ax.axhline(p.capacity, color="#999999", ls="--", lw=0.8, label=f"capacity {p.capacity}")
+    if p.starvations is not None:
+        st, total, bucketed = _marks(a, p.starvations)
+        st = st[_window(a, st)]
+        if total:
+            ax.plot(st, np.zeros(len(st)), "^", color="#cc3311", ms=7,
+                    label=f"starvation ({total}{', bins with any' if bucketed else ''})")
+    ax.set_xlabel("s from the start")
+    ax.set_ylabel("vectors queued")
+    ax.set_title("Queue depth over time (replayed through the unit's motion model)")
+    _limit(ax, a)
+    _legend(ax)
+    return _png(fig)
+
+
 def queue_plot(a: Any) -> str | None:
+    if not a.whole:
+        return _queue_summary(a)
     rep = a.queue
     if rep is None or len(rep.depth_t) == 0:
         return None
@@ -199,7 +324,28 @@ def queue_plot(a: Any) -> str | None:
     return _png(fig)
 
 
+def _path_summary(a: Any) -> str | None:
+    ps = a.plot.path
+    if ps is None or ps.pushed == 0:
+        return None
+    x, y, stops = ps.points()
+    fig, ax = _fig(8.0, 6.0)
+    ax.plot(x, y, color="#4477aa", lw=0.8,
+            label="path" + (f" (every {ps.step}th junction)" if ps.step > 1 else ""))
+    if len(stops):
+        ax.plot(stops[:, 0], stops[:, 1], "o", ms=3, color="#cc3311",
+                label=f"stopped ({ps.n_stops})")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("X pulses")
+    ax.set_ylabel("Y pulses")
+    ax.set_title("X/Y path, junctions where the motion stopped")
+    _legend(ax)
+    return _png(fig)
+
+
 def path_plot(a: Any) -> str | None:
+    if not a.whole:
+        return _path_summary(a)
     rep = a.queue
     if rep is None or rep.vectors == 0:
         return None
@@ -251,3 +397,73 @@ def all_plots(a: Any) -> dict[str, str]:
         if img:
             out[key] = img
     return out
+
+
+class PathSample:
+    """The X/Y path of a long capture, decimated as it streams: every ``step``-th junction
+    (the step doubles when more than ``2 * MAX_POINTS`` are held), and the push numbers of
+    the first ``MAX_POINTS`` junctions where the motion stopped; a stop is drawn at the kept
+    junction nearest before it (at most ``step`` junctions early)."""
+
+    def __init__(self, naxes: int) -> None:
+        self.pos = np.zeros(2, np.int64)
+        self.pushed = 0
+        self.step = 1
+        self.idx: list[int] = [0]
+        self.xy: list[tuple[int, int]] = [(0, 0)]
+        self.stops: list[int] = []
+        self.n_stops = 0
+
+    def push(self, d: np.ndarray) -> None:
+        if len(d) == 0:
+            return
+        xy = np.cumsum(d[:, :2], axis=0) + self.pos
+        k = np.arange(1, len(d) + 1) + self.pushed  # point k ends vector k - 1
+        sel = np.flatnonzero(k % self.step == 0)
+        self.idx.extend(k[sel].tolist())
+        self.xy.extend(map(tuple, xy[sel].tolist()))
+        self.pos = xy[-1]
+        self.pushed += len(d)
+        while len(self.idx) > 2 * MAX_POINTS:
+            self.step *= 2
+            keep = [i for i, p in enumerate(self.idx) if p % self.step == 0]
+            self.idx = [self.idx[i] for i in keep]
+            self.xy = [self.xy[i] for i in keep]
+
+    def done(self, seq: np.ndarray, v_out: np.ndarray) -> None:
+        stop = seq[(v_out <= 0) & (seq + 1 < self.pushed)]
+        self.n_stops += len(stop)
+        room = MAX_POINTS - len(self.stops)
+        if room > 0:
+            self.stops.extend((stop[:room] + 1).tolist())
+
+    def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x, y) of the kept path and of the stops drawn."""
+        xy = np.array(self.xy, np.int64).reshape(-1, 2)
+        at = np.searchsorted(np.array(self.idx), np.array(self.stops, np.int64),
+                             side="right") - 1
+        return xy[:, 0], xy[:, 1], xy[np.clip(at, 0, len(xy) - 1)]
+
+
+@dataclass
+class PlotData:
+    """Bounded series for the plots of a long capture (see ``summaries``)."""
+
+    t0: float
+    rtt: tuple  # (bin start, count, min, max) in ms, bins from the start
+    rtt_values: Any  # summaries.Quantiles of the round trip (s)
+    latency: dict[str, Any]  # column -> Quantiles
+    errors: Any  # TimeBins of error answers
+    bad: Any  # TimeBins of missing or garbled answers
+    starvations: Any  # TimeBins of starvations
+    depth: tuple | None  # (bin start, count, min, max)
+    capacity: int
+    path: Any
+
+    @classmethod
+    def of(cls, m: Any, rep: Any, t0: float) -> PlotData:
+        return cls(t0, m.rtt_t.series(), m.lat["rtt"], m.lat, m.errors_t, m.bad_t,
+                   rep.starve_t if rep is not None else None,
+                   rep.depth_x.series() if rep is not None and rep.depth_x is not None
+                   else None, rep.variant.queue if rep is not None else 0,
+                   rep.path if rep is not None else None)

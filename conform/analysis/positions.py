@@ -55,125 +55,204 @@ class _Motion:
 
 def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
                     out: Findings) -> dict[str, Any]:
-    ex = ctx.ex
-    name = ctx.name
-    answered = ctx.status == "answered"
-    clean = answered & (ex["answer_kind"].to_numpy() == "answer") & (ctx.code == 0)
-    pos_rows = np.flatnonzero(isin(name, list(POSITION)) & clean)
-    summary: dict[str, Any] = {"position_reports": int(len(pos_rows)), "checked": 0,
-                               "confirmed_double": 0, "confirmed_lost": 0}
-    if len(pos_rows) == 0:
-        return summary
-    mot_all = _Motion(ctx)
-    reports: list[tuple[int, tuple[int, ...]]] = []
-    for r in pos_rows.tolist():
-        res = unit.result(int(ctx.answer[r]))
-        try:
-            vals = tuple(int(f) for f in res.fields[: POSITION[name[r]]])
-        except (ValueError, AttributeError):
-            continue
-        if len(vals) == POSITION[name[r]]:
-            reports.append((r, vals))
-    # segments between resets; unreliable after H / D / K (motion cut short on purpose)
-    zero = np.flatnonzero(clean & isin(name, ("N", "J", "N<axis>")))
-    cut = np.flatnonzero(clean & isin(name, ("H", "D", "K")))
-    at = np.union1d(pos_rows, zero)
-    cum_at = mot_all.cum_at(at, rec["contrib"])
-    cum = {int(r): cum_at[j] for j, r in enumerate(at.tolist())}
-    doubles = np.concatenate([rec["doubles"], rec.get("checked_resends", np.zeros(0, np.int64))])
-    checked_resends = set(rec.get("checked_resends", np.zeros(0, np.int64)).tolist())
-    unclear = set(rec.get("unclear_resends", np.zeros(0, np.int64)).tolist())
-    lost = rec["lost"]
-    used: set[int] = set()
-    prev_vals: tuple[int, ...] | None = None
-    expected_prev = None
-    adjust = np.zeros(4, np.int64)  # doubles and losses already confirmed in this segment
-    seg = None
-    for k, (r, vals) in enumerate(reports):
-        nxt = reports[k + 1][1] if k + 1 < len(reports) else None
+    """The whole table at once (a stream uses ``PositionCheck`` window by window)."""
+    pc = PositionCheck()
+    pc.feed(ctx, unit, rec, out, 0, len(ctx.ex), 0)
+    return pc.finish(out)
+
+
+class _Report:
+    """A position report waiting for the next one (which says whether it was at rest)."""
+
+    def __init__(self, row: int, vals: tuple[int, ...], t: float, text: str,
+                 frames: list[str], cum: np.ndarray, zero: tuple | None, cut_after: int
+                 ) -> None:
+        self.row, self.vals, self.t, self.text, self.frames = row, vals, t, text, frames
+        self.cum, self.zero, self.cut_after = cum, zero, cut_after
+
+
+class PositionCheck:
+    """Reported positions against the vectors, fed a window of rows at a time.
+
+    Carried: the running sum of the motion the sender meant (``contrib``), the last reset
+    (``N``/``J``) with the sum at it, the last H/D/K, the doubled and lost candidates of the
+    current segment with their motion and text, and the last report (its stability is known
+    at the next one).
+    """
+
+    def __init__(self) -> None:
+        self.summary: dict[str, Any] = {"position_reports": 0, "checked": 0,
+                                        "confirmed_double": 0, "confirmed_lost": 0}
+        self.cum = np.zeros(4, np.int64)
+        self.zero: tuple[int, np.ndarray, str] | None = None  # (row, cum at it, name)
+        self.last_cut = -1
+        self.doubles: list[int] = []
+        self.checked: list[int] = []
+        self.lost: list[int] = []
+        self.checked_set: set[int] = set()
+        self.unclear: set[int] = set()
+        self.motion: dict[int, np.ndarray] = {}
+        self.text: dict[int, str] = {}
+        self.used: set[int] = set()
+        self.prev_vals: tuple[int, ...] | None = None
+        self.expected_prev: np.ndarray | None = None
+        self.adjust = np.zeros(4, np.int64)
+        self.seg: int | None = None
+        self.pending: _Report | None = None
+
+    def feed(self, ctx: Context, unit: Any, rec: dict[str, np.ndarray], out: Any,
+             lo: int, hi: int, base: int) -> None:
+        """Rows ``lo:hi`` of ``ctx.ex`` (row 0 is the capture's row ``base``); ``unit``'s
+        ``result(i)`` reads the answer ``ctx.answer[r]``; ``out`` numbers the capture."""
+        ex = ctx.ex
+        name = ctx.name
+        own = np.zeros(len(ex), bool)
+        own[lo:hi] = True
+        answered = ctx.status == "answered"
+        clean = answered & (ex["answer_kind"].to_numpy() == "answer") & (ctx.code == 0)
+        pos_rows = np.flatnonzero(isin(name, list(POSITION)) & clean & own)
+        zero = np.flatnonzero(clean & isin(name, ("N", "J", "N<axis>")) & own)
+        cut = np.flatnonzero(clean & isin(name, ("H", "D", "K")) & own)
+        mot = _Motion(ctx)
+        units = (mot.rows >= lo) & (mot.rows < hi)
+        for key, lst in (("doubles", self.doubles), ("checked_resends", self.checked),
+                         ("lost", self.lost)):
+            for r in rec.get(key, np.zeros(0, np.int64)).tolist():
+                lst.append(r + base)
+                self.motion[r + base] = mot[r]
+                self.text[r + base] = ctx.cmd(r)
+        self.checked_set.update(int(r) + base for r in rec.get("checked_resends", []))
+        self.unclear.update(int(r) + base for r in rec.get("unclear_resends", []))
+        self.summary["position_reports"] += len(pos_rows)
+        at = np.union1d(pos_rows, zero)
+        w = rec["contrib"].copy()
+        w[~own] = False
+        sel = np.flatnonzero(units)
+        mot_own = _Motion.__new__(_Motion)
+        mot_own.rows = mot.rows[sel]
+        mot_own.cols = [c[sel] for c in mot.cols]
+        cum_at = mot_own.cum_at(at, w) + self.cum
+        if len(sel):
+            self.cum = self.cum + np.array(
+                [int((c * w[mot_own.rows]).sum()) for c in mot_own.cols], np.int64)
+        cum = {int(r): cum_at[j] for j, r in enumerate(at.tolist())}
+        events = sorted([(int(r), 0) for r in zero.tolist()] + [(int(r), 1) for r in pos_rows.tolist()]
+                        + [(int(r), 2) for r in cut.tolist()])
+        for r, what in events:
+            if what == 0:
+                self.zero = (r + base, cum[r], str(name[r]))
+            elif what == 2:
+                self.last_cut = r + base
+            else:
+                res = unit.result(int(ctx.answer[r]))
+                try:
+                    vals = tuple(int(f) for f in res.fields[: POSITION[name[r]]])
+                except (ValueError, AttributeError):
+                    continue
+                if len(vals) != POSITION[name[r]]:
+                    continue
+                frames = [f"host:{r + base}"] + (
+                    [f"unit:{int(ctx.answer[r]) + ctx.unit_base}"] if ctx.answer[r] >= 0 else [])
+                rep = _Report(r + base, vals, float(ctx.t[r]), ctx.cmd(r), frames, cum[r],
+                              self.zero, self.last_cut)
+                if self.pending is not None:
+                    self._judge(self.pending, rep.vals, out)
+                self.pending = rep
+
+    def finish(self, out: Any) -> dict[str, Any]:
+        if self.pending is not None:
+            self._judge(self.pending, None, out)
+            self.pending = None
+        return self.summary
+
+    def _judge(self, rp: _Report, nxt: tuple[int, ...] | None, out: Any) -> None:
+        r, vals = rp.row, rp.vals
         stable = nxt == vals or nxt is None
-        zi = np.searchsorted(zero, r) - 1
-        z = int(zero[zi]) if zi >= 0 else -1
-        base = cum[z] if z >= 0 else np.zeros(4, np.int64)
-        if z >= 0 and name[z] == "N<axis>":
+        z = rp.zero[0] if rp.zero is not None else -1
+        base = rp.zero[1] if rp.zero is not None else np.zeros(4, np.int64)
+        if rp.zero is not None and rp.zero[2] == "N<axis>":
             stable = False  # the set value is not tracked here
-        if z != seg:
-            seg, adjust = z, np.zeros(4, np.int64)
-        expected = (cum[r] - base + adjust)[: len(vals)]
+        if z != self.seg:
+            self.seg, self.adjust = z, np.zeros(4, np.int64)
+            keep = lambda lst: [x for x in lst if x > z]  # noqa: E731 - before z: never again
+            self.doubles, self.checked, self.lost = (keep(self.doubles), keep(self.checked),
+                                                     keep(self.lost))
+        expected = (rp.cum - base + self.adjust)[: len(vals)]
         rep = np.asarray(vals)
-        if prev_vals is not None and not any(rep) and any(expected) and \
-                (expected_prev is None or any(expected_prev)) and any(prev_vals):
-            out.add("reset", ctx.t[r], "warning",
-                    f"`{ctx.cmd(r)}` reports {vals} where the vectors sent add up to "
+        pv, ep = self.prev_vals, self.expected_prev
+        if pv is not None and not any(rep) and any(expected) and \
+                (ep is None or any(ep)) and any(pv):
+            out.add("reset", rp.t, "warning",
+                    f"`{rp.text}` reports {vals} where the vectors sent add up to "
                     f"{tuple(int(x) for x in expected)} and no N or J was sent: the unit "
-                    "seems to have been reset (power-up?)", frames=ctx.frames(r), row=r,
+                    "seems to have been reset (power-up?)", frames=list(rp.frames), row=r,
                     cause="power-up")
-        prev_vals, expected_prev = vals, expected
-        if not stable or ((cut > z) & (cut < r)).any():
-            continue
-        summary["checked"] += 1
+        self.prev_vals, self.expected_prev = vals, expected
+        if not stable or rp.cut_after > z:
+            return
+        self.summary["checked"] += 1
         delta = rep - expected
-        cand_d = [int(x) for x in doubles if z < x < r and x not in used]
-        cand_l = [int(x) for x in lost if z < x < r and x not in used]
+        doubles = self.doubles + self.checked
+        cand_d = [int(x) for x in doubles if z < x < r and x not in self.used]
+        cand_l = [int(x) for x in self.lost if z < x < r and x not in self.used]
         if not delta.any():
-            used.update(cand_d + cand_l)
-            continue
-        found = _explain(delta, cand_d, cand_l, mot_all, len(vals))
+            self.used.update(cand_d + cand_l)
+            return
+        found = _explain(delta, cand_d, cand_l, self.motion, len(vals))
         if found is None:
-            out.add("position-mismatch", ctx.t[r], "warning",
-                    f"`{ctx.cmd(r)}` reports {vals}; the accepted vectors add up to "
+            out.add("position-mismatch", rp.t, "warning",
+                    f"`{rp.text}` reports {vals}; the accepted vectors add up to "
                     f"{tuple(int(x) for x in expected)} (off by "
-                    f"{tuple(int(x) for x in delta)})", frames=ctx.frames(r), row=r,
+                    f"{tuple(int(x) for x in delta)})", frames=list(rp.frames), row=r,
                     delta=[int(x) for x in delta])
-            continue
+            return
         dd, ll = found
         for d in dd:
-            adjust += mot_all[d]
+            self.adjust = self.adjust + self.motion[d]
         for lv in ll:
-            adjust -= mot_all[lv]
+            self.adjust = self.adjust - self.motion[lv]
         for d in dd:
-            used.add(d)
-            if d in unclear:
+            self.used.add(d)
+            if d in self.unclear:
                 # the line before it was the same text: `>` cannot tell a resend from the
                 # job's next identical vector, and neither can a position
-                summary["possible_double"] = summary.get("possible_double", 0) + 1
-                out.add("double-move", ctx.t[r], "hazard",
-                        f"`{ctx.cmd(d)}` may have been executed twice: the sender asked `@`/`>` "
-                        "and sent the same vector again, but with the same line just before "
-                        "it neither the answers nor the position "
-                        f"(`{ctx.cmd(r)}` reports {vals}) tell a resend from the job's next "
-                        "identical vector", frames=[f"host:{d}"] + ctx.frames(r), row=d,
+                self.summary["possible_double"] = self.summary.get("possible_double", 0) + 1
+                out.add("double-move", rp.t, "hazard",
+                        f"`{self.text[d]}` may have been executed twice: the sender asked "
+                        "`@`/`>` and sent the same vector again, but with the same line just "
+                        "before it neither the answers nor the position "
+                        f"(`{rp.text}` reports {vals}) tell a resend from the job's next "
+                        "identical vector", frames=[f"host:{d}"] + rp.frames, row=d,
                         position_row=r, confirmed=False)
                 continue
-            summary["confirmed_double"] += 1
+            self.summary["confirmed_double"] += 1
             how = (" The sender asked `@`/`>` before sending it again, but the unit had taken "
-                   "the first copy." if d in checked_resends else "")
-            out.add("double-move", ctx.t[r], "hazard",
-                    f"`{ctx.cmd(d)}` was executed twice: `{ctx.cmd(r)}` reports {vals}, "
+                   "the first copy." if d in self.checked_set else "")
+            out.add("double-move", rp.t, "hazard",
+                    f"`{self.text[d]}` was executed twice: `{rp.text}` reports {vals}, "
                     f"which is the job's position plus that vector once more.{how}",
-                    frames=[f"host:{d}"] + ctx.frames(r), row=d, position_row=r,
+                    frames=[f"host:{d}"] + rp.frames, row=d, position_row=r,
                     confirmed=True)
         for lv in ll:
-            used.add(lv)
-            summary["confirmed_lost"] += 1
-            why = (f" Confirmed: `{ctx.cmd(r)}` reports {vals}, the job's position less "
+            self.used.add(lv)
+            self.summary["confirmed_lost"] += 1
+            why = (f" Confirmed: `{rp.text}` reports {vals}, the job's position less "
                    "that vector.")
             for f in out.items:
                 if f.kind == "lost-vector" and f.row == lv:
                     f.message += why
                     f.extra["confirmed"] = True
                     f.extra["position_row"] = r
-                    f.frames += ctx.frames(r)
+                    f.frames += rp.frames
                     break
             else:
-                out.add("lost-vector", ctx.t[r], "hazard",
-                        f"`{ctx.cmd(lv)}` was never executed.{why}",
-                        frames=[f"host:{lv}"] + ctx.frames(r), row=lv, position_row=r,
+                out.add("lost-vector", rp.t, "hazard",
+                        f"`{self.text[lv]}` was never executed.{why}",
+                        frames=[f"host:{lv}"] + rp.frames, row=lv, position_row=r,
                         confirmed=True)
-    return summary
 
 
-def _explain(delta: np.ndarray, doubles: list[int], lost: list[int], motion: _Motion,
+def _explain(delta: np.ndarray, doubles: list[int], lost: list[int], motion: Any,
              naxes: int) -> tuple[list[int], list[int]] | None:
     """A small set of doubled and lost vectors whose sum is ``delta``, if there is one."""
     mot = {r: motion[r][:naxes] for r in set(doubles) | set(lost)}

@@ -396,3 +396,254 @@ def whatif(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
                                   if len(rep.ends) else 0.0)
         out.append(row)
     return out
+
+
+class StreamReplay:
+    """The compiled replay fed a window of exchange rows at a time (``feed``), finished
+    with the final drain (``finish``). Carried: the executor's state, the vectors still
+    queued (pulses, continuity, parameter row, arrival, exchange row), the running maximum
+    of the arrival times, the modal parameters (one table row per distinct set), the queue
+    depth and the last completion. What comes out is summed up as it comes
+    (``summaries``); while ``keep`` the whole arrays are kept too, for a ``QueueReplay``.
+
+    A session with H/G/D/K/R/J needs the Python executor: the compiled replay stops at the
+    first of them (``control_row``) and the caller replays the kept table instead, or says
+    that the replay stops there.
+    """
+
+    def __init__(self, variant: Variant, keep: bool = True) -> None:
+        from conform.analysis.replay_kernel import new_state
+        from conform.analysis.summaries import Quantiles, TimeBins
+
+        self.variant = variant
+        self.naxes = len(variant.axes)
+        self.F, self.I = new_state()
+        self.params = _params(variant)
+        self.states: dict[Any, int] = {self._key(self.params): 0}
+        self.table: list[Any] = [self.params]
+        self.t_max = -np.inf
+        z = np.zeros(0, np.int64)
+        self.q_d = np.zeros((0, self.naxes), np.int64)
+        self.q_cont, self.q_state = np.zeros(0, bool), np.zeros(0, np.int32)
+        self.q_t, self.q_row = np.zeros(0), z
+        self.first = 0  # push index of q_*[0]
+        self.pushed = 0
+        self.control_row = -1
+        self.notes: list[str] = []
+        self.depth = 0
+        self.max_depth = 0
+        self.area = 0.0  # sum of depth x time between depth events
+        self.depth_last: tuple[float, int] | None = None
+        self.depth_t0: float | None = None
+        self.depth_n, self.depth_sum = 0, 0.0
+        self.first_depth = 0
+        self.completed = 0
+        self.durations = Quantiles()
+        self.end_max = -np.inf
+        self.last_end: float | None = None
+        self.push_min = np.inf
+        self.starvations: list[dict[str, Any]] = []  # the first ones (findings list 10)
+        self.starved = 0
+        self.starved_s = 0.0
+        self.standstill_s = 0.0
+        self.supply, self.consume = TimeBins(), TimeBins()
+        self.starve_t = TimeBins()
+        self.sink: Any = None  # depth (t, depth) for the Parquet table once not kept
+        self.depth_x: Any = None  # summaries.Extremes of the depth for long captures' plots
+        self.path: Any = None  # plots.PathSample for long captures' plots
+        self.keep = keep
+        self.kept: dict[str, list[np.ndarray]] = {k: [] for k in (
+            "pushes", "push_rows", "starts", "ends", "starved", "v_out", "done_rows",
+            "depth_t", "depth")}
+        if not keep:
+            self.stop_keeping()
+
+    @staticmethod
+    def _key(p: Any) -> tuple:
+        return (p.v, p.a, p.b, p.short, p.pause, p.vk)
+
+    def feed(self, ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, lo: int, hi: int,
+             base: int) -> None:
+        """Rows ``lo:hi`` of ``ex`` (the capture's rows ``base + lo`` …)."""
+        if self.control_row >= 0 or hi <= lo:
+            return
+        sl = slice(lo, hi)
+        names = ex["name"].to_numpy()[sl]
+        code = ex["code"].to_numpy()[sl]
+        t = np.nan_to_num(ex["t_cmd_last"].to_numpy()[sl], nan=0.0)
+        t = np.maximum.accumulate(np.concatenate([[self.t_max], t]))[1:]
+        if len(t):
+            self.t_max = float(t[-1])
+        ok = (code == 0) & (ex["status"].to_numpy()[sl] == "answered")
+        ctrl = isin(names, list(MODAL | CONTROL)) & ok
+        acc = accepted[sl]
+        rows = np.flatnonzero(acc | ctrl)
+        is_vec = acc[rows]
+        stop = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
+        if len(stop):
+            self.control_row = int(rows[stop[0]]) + lo + base
+            rows, is_vec = rows[: stop[0]], is_vec[: stop[0]]
+        state = np.empty(len(rows), np.int32)
+        cur = self.states[self._key(self.params)]
+        for i in range(len(rows)):
+            if is_vec[i]:
+                state[i] = cur
+                continue
+            r = int(rows[i]) + lo
+            name = str(names[rows[i]])
+            try:
+                self.params = _modal(self.params, name,
+                                     getattr(host_parsed(r), "args", ()) or ())
+            except ValueError as err:
+                self.notes.append(f"replay: {name} at row {r + base} refused by the model: "
+                                  f"{err}")
+            key = self._key(self.params)
+            if key not in self.states:
+                self.states[key] = len(self.table)
+                self.table.append(self.params)
+            cur = state[i] = self.states[key]
+        vrows = rows[is_vec] + lo
+        d = np.empty((len(vrows), self.naxes), np.int64)
+        for j, c in enumerate(AXES[: self.naxes]):
+            d[:, j] = ex[c].to_numpy()[vrows]
+        if self.path is not None:
+            self.path.push(d)
+        self._run(t[rows], is_vec, d, names[rows[is_vec]] == "C", state[is_vec],
+                  vrows + base, -1)
+
+    def _run(self, ev_t: np.ndarray, is_vec: np.ndarray, d: np.ndarray, cont: np.ndarray,
+             state: np.ndarray, vrows: np.ndarray, guard: int) -> None:
+        from conform.analysis.replay_kernel import H, N, replay_vectors
+
+        F, I = self.F, self.I  # noqa: E741
+        done = int(I[H])  # what finished is gone; the queue moves to the front
+        I[N] -= done
+        I[H] = 0
+        self.first += done
+        tacc = ev_t[is_vec]
+        self.q_d = np.concatenate([self.q_d[done:], d])
+        self.q_cont = np.concatenate([self.q_cont[done:], cont])
+        self.q_state = np.concatenate([self.q_state[done:], state])
+        self.q_t = np.concatenate([self.q_t[done:], tacc])
+        self.q_row = np.concatenate([self.q_row[done:], vrows])
+        push = np.where(is_vec, np.cumsum(is_vec) - 1 + (self.pushed - self.first), -1)
+        col = lambda f, dt: np.array([getattr(s, f) for s in self.table], dt)  # noqa: E731
+        out = replay_vectors(ev_t.astype(float), push, self.q_d, self.q_cont, self.q_state,
+                             self.q_t, col("v", float), col("a", float), col("b", float),
+                             col("short", np.int64), col("pause", float), col("vk", bool),
+                             float(self.variant.max_rate or 0.0), guard, F, I)
+        self.pushed += int(is_vec.sum())
+        seq, starts, ends, v_out, starved = out[0], out[1], out[2], out[4], out[6]
+        if self.path is not None:
+            self.path.done(seq + self.first, v_out)
+        self._summarise(tacc, vrows, seq, starts.copy(), ends.copy(), v_out.copy(),
+                        starved.copy())
+
+    def _summarise(self, pushes: np.ndarray, push_rows: np.ndarray, seq: np.ndarray,
+                   starts: np.ndarray, ends: np.ndarray, v_out: np.ndarray,
+                   starved: np.ndarray) -> None:
+        arrived = self.q_t[seq]
+        done_rows = self.q_row[seq]
+        if len(pushes):
+            self.push_min = min(self.push_min, float(pushes.min()))
+        self.completed += len(ends)
+        self.durations.add(ends - starts)
+        if len(ends):
+            self.end_max = max(self.end_max, float(ends.max()))
+        self.supply.add(pushes)
+        self.consume.add(ends)
+        for i in np.flatnonzero(starved).tolist():
+            dry = float(ends[i - 1]) if i > 0 else (
+                self.last_end if self.last_end is not None else float(starts[i]))
+            gap = max(0.0, float(arrived[i]) - dry)
+            stop = float(starts[i]) - dry
+            self.starved += 1
+            self.starved_s += gap
+            self.standstill_s += stop
+            self.starve_t.add(np.array([dry]))
+            if len(self.starvations) < 10 or self.keep:
+                self.starvations.append({"t": dry, "from": dry, "arrived": float(arrived[i]),
+                                         "start": float(starts[i]), "gap": gap, "stop": stop,
+                                         "row": int(done_rows[i])})
+        if len(ends):
+            self.last_end = float(ends[-1])
+        dt, dv = queue_depth(pushes, ends, np.zeros(0))
+        dv = dv.astype(np.int64) + self.depth
+        if len(dv):
+            if self.depth_last is None:
+                self.depth_t0 = float(dt[0])
+                self.first_depth = int(dv[0])
+            else:
+                self.area += self.depth_last[1] * (float(dt[0]) - self.depth_last[0])
+            self.area += float((dv[:-1] * np.diff(dt)).sum())
+            self.depth_last = (float(dt[-1]), int(dv[-1]))
+            self.depth = int(dv[-1])
+            self.max_depth = max(self.max_depth, int(dv.max()))
+            self.depth_n += len(dv)
+            self.depth_sum += float(dv.sum())
+        if not self.keep:
+            if self.sink is not None:
+                self.sink(dt, dv)
+            if self.depth_x is not None:
+                self.depth_x.add(dt, dv.astype(float))
+        else:
+            for k, v in (("pushes", pushes), ("push_rows", push_rows), ("starts", starts),
+                         ("ends", ends), ("starved", starved), ("v_out", v_out),
+                         ("done_rows", done_rows), ("depth_t", dt), ("depth", dv)):
+                self.kept[k].append(v)
+
+    def stop_keeping(self) -> None:
+        """From now on only summaries: what was kept goes to the sink and the plot series."""
+        from conform.analysis.plots import PathSample
+        from conform.analysis.summaries import Extremes
+
+        self.keep = False
+        self.depth_x = Extremes()
+        self.path = PathSample(self.naxes)
+        k = self.kept
+        if k["depth_t"]:
+            dt, dv = np.concatenate(k["depth_t"]), np.concatenate(k["depth"])
+            if self.sink is not None:
+                self.sink(dt, dv)
+            self.depth_x.add(dt, dv.astype(float))
+        self.kept = {name: [] for name in k}
+        self.starvations = self.starvations[:10]
+
+    def finish(self) -> None:
+        """The final drain (as ``replay``: at most capacity + 10 000 steps)."""
+        z = np.zeros(0, np.int64)
+        self._run(np.zeros(0), np.zeros(0, bool), np.zeros((0, self.naxes), np.int64),
+                  np.zeros(0, bool), np.zeros(0, np.int32), z, self.variant.queue + 10_000)
+        self.q_d = np.zeros((0, self.naxes), np.int64)  # the rest never ran
+
+    def mean_depth(self) -> float:
+        if self.depth_n < 2:
+            return float(self.first_depth) if self.depth_n else 0.0
+        total = self.depth_last[0] - self.depth_t0 if self.depth_last and self.depth_t0 is not None else 0.0
+        return self.area / total if total > 0 else self.depth_sum / self.depth_n
+
+    def result(self) -> QueueReplay:
+        """The whole replay (only while ``keep``)."""
+        k = {name: (np.concatenate(v) if v else np.zeros(0)) for name, v in self.kept.items()}
+        rep = QueueReplay(k["pushes"].astype(float), k["push_rows"].astype(np.int64),
+                          k["starts"], k["ends"], k["starved"].astype(bool), k["v_out"],
+                          k["done_rows"].astype(np.int64), np.zeros(0), k["depth_t"],
+                          k["depth"].astype(np.int32), notes=list(self.notes),
+                          capacity=self.variant.queue)
+        rep.starvations = list(self.starvations)
+        return rep
+
+    def metrics(self, t0: float, whatif_rows: list[dict[str, Any]]) -> dict[str, Any]:
+        return {
+            "capacity": self.variant.queue,
+            "vectors_replayed": self.pushed,
+            "vectors_completed": self.completed,
+            "max_depth": self.max_depth,
+            "mean_depth": float(self.mean_depth()),
+            "starvations": self.starved,
+            "starved_s": float(self.starved_s),
+            "standstill_s": float(self.standstill_s),
+            "median_vector_s": float(self.durations.median()) if self.durations.n else None,
+            "motion_end_s": float(self.end_max - t0) if self.completed else None,
+            "whatif": whatif_rows,
+        }

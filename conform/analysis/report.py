@@ -93,7 +93,13 @@ def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
 def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
                   ) -> dict[str, Path]:
     """The exchange, frame, series and queue-depth tables, streamed in row groups
-    (``conform.analysis.tables``)."""
+    (``conform.analysis.tables``). A streamed analysis kept no tables: it wrote them while
+    it ran (``analyze(…, parquet=DIR)``), and those are the ones returned."""
+    if not a.whole:
+        if a.tables:
+            return dict(a.tables)
+        raise UserError(f"{a.path}: the capture was streamed, not kept: analyse it with "
+                        "--parquet to write its tables")
     d = Path(out_dir)
     try:
         d.mkdir(parents=True, exist_ok=True)

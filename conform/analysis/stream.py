@@ -128,6 +128,8 @@ class RawStream:
         for name in ("host", "unit"):
             parts, self.col.parts[name] = self.col.parts[name], []
             for part in parts:
+                if len(part.length) == 0:  # nothing readable in it
+                    continue
                 self.status.bad_times += self.sane[name].apply(part)
                 yield from _pieces(part, self.reads_per_part)
 
@@ -213,3 +215,51 @@ class LineBuffer:
         self.t_first = self.t_first[keep]
         self.order = self.order[keep]
         self.base += upto
+
+
+class ReadStats:
+    """What the reads of one direction tell, gathered part by part: a lower bound on the
+    baud (bytes that arrived between two reads took that long: the 98th percentile of
+    10 x bytes / interval over reads of 4 bytes or more), reads whose stream offset does
+    not follow the previous one, and whether every first-byte time equals its read time
+    (a direction with no wire to cross)."""
+
+    def __init__(self, name: str) -> None:
+        from conform.analysis.summaries import Quantiles
+
+        self.name = name
+        self.reads = 0
+        self.rates = Quantiles()
+        self.last_t: float | None = None
+        self.real = 0  # stream offset the next read should claim
+        self.gaps = 0
+        self.gap_t = 0.0
+        self.exact = True
+
+    def feed(self, d: Direction) -> None:
+        if d.chunks == 0:
+            return
+        t = d.t_read if self.last_t is None else np.concatenate([[self.last_t], d.t_read])
+        n = d.length if self.last_t is None else d.length
+        dt = np.diff(t)
+        nn = n[1:] if self.last_t is None else n
+        ok = (dt > 0) & (nn >= 4)
+        self.rates.add(10.0 * nn[ok] / dt[ok])
+        self.last_t = float(d.t_read[-1])
+        real = self.real + np.concatenate([[0], np.cumsum(d.length)[:-1]])
+        gaps = np.flatnonzero((d.offset >= 0) & (d.offset != real))
+        if len(gaps):
+            if not self.gaps:
+                self.gap_t = float(d.t_read[gaps[0]])
+            self.gaps += len(gaps)
+        self.real += int(d.length.sum())
+        self.exact = self.exact and bool(np.all(np.abs(d.t_read - d.t_first) < 1e-5))
+        self.reads += d.chunks
+
+    def baud_bound(self) -> float | None:
+        if self.reads < 3 or self.rates.n < 3:
+            return None
+        return self.rates.quantile([0.98])[0]
+
+    def gap(self) -> tuple[str, float, int] | None:
+        return (self.name, self.gap_t, self.gaps) if self.gaps and self.reads > 1 else None

@@ -14,8 +14,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
+import pyarrow.compute  # noqa: F401 - pa.compute
 import pyarrow.parquet as pq
 
 ROW_GROUP = 131_072
@@ -85,3 +87,128 @@ def relative_times(part: pd.DataFrame, t0: float, cols: tuple[str, ...]) -> pd.D
         if col in part:
             part[col] = part[col].to_numpy() - t0
     return part
+
+
+CODED = {"name", "kind", "status", "answer_kind", "packet_role", "direction",
+         "checksum_status", "detail"}  # text columns written dictionary-encoded
+TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
+         "frames_host": ("t_first", "t_last"), "frames_unit": ("t_first", "t_last"),
+         "queue_depth": ("t",)}
+
+
+def _arrow(df: pd.DataFrame) -> pa.Table:
+    """Text columns as dictionary-encoded strings (names, kinds, statuses) or strings; the
+    same schema for every part of a table, whatever values a part holds."""
+    cols = {}
+    for c in df.columns:
+        v = df[c]
+        if not (pd.api.types.is_numeric_dtype(v) or pd.api.types.is_bool_dtype(v)):
+            arr = pa.array(v.astype("string").to_numpy(na_value=None), pa.string())
+            cols[c] = arr.dictionary_encode() if c in CODED else arr
+        else:
+            cols[c] = pa.array(v.to_numpy())
+    return pa.table(cols)
+
+
+class ParquetStream:
+    """The tables of a streamed analysis written as their rows come (``--parquet DIR``):
+    ``exchanges``, ``frames_host``, ``frames_unit``, ``queue_depth`` a row group per window,
+    ``series`` at the end. Times are seconds from the capture's start; the start is only
+    known at the end, so parts are written from the first window's start and, in the rare
+    capture whose earliest byte comes later in the file, rewritten a row group at a time."""
+
+    def __init__(self, out_dir: str | Path, only: tuple[str, ...] | None = None,
+                 files: dict[str, Path] | None = None, const: dict[str, Any] | None = None
+                 ) -> None:
+        """``only``: the tables to write (all by default); ``files``: a path per table
+        instead of ``DIR/NAME.parquet``; ``const``: columns of one value put first in the
+        exchange table (a fleet's ``session``), and a ``t0`` column if it names one."""
+        from conform.errors import UserError
+
+        self.only, self.files, self.const = only, files or {}, dict(const or {})
+        self.dir = Path(out_dir)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"{self.dir}: cannot create the folder: {exc.strerror}") from None
+        self.writers: dict[str, pq.ParquetWriter] = {}
+        self.t0: float | None = None
+
+    def path(self, name: str) -> Path:
+        return self.files.get(name, self.dir / f"{name}.parquet")
+
+    def _put(self, name: str, df: pd.DataFrame) -> None:
+        assert self.t0 is not None
+        if self.only is not None and name not in self.only:
+            return
+        for c in TIMES.get(name, ()):
+            df[c] = df[c].to_numpy() - self.t0
+        if name == "exchanges" and self.const:
+            for k, v in reversed(self.const.items()):
+                df.insert(0, k, self.t0 if k == "t0" else v)
+        t = _arrow(df)
+        w = self.writers.get(name)
+        if w is None:
+            path = self.path(name)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            w = self.writers[name] = pq.ParquetWriter(path, t.schema)
+        w.write_table(t.cast(w.schema), row_group_size=max(len(df), 1))
+
+    def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int) -> None:
+        """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``)."""
+        from conform.analysis.analyze import frames_frame
+        from conform.capture.session import escape_bytes
+
+        if self.t0 is None:
+            t = np.concatenate([host.t_first, unit.t_first])
+            t = t[np.isfinite(t)]
+            if len(t) == 0 and len(ex) == 0:
+                return
+            self.t0 = float(t.min()) if len(t) else 0.0
+        row0 = int(ex["frame"].iloc[0]) if len(ex) else 0
+        part = ex.copy()
+        part["command"] = [escape_bytes(b) for b in host.lines.bodies.to_pylist()]
+        self._put("exchanges", part)
+        fh = frames_frame(host, 0.0, base=row0)
+        fh["packet"] = ex["packet"].to_numpy()
+        fh["packet_role"] = ex["packet_role"].to_numpy()
+        self._put("frames_host", fh)
+        if len(unit):
+            self._put("frames_unit", frames_frame(unit, 0.0, base=unit_base))
+
+    def depth(self, t: Any, depth: Any) -> None:
+        if self.t0 is not None and len(t):
+            self._put("queue_depth", pd.DataFrame({"t": t, "depth": depth}))
+
+    def finish(self, t0: float, series: pd.DataFrame) -> dict[str, Path]:
+        if self.t0 is None:
+            self.t0 = t0
+        self._put("series", series.copy())
+        for w in self.writers.values():
+            w.close()
+        out = {name: self.path(name) for name in self.writers}
+        if t0 != self.t0:
+            for name, path in out.items():
+                _shift(path, TIMES.get(name, ()), self.t0 - t0,
+                       t0 if name == "exchanges" and "t0" in self.const else None)
+        return out
+
+
+def _shift(path: Path, cols: tuple[str, ...], by: float, t0: float | None = None) -> None:
+    """Add ``by`` to the time columns of a Parquet file, a row group at a time (and set its
+    ``t0`` column, if given)."""
+    if not cols:
+        return
+    f = pq.ParquetFile(path)
+    tmp = path.with_suffix(".tmp")
+    with pq.ParquetWriter(tmp, f.schema_arrow) as w:
+        for i in range(f.num_row_groups):
+            t = f.read_row_group(i)
+            for c in cols:
+                j = t.schema.get_field_index(c)
+                t = t.set_column(j, c, pa.compute.add(t.column(c), by))
+            if t0 is not None:
+                j = t.schema.get_field_index("t0")
+                t = t.set_column(j, "t0", pa.array(np.full(len(t), t0)))
+            w.write_table(t)
+    tmp.replace(path)

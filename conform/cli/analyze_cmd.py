@@ -61,7 +61,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
       conform analyze captures/ --report fleet/     # every capture in the folder
     """
     from conform.analysis.analyze import analyze
-    from conform.analysis.report import findings_document, write_parquet, write_report
+    from conform.analysis.report import findings_document, write_report
 
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
@@ -91,15 +91,14 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
             task.update(completed=done, total=total)
 
         a = analyze(file, variant=variant, baud=baud, dialect=dialect, progress=on_bytes,
-                    step=lambda name: task.update(step=name), whatif_replays=not no_whatif)
+                    step=lambda name: task.update(step=name), whatif_replays=not no_whatif,
+                    parquet=parquet_dir)  # the tables are written as the capture streams
         a.time_range = window
         paths = {}
         if report_dir:
             task.update(step="writing the report (plots)")
             paths["report"] = str(write_report(a, report_dir)["html"])
         if parquet_dir:
-            task.update(step="writing Parquet tables")
-            write_parquet(a, parquet_dir)
             paths["parquet"] = parquet_dir
     m = a.metrics
     echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
