@@ -216,6 +216,7 @@ class _Session:
             self.Tu = fr.DecodedLines.join([self.Tu, w.unit])
             self.Tc = np.concatenate([self.Tc, w.cmd_row])
         self.rows += len(w.ex)
+        release_memory()  # what the last window freed goes back, not onto this one's peak
         if self.keep and self.rows > self.keep_rows:
             self.keep = False
             self.kept = {k: [] for k in self.kept}

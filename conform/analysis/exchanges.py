@@ -342,6 +342,8 @@ class ExchangeStream:
         ut = line_times(ud, ul, ud.t_first)
         kk = _prefix_below(ht[1], w)
         limit = self.window_lines
+        if kk < limit and w != np.inf:
+            return None  # not a window's worth yet: wait for more bytes
         while True:
             k = min(kk, limit)
             wc = w if k == kk else min(w, float(ht[1][k]))

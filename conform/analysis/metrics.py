@@ -69,22 +69,23 @@ class Metrics:
         self.commands += len(ex)
         self.n_vec += int(accepted.sum())
         self.hb += int(ex["cmd_bytes"].sum())
-        for k, v in zip(*np.unique(status.astype(str), return_counts=True), strict=True):
+        for k, v in pd.Series(status, dtype=object).value_counts(sort=False).items():
             self.status[str(k)] = self.status.get(str(k), 0) + int(v)
-        for k, v in zip(*np.unique(ex["code"].to_numpy()[answered], return_counts=True),
-                        strict=True):
-            self.codes[int(k)] = self.codes.get(int(k), 0) + int(v)
+        codes = ex["code"].to_numpy()[answered]
+        for k in np.unique(codes).tolist():
+            self.codes[int(k)] = self.codes.get(int(k), 0) + int((codes == k).sum())
         for c in LATENCY:
             self.lat[c].add(ex[c].to_numpy()[answered])
         rtt = ex["rtt"].to_numpy()[answered]
-        names = ex["name"].to_numpy()[answered]
-        valid = pd.notna(names)
-        if valid.any():
-            s = pd.Series(rtt[valid]).groupby(names[valid])
-            for k, g in s:
+        which, uniq = pd.factorize(ex["name"].to_numpy()[answered])  # None: -1, left out
+        if len(uniq):
+            order = np.argsort(which, kind="stable")
+            bounds = np.searchsorted(which[order], np.arange(len(uniq) + 1))
+            for j, k in enumerate(uniq):
+                g = rtt[order[bounds[j] : bounds[j + 1]]]
                 entry = self.by_cmd.setdefault(str(k), [0, Quantiles()])
-                entry[0] += int(g.size)
-                entry[1].add(g.to_numpy())
+                entry[0] += len(g)
+                entry[1].add(g)
         t_cmd = ex["t_cmd_first"].to_numpy()
         self.answered_t.add(t_cmd[answered])
         self.vector_t.add(ex["t_cmd_last"].to_numpy()[accepted])

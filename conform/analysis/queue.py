@@ -483,12 +483,10 @@ class StreamReplay:
         if len(stop):
             self.control_row = int(rows[stop[0]]) + lo + base
             rows, is_vec = rows[: stop[0]], is_vec[: stop[0]]
-        state = np.empty(len(rows), np.int32)
-        cur = self.states[self._key(self.params)]
-        for i in range(len(rows)):
-            if is_vec[i]:
-                state[i] = cur
-                continue
+        modal = np.flatnonzero(~is_vec)  # few: the parameters they set, one by one
+        after = np.empty(len(modal) + 1, np.int32)  # parameter row after each of them
+        after[0] = self.states[self._key(self.params)]
+        for j, i in enumerate(modal.tolist()):
             r = int(rows[i]) + lo
             name = str(names[rows[i]])
             try:
@@ -501,7 +499,8 @@ class StreamReplay:
             if key not in self.states:
                 self.states[key] = len(self.table)
                 self.table.append(self.params)
-            cur = state[i] = self.states[key]
+            after[j + 1] = self.states[key]
+        state = after[np.cumsum(~is_vec)]  # in force at each row
         vrows = rows[is_vec] + lo
         d = np.empty((len(vrows), self.naxes), np.int64)
         for j, c in enumerate(AXES[: self.naxes]):

@@ -217,9 +217,13 @@ class Extremes:
         need = int(idx.max()) + 1
         if need > len(self.n):
             self._grow(need - len(self.n))
-        np.add.at(self.n, idx, 1)
-        np.minimum.at(self.lo, idx, v)
-        np.maximum.at(self.hi, idx, v)
+        order = np.argsort(idx, kind="stable")
+        idx, v = idx[order], v[order]
+        first = np.flatnonzero(np.concatenate([[True], idx[1:] != idx[:-1]]))
+        at = idx[first]
+        self.n[at] += np.diff(np.append(first, len(idx)))
+        self.lo[at] = np.minimum(self.lo[at], np.minimum.reduceat(v, first))
+        self.hi[at] = np.maximum(self.hi[at], np.maximum.reduceat(v, first))
 
     def _grow(self, k: int, front: bool = False) -> None:
         parts = [(self.n, np.zeros(k, np.int64)), (self.lo, np.full(k, np.inf)),
