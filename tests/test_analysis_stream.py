@@ -154,3 +154,29 @@ def test_pairing_across_cuts(tmp_path: Path) -> None:
         assert a.metrics["vectors_accepted"] == 4
         assert a.metrics["positions"]["checked"] == 1  # P after PF: the last is at rest
     same(path, streamed=True, keep_rows=0, reads_per_part=1, window_lines=1)
+
+
+def test_streamed_report_and_tables(tmp_path: Path) -> None:
+    """A capture too long to keep: the report's plots come from the bounded series and the
+    Parquet tables were written as it streamed, with the rows of the whole analysis."""
+    import pandas as pd
+
+    from conform.analysis import write_parquet, write_report
+
+    path = CAPTURES / "careless-noisy.mcap"
+    whole = analyze(path)
+    tables = write_parquet(whole, tmp_path / "whole")
+    a = analyze(path, keep_rows=0, parquet=tmp_path / "streamed", window_lines=500)
+    assert not a.whole and a.exchanges is None and a.plot is not None
+    html = write_report(a, tmp_path / "report")["html"].read_text()
+    assert html.count("data:image/png") == 5
+    assert write_parquet(a, tmp_path / "ignored") == a.tables
+    for name, p in tables.items():
+        old, new = pd.read_parquet(p), pd.read_parquet(a.tables[name])
+        assert list(new.columns) == list(old.columns)
+        assert len(new) == len(old), name
+        for col in ("t_cmd_first", "t_first", "t", "depth", "code", "line"):
+            if col in old:
+                assert (new[col].fillna(-1.0).to_numpy() == old[col].fillna(-1.0).to_numpy()).all()
+    ex = pd.read_parquet(a.tables["exchanges"])
+    assert (ex["status"].astype(str) == whole.exchanges["status"]).all()

@@ -50,13 +50,9 @@ def byte_times(d: Direction, t_first: np.ndarray, idx: np.ndarray) -> np.ndarray
 
 def chunk_first_times(d: Direction, baud: float | None, trust_capture: bool) -> np.ndarray:
     """First-byte time of every chunk: the capture's, or estimated from ``baud``."""
-    est = d.t_read - (d.length * BITS_PER_BYTE / baud if baud else 0.0)
-    if d.chunks:
-        prev = np.concatenate([[-np.inf], np.maximum.accumulate(d.t_read)[:-1]])
-        est = np.maximum(est, np.minimum(prev, d.t_read))
-    if trust_capture:
-        return np.where(np.isnan(d.t_first), est, d.t_first)
-    return est
+    from conform.analysis.stream import first_byte_times
+
+    return first_byte_times(d, baud, trust_capture, -np.inf)
 
 
 @dataclass

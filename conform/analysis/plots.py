@@ -64,6 +64,16 @@ def _limit(ax: Any, a: Any) -> None:
         ax.set_xlim(left=lo if np.isfinite(lo) else None, right=hi if np.isfinite(hi) else None)
 
 
+def _over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str) -> str:
+    """Labels, the report's time range and the legend of a plot over time; its PNG."""
+    ax.set_xlabel("s from the start")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    _limit(ax, a)
+    _legend(ax)
+    return _png(fig)
+
+
 def _thin(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     n = len(arrays[0])
     if n <= MAX_POINTS:
@@ -89,41 +99,7 @@ def _latency_values(a: Any, col: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def latency_plots(a: Any) -> str | None:
-    if not a.whole:
-        return _latency_plots_summary(a)
-    ex = a.exchanges
-    ok = ex["status"].to_numpy() == "answered"
-    rtt = ex["rtt"].to_numpy()[ok] * 1000
-    rtt = rtt[np.isfinite(rtt)]
-    if len(rtt) == 0:
-        return None
-    _use_agg()
-    import matplotlib.pyplot as plt
-
-    fig, (h, c) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=100)
-    hi = float(np.quantile(rtt, 0.995)) if len(rtt) > 10 else float(rtt.max())
-    h.hist(np.clip(rtt, 0, hi), bins=60, color="#4477aa")
-    h.set_xlabel("round trip, ms (clipped at p99.5)")
-    h.set_ylabel("exchanges")
-    h.set_title("Latency histogram")
-    for col, label, color in (("rtt", "round trip", "#4477aa"), ("unit_time", "unit", "#228833"),
-                              ("host_time", "host turnaround", "#cc6677")):
-        v = ex[col].to_numpy()[ok] * 1000
-        v = np.sort(v[np.isfinite(v)])
-        if len(v):
-            y = np.arange(1, len(v) + 1) / len(v)
-            xs, ys = _thin(v, y)
-            c.plot(xs, ys, label=label, color=color)
-    c.set_xscale("symlog", linthresh=0.1)
-    c.set_xlabel("ms")
-    c.set_ylabel("fraction")
-    c.set_title("Latency CDF")
-    _legend(c)
-    return _png(fig)
-
-
-def _latency_plots_summary(a: Any) -> str | None:
-    """Histogram and CDF of a streamed analysis, from its latency summaries."""
+    """Histogram and CDF of the latencies (every exchange, or a long capture's summaries)."""
     rtt, n = _latency_values(a, "rtt")
     if len(rtt) == 0:
         return None
@@ -131,8 +107,11 @@ def _latency_plots_summary(a: Any) -> str | None:
     import matplotlib.pyplot as plt
 
     fig, (h, c) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=100)
-    hi = a.plot.rtt_values.quantile([0.995])[0] * 1000
-    h.hist(np.clip(rtt, 0, hi), bins=60, weights=n, color="#4477aa")
+    if not a.whole:
+        hi = a.plot.rtt_values.quantile([0.995])[0] * 1000
+    else:
+        hi = float(np.quantile(rtt, 0.995)) if len(rtt) > 10 else float(rtt.max())
+    h.hist(np.clip(rtt, 0, hi), bins=60, weights=None if a.whole else n, color="#4477aa")
     h.set_xlabel("round trip, ms (clipped at p99.5)")
     h.set_ylabel("exchanges")
     h.set_title("Latency histogram")
@@ -194,12 +173,7 @@ def _latency_time_summary(a: Any) -> str | None:
     pos = lo[w][lo[w] > 0]
     if len(pos) and hi[w].max() / pos.min() > 30:
         ax.set_yscale("log")
-    ax.set_xlabel("s from the start")
-    ax.set_ylabel("round trip, ms")
-    ax.set_title("Latency over time")
-    _limit(ax, a)
-    _legend(ax)
-    return _png(fig)
+    return _over_time(fig, ax, a, "round trip, ms", "Latency over time")
 
 
 def latency_time_plot(a: Any) -> str | None:
@@ -239,12 +213,7 @@ def latency_time_plot(a: Any) -> str | None:
     pos = ys[ys > 0]
     if len(pos) and pos.max() / pos.min() > 30:  # long tails: a log scale keeps both visible
         ax.set_yscale("log")
-    ax.set_xlabel("s from the start")
-    ax.set_ylabel("round trip, ms")
-    ax.set_title("Latency over time")
-    _limit(ax, a)
-    _legend(ax)
-    return _png(fig)
+    return _over_time(fig, ax, a, "round trip, ms", "Latency over time")
 
 
 def throughput_plot(a: Any) -> str | None:
@@ -291,12 +260,8 @@ def _queue_summary(a: Any) -> str | None:
         if total:
             ax.plot(st, np.zeros(len(st)), "^", color="#cc3311", ms=7,
                     label=f"starvation ({total}{', bins with any' if bucketed else ''})")
-    ax.set_xlabel("s from the start")
-    ax.set_ylabel("vectors queued")
-    ax.set_title("Queue depth over time (replayed through the unit's motion model)")
-    _limit(ax, a)
-    _legend(ax)
-    return _png(fig)
+    return _over_time(fig, ax, a, "vectors queued",
+                      "Queue depth over time (replayed through the unit's motion model)")
 
 
 def queue_plot(a: Any) -> str | None:
@@ -316,12 +281,8 @@ def queue_plot(a: Any) -> str | None:
         st = st[_window(a, st)]
         ax.plot(st, np.zeros(len(st)), "^", color="#cc3311", ms=7,
                 label=f"starvation ({len(st)})")
-    ax.set_xlabel("s from the start")
-    ax.set_ylabel("vectors queued")
-    ax.set_title("Queue depth over time (replayed through the unit's motion model)")
-    _limit(ax, a)
-    _legend(ax)
-    return _png(fig)
+    return _over_time(fig, ax, a, "vectors queued",
+                      "Queue depth over time (replayed through the unit's motion model)")
 
 
 def _path_summary(a: Any) -> str | None:
