@@ -125,11 +125,16 @@ class Analysis:
         return dict(self.metrics.get("finding_counts", {}))
 
 
-def frames_frame(d: fr.DecodedLines, t0: float, sl: slice = slice(None), base: int = 0
-                 ) -> pd.DataFrame:
-    """Lines ``sl`` of ``d`` as a table; ``base``: the capture's number of ``d``'s line 0."""
+def frames_frame(d: fr.DecodedLines, t0: float, sl: slice = slice(None), base: int = 0,
+                 arrow_text: bool = False) -> pd.DataFrame:
+    """Lines ``sl`` of ``d`` as a table; ``base``: the capture's number of ``d``'s line 0;
+    ``arrow_text``: the text as an Arrow column (for Parquet: no Python string per line)."""
+    from conform.analysis.tables import escaped
+
     lo, hi, _ = sl.indices(len(d))
-    bodies = d.lines.bodies.slice(lo, max(hi - lo, 0)).to_pylist()
+    raw = d.lines.bodies.slice(lo, max(hi - lo, 0))
+    text = pd.arrays.ArrowExtensionArray(escaped(raw)) if arrow_text else [
+        escape_bytes(b) for b in raw.to_pylist()]
     return pd.DataFrame({
         "direction": d.direction,
         "line": np.arange(lo, max(hi, lo)) + base,
@@ -144,7 +149,7 @@ def frames_frame(d: fr.DecodedLines, t0: float, sl: slice = slice(None), base: i
         "checksum_status": fr.CHECKSUM_NAMES[d.checksum[sl].astype(np.int64)],
         "checksum_mode": d.checksum_mode[sl],
         "detail": d.detail[sl],
-        "text": [escape_bytes(b) for b in bodies],
+        "text": text,
     })
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-import pyarrow.compute  # noqa: F401 - pa.compute
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 ROW_GROUP = 131_072
@@ -96,13 +96,31 @@ TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last")
          "queue_depth": ("t",)}
 
 
+def escaped(bodies: pa.BinaryArray) -> pa.Array:
+    """``escape_bytes`` of every line, as an Arrow string array: lines of printable ASCII
+    (nearly all) are taken as they are in one pass, the others escaped one by one."""
+    from conform.capture.session import escape_bytes
+
+    plain = pc.match_substring_regex(bodies, r"^[\x20-\x5b\x5d-\x7e]*$").to_numpy(
+        zero_copy_only=False)
+    text = bodies.cast(pa.string(), safe=False)
+    if plain.all():
+        return text
+    odd = np.flatnonzero(~plain)
+    fixed = pa.array([escape_bytes(b) for b in bodies.take(pa.array(odd)).to_pylist()],
+                     pa.string())
+    return pc.replace_with_mask(text, pa.array(~plain), fixed)
+
+
 def _arrow(df: pd.DataFrame) -> pa.Table:
     """Text columns as dictionary-encoded strings (names, kinds, statuses) or strings; the
     same schema for every part of a table, whatever values a part holds."""
     cols = {}
     for c in df.columns:
         v = df[c]
-        if not (pd.api.types.is_numeric_dtype(v) or pd.api.types.is_bool_dtype(v)):
+        if isinstance(v.dtype, pd.ArrowDtype):
+            cols[c] = pa.array(v.array)
+        elif not (pd.api.types.is_numeric_dtype(v) or pd.api.types.is_bool_dtype(v)):
             arr = pa.array(v.astype("string").to_numpy(na_value=None), pa.string())
             cols[c] = arr.dictionary_encode() if c in CODED else arr
         else:
@@ -157,7 +175,6 @@ class ParquetStream:
     def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int) -> None:
         """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``)."""
         from conform.analysis.analyze import frames_frame
-        from conform.capture.session import escape_bytes
 
         if self.t0 is None:
             t = np.concatenate([host.t_first, unit.t_first])
@@ -167,14 +184,16 @@ class ParquetStream:
             self.t0 = float(t.min()) if len(t) else 0.0
         row0 = int(ex["frame"].iloc[0]) if len(ex) else 0
         part = ex.copy()
-        part["command"] = [escape_bytes(b) for b in host.lines.bodies.to_pylist()]
+        text = pd.Series(pd.arrays.ArrowExtensionArray(escaped(host.lines.bodies)),
+                         index=part.index)
+        part["command"] = text
         self._put("exchanges", part)
-        fh = frames_frame(host, 0.0, base=row0)
+        fh = frames_frame(host, 0.0, base=row0, arrow_text=True)
         fh["packet"] = ex["packet"].to_numpy()
         fh["packet_role"] = ex["packet_role"].to_numpy()
         self._put("frames_host", fh)
         if len(unit):
-            self._put("frames_unit", frames_frame(unit, 0.0, base=unit_base))
+            self._put("frames_unit", frames_frame(unit, 0.0, base=unit_base, arrow_text=True))
 
     def depth(self, t: Any, depth: Any) -> None:
         if self.t0 is not None and len(t):
@@ -206,7 +225,7 @@ def _shift(path: Path, cols: tuple[str, ...], by: float, t0: float | None = None
             t = f.read_row_group(i)
             for c in cols:
                 j = t.schema.get_field_index(c)
-                t = t.set_column(j, c, pa.compute.add(t.column(c), by))
+                t = t.set_column(j, c, pc.add(t.column(c), by))
             if t0 is not None:
                 j = t.schema.get_field_index("t0")
                 t = t.set_column(j, "t0", pa.array(np.full(len(t), t0)))
