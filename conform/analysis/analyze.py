@@ -473,6 +473,10 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
             whatif_rows = whatif(ex, accepted, host.result, var, used, rep)
         except Exception as exc:  # noqa: BLE001
             notes.append(f"what-if replay failed: {type(exc).__name__}: {exc}")
+    elif not whole and whatif_replays and rep_stream.control_row < 0:
+        r = rep_stream  # the scenarios from the summaries, without the simulated replays
+        whatif_rows = r.inputs.rows(used, r.durations.median() if r.durations.n else np.nan,
+                                    r.starved, r.end_max - r.push_min if r.completed else 0.0)
     if rep is not None:
         rep.whatif = whatif_rows
         notes.extend(rep.notes[:10])

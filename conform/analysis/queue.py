@@ -356,33 +356,20 @@ def whatif(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
     vec_rows = np.flatnonzero(accepted)
     if len(vec_rows) < 2 or not baud:
         return []
-    byte_t = 10.0 / baud
     # medians of three columns over the single (unpacketed) vectors: no copy of the table
     plain = vec_rows[ex["packet"].to_numpy()[vec_rows] < 0]
     src = plain if len(plain) else vec_rows
-    cmd_w = float(np.median(ex["cmd_bytes"].to_numpy()[src])) * byte_t
-    ans_w = 2 * byte_t
     ut = ex["unit_time"].to_numpy()[src]
     ht = ex["host_time"].to_numpy()[src]
-    lat = float(np.nanmedian(ut)) if np.isfinite(ut).any() else 0.0
-    host = float(np.nanmedian(ht)) if np.isfinite(ht).any() else 0.0
-    lat, host = max(lat, 0.0), max(host, 0.0)
     durations = rep.ends - rep.starts
-    need = float(np.median(durations)) if len(durations) else float("nan")
-    observed = float(np.median(np.diff(ex["t_cmd_first"].to_numpy()[vec_rows])))
-    scenarios = [("as captured", observed)]
-    scenarios.append(("no converter latency (RS232)", cmd_w + ans_w + min(lat, 0.0005)
-                      + min(host, 0.0005)))
-    for n in (10, 20):
-        overhead = (6 + 8) * byte_t + 6 * byte_t + lat + host
-        scenarios.append((f"packets of {n}", cmd_w + overhead / n))
-    out = []
-    for label, cycle in scenarios:
-        row: dict[str, Any] = {"scenario": label, "seconds_per_vector": cycle,
-                               "supply_per_s": 1.0 / cycle if cycle > 0 else float("inf"),
-                               "consumption_per_s": 1.0 / need if need > 0 else float("nan")}
-        row["keeps_up"] = bool(cycle <= need) if need == need else None
-        if label != "as captured" and len(vec_rows) <= WHATIF_MAX_VECTORS:
+    rows = scenarios(baud, float(np.median(ex["cmd_bytes"].to_numpy()[src])),
+                     float(np.nanmedian(ut)) if np.isfinite(ut).any() else 0.0,
+                     float(np.nanmedian(ht)) if np.isfinite(ht).any() else 0.0,
+                     float(np.median(durations)) if len(durations) else float("nan"),
+                     float(np.median(np.diff(ex["t_cmd_first"].to_numpy()[vec_rows]))))
+    for row in rows:
+        if row["scenario"] != "as captured" and len(vec_rows) <= WHATIF_MAX_VECTORS:
+            cycle = row["seconds_per_vector"]
             t0 = float(ex["t_cmd_last"].to_numpy()[vec_rows[0]])
             arrival = ex["t_cmd_last"].to_numpy().astype(float).copy()
             arrival[vec_rows] = t0 + cycle * np.arange(len(vec_rows))
@@ -390,12 +377,75 @@ def whatif(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
             sim = replay(ex, accepted, host_parsed, variant, arrival=arrival)
             row["starvations"] = len(sim.starvations)
             row["job_seconds"] = float(sim.ends.max() - t0) if len(sim.ends) else 0.0
-        elif label == "as captured":
+        elif row["scenario"] == "as captured":
             row["starvations"] = len(rep.starvations)
             row["job_seconds"] = (float(rep.ends.max() - rep.pushes.min())
                                   if len(rep.ends) else 0.0)
+    return rows
+
+
+def scenarios(baud: float, cmd_bytes: float, unit_time: float, host_time: float,
+              need: float, observed: float) -> list[dict[str, Any]]:
+    """The what-if rows from the medians of the single vectors (command bytes, unit time,
+    host turnaround), of the time a vector takes to run and between two vectors sent."""
+    byte_t = 10.0 / baud
+    cmd_w = cmd_bytes * byte_t
+    ans_w = 2 * byte_t
+    lat, host = max(unit_time, 0.0), max(host_time, 0.0)
+    cycles = [("as captured", observed)]
+    cycles.append(("no converter latency (RS232)", cmd_w + ans_w + min(lat, 0.0005)
+                   + min(host, 0.0005)))
+    for n in (10, 20):
+        overhead = (6 + 8) * byte_t + 6 * byte_t + lat + host
+        cycles.append((f"packets of {n}", cmd_w + overhead / n))
+    out = []
+    for label, cycle in cycles:
+        row: dict[str, Any] = {"scenario": label, "seconds_per_vector": cycle,
+                               "supply_per_s": 1.0 / cycle if cycle > 0 else float("inf"),
+                               "consumption_per_s": 1.0 / need if need > 0 else float("nan")}
+        row["keeps_up"] = bool(cycle <= need) if need == need else None
         out.append(row)
     return out
+
+
+class WhatIfInputs:
+    """The medians ``scenarios`` needs, gathered window by window (``summaries``)."""
+
+    def __init__(self) -> None:
+        from conform.analysis.summaries import Quantiles
+
+        self.q = {k: Quantiles() for k in ("cmd_bytes", "unit_time", "host_time",
+                                           "all_cmd_bytes", "all_unit_time", "all_host_time",
+                                           "gap")}
+        self.vectors = 0
+        self.last_t: float | None = None
+
+    def feed(self, ex: pd.DataFrame, vec_rows: np.ndarray) -> None:
+        if len(vec_rows) == 0:
+            return
+        plain = vec_rows[ex["packet"].to_numpy()[vec_rows] < 0]
+        for col in ("cmd_bytes", "unit_time", "host_time"):
+            v = ex[col].to_numpy()
+            self.q[col].add(v[plain])
+            self.q["all_" + col].add(v[vec_rows])
+        t = ex["t_cmd_first"].to_numpy()[vec_rows]
+        self.q["gap"].add(np.diff(t if self.last_t is None else np.concatenate([[self.last_t],
+                                                                                 t])))
+        self.last_t = float(t[-1])
+        self.vectors += len(vec_rows)
+
+    def rows(self, baud: float | None, need: float, starvations: int,
+             job_seconds: float) -> list[dict[str, Any]]:
+        if self.vectors < 2 or not baud:
+            return []
+        pre = "" if self.q["cmd_bytes"].n else "all_"
+        med = {c: self.q[pre + c].median() if self.q[pre + c].n else 0.0
+               for c in ("cmd_bytes", "unit_time", "host_time")}
+        rows = scenarios(baud, med["cmd_bytes"], med["unit_time"], med["host_time"], need,
+                         self.q["gap"].median())
+        rows[0]["starvations"] = starvations
+        rows[0]["job_seconds"] = job_seconds
+        return rows
 
 
 class StreamReplay:
@@ -448,6 +498,7 @@ class StreamReplay:
         self.standstill_s = 0.0
         self.supply, self.consume = TimeBins(), TimeBins()
         self.starve_t = TimeBins()
+        self.inputs = WhatIfInputs()
         self.sink: Any = None  # depth (t, depth) for the Parquet table once not kept
         self.depth_x: Any = None  # summaries.Extremes of the depth for long captures' plots
         self.path: Any = None  # plots.PathSample for long captures' plots
@@ -477,6 +528,7 @@ class StreamReplay:
         ok = (code == 0) & (ex["status"].to_numpy()[sl] == "answered")
         ctrl = isin(names, list(MODAL | CONTROL)) & ok
         acc = accepted[sl]
+        self.inputs.feed(ex, np.flatnonzero(acc) + lo)
         rows = np.flatnonzero(acc | ctrl)
         is_vec = acc[rows]
         stop = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
