@@ -338,16 +338,24 @@ class ExchangeStream:
         w = min(self.host.horizon(), self.unit.horizon())
         hl = hl_all if w == np.inf else hl_all.head(int((hl_all.term > 0).sum()))
         ul = ul_all if w == np.inf else ul_all.head(int((ul_all.term > 0).sum()))
-        ht = line_times(hd, hl, hd.t_first)
-        ut = line_times(ud, ul, ud.t_first)
-        kk = _prefix_below(ht[1], w)
         limit = self.window_lines
-        if kk < limit and w != np.inf:
-            return None  # not a window's worth yet: wait for more bytes
         while True:
+            # times of the lines that can be in this window only (not the whole buffer)
+            ht = line_times(hd, hl.head(limit + 1), hd.t_first)
+            kk = _prefix_below(ht[1], w)  # every line if fewer than limit + 1
+            if kk < limit and w != np.inf:
+                return None  # not a window's worth yet: wait for more bytes
             k = min(kk, limit)
-            wc = w if k == kk else min(w, float(ht[1][k]))
-            j = _prefix_below(ut[1], wc)
+            # all the lines below the horizon are in: one at or above it was seen, or none left
+            full = k == kk and (kk < len(ht[1]) or len(ht[1]) == len(hl))
+            wc = w if full else min(w, float(ht[1][k]))
+            m = min(len(ul), 2 * k + 16)
+            while True:
+                ut = line_times(ud, ul.head(m), ud.t_first)
+                j = _prefix_below(ut[1], wc)
+                if j < m or m == len(ul):
+                    break
+                m = min(len(ul), 2 * m)
             hk = hl.head(k)
             ev_idx, ev_state = mode_events(hd.data, hk)
             mode = self.mode
@@ -367,7 +375,7 @@ class ExchangeStream:
             packets = find_packets(host, self.open, self.started)
             answer, extra, unsolicited = pair(host, unit, packets, (hr, ur))
             exp_idx = np.flatnonzero(expecting(host, packets))
-            final = w == np.inf and k == kk
+            final = w == np.inf and full
             if final:
                 cut = k
             else:
@@ -375,7 +383,7 @@ class ExchangeStream:
                 cands = exp_idx[ok]
                 cands = cands[ht[1][cands] < wc]
                 if len(cands) == 0:
-                    if k < kk:
+                    if not full:
                         limit *= 2  # no place to cut yet: look further
                         continue
                     return None

@@ -370,26 +370,25 @@ class PathSample:
         self.pos = np.zeros(2, np.int64)
         self.pushed = 0
         self.step = 1
-        self.idx: list[int] = [0]
-        self.xy: list[tuple[int, int]] = [(0, 0)]
+        self.idx = np.zeros(1, np.int64)
+        self.xy = np.zeros((1, 2), np.int64)
         self.stops: list[int] = []
         self.n_stops = 0
 
     def push(self, d: np.ndarray) -> None:
         if len(d) == 0:
             return
+        while (self.pushed + len(d)) // self.step > 2 * MAX_POINTS:  # coarser first
+            self.step *= 2
+            keep = self.idx % self.step == 0
+            self.idx, self.xy = self.idx[keep], self.xy[keep]
         xy = np.cumsum(d[:, :2], axis=0) + self.pos
         k = np.arange(1, len(d) + 1) + self.pushed  # point k ends vector k - 1
-        sel = np.flatnonzero(k % self.step == 0)
-        self.idx.extend(k[sel].tolist())
-        self.xy.extend(map(tuple, xy[sel].tolist()))
+        sel = k % self.step == 0
+        self.idx = np.concatenate([self.idx, k[sel]])
+        self.xy = np.concatenate([self.xy, xy[sel]])
         self.pos = xy[-1]
         self.pushed += len(d)
-        while len(self.idx) > 2 * MAX_POINTS:
-            self.step *= 2
-            keep = [i for i, p in enumerate(self.idx) if p % self.step == 0]
-            self.idx = [self.idx[i] for i in keep]
-            self.xy = [self.xy[i] for i in keep]
 
     def done(self, seq: np.ndarray, v_out: np.ndarray) -> None:
         stop = seq[(v_out <= 0) & (seq + 1 < self.pushed)]
@@ -400,9 +399,8 @@ class PathSample:
 
     def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x, y) of the kept path and of the stops drawn."""
-        xy = np.array(self.xy, np.int64).reshape(-1, 2)
-        at = np.searchsorted(np.array(self.idx), np.array(self.stops, np.int64),
-                             side="right") - 1
+        xy = self.xy
+        at = np.searchsorted(self.idx, np.array(self.stops, np.int64), side="right") - 1
         return xy[:, 0], xy[:, 1], xy[np.clip(at, 0, len(xy) - 1)]
 
 

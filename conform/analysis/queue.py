@@ -427,7 +427,8 @@ class WhatIfInputs:
         for col in ("cmd_bytes", "unit_time", "host_time"):
             v = ex[col].to_numpy()
             self.q[col].add(v[plain])
-            self.q["all_" + col].add(v[vec_rows])
+            if not self.q["cmd_bytes"].n:  # every vector counts only while none is single
+                self.q["all_" + col].add(v[vec_rows])
         t = ex["t_cmd_first"].to_numpy()[vec_rows]
         self.q["gap"].add(np.diff(t if self.last_t is None else np.concatenate([[self.last_t],
                                                                                  t])))
@@ -446,6 +447,38 @@ class WhatIfInputs:
         rows[0]["starvations"] = starvations
         rows[0]["job_seconds"] = job_seconds
         return rows
+
+
+class _Queue:
+    """The vectors still queued in a stream replay (pulses, continuity, parameter row,
+    arrival, exchange row), in buffers that grow by half when full and drop finished
+    vectors from the front by moving a start index: no copy of the queue per window."""
+
+    def __init__(self, naxes: int) -> None:
+        self.start = self.end = 0
+        self.bufs = [np.zeros((0, naxes), np.int64), np.zeros(0, bool), np.zeros(0, np.int32),
+                     np.zeros(0), np.zeros(0, np.int64)]
+
+    def drop(self, n: int) -> None:
+        self.start += n
+
+    def append(self, *parts: np.ndarray) -> None:
+        n = len(parts[0])
+        live = self.end - self.start
+        if self.end + n > len(self.bufs[0]):  # room for half as much again, queue to the front
+            size = max(1024, (live + n) * 3 // 2)
+            new = []
+            for b in self.bufs:
+                nb = np.empty((size,) + b.shape[1:], b.dtype)
+                nb[:live] = b[self.start : self.end]
+                new.append(nb)
+            self.bufs, self.start, self.end = new, 0, live
+        for b, p in zip(self.bufs, parts, strict=True):
+            b[self.end : self.end + n] = p
+        self.end += n
+
+    def views(self) -> list[np.ndarray]:
+        return [b[self.start : self.end] for b in self.bufs]
 
 
 class StreamReplay:
@@ -472,10 +505,8 @@ class StreamReplay:
         self.states: dict[Any, int] = {self._key(self.params): 0}
         self.table: list[Any] = [self.params]
         self.t_max = -np.inf
-        z = np.zeros(0, np.int64)
-        self.q_d = np.zeros((0, self.naxes), np.int64)
-        self.q_cont, self.q_state = np.zeros(0, bool), np.zeros(0, np.int32)
-        self.q_t, self.q_row = np.zeros(0), z
+        self.q = _Queue(self.naxes)
+        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
         self.first = 0  # push index of q_*[0]
         self.pushed = 0
         self.control_row = -1
@@ -572,11 +603,9 @@ class StreamReplay:
         I[H] = 0
         self.first += done
         tacc = ev_t[is_vec]
-        self.q_d = np.concatenate([self.q_d[done:], d])
-        self.q_cont = np.concatenate([self.q_cont[done:], cont])
-        self.q_state = np.concatenate([self.q_state[done:], state])
-        self.q_t = np.concatenate([self.q_t[done:], tacc])
-        self.q_row = np.concatenate([self.q_row[done:], vrows])
+        self.q.drop(done)
+        self.q.append(d, cont, state, tacc, vrows)
+        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
         push = np.where(is_vec, np.cumsum(is_vec) - 1 + (self.pushed - self.first), -1)
         col = lambda f, dt: np.array([getattr(s, f) for s in self.table], dt)  # noqa: E731
         out = replay_vectors(ev_t.astype(float), push, self.q_d, self.q_cont, self.q_state,
@@ -665,7 +694,8 @@ class StreamReplay:
         z = np.zeros(0, np.int64)
         self._run(np.zeros(0), np.zeros(0, bool), np.zeros((0, self.naxes), np.int64),
                   np.zeros(0, bool), np.zeros(0, np.int32), z, self.variant.queue + 10_000)
-        self.q_d = np.zeros((0, self.naxes), np.int64)  # the rest never ran
+        self.q = _Queue(self.naxes)  # the rest never ran
+        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
 
     def mean_depth(self) -> float:
         if self.depth_n < 2:
