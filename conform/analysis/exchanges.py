@@ -334,28 +334,35 @@ class ExchangeStream:
         )
 
         hd, ud = self.host.view(), self.unit.view()
-        hl_all, ul_all = split_lines(hd.data, self.mode_a1), split_lines(ud.data, self.mode_a1)
         w = min(self.host.horizon(), self.unit.horizon())
-        hl = hl_all if w == np.inf else hl_all.head(int((hl_all.term > 0).sum()))
-        ul = ul_all if w == np.inf else ul_all.head(int((ul_all.term > 0).sum()))
+
+        def lines(d: Any, n: int) -> tuple[Any, Any, bool]:
+            """The first ``n`` lines of a buffer, those complete (all at the end of the
+            stream), and whether there may be more."""
+            cut = split_lines(d.data, self.mode_a1, n)
+            done = cut if w == np.inf else cut.head(int((cut.term > 0).sum()))
+            return cut, done, len(cut) == n
+
         limit = self.window_lines
         while True:
-            # times of the lines that can be in this window only (not the whole buffer)
+            # only the lines this window can hold are cut out and timed, not the whole buffer
+            hl_all, hl, more = lines(hd, limit + 2)
             ht = line_times(hd, hl.head(limit + 1), hd.t_first)
             kk = _prefix_below(ht[1], w)  # every line if fewer than limit + 1
             if kk < limit and w != np.inf:
                 return None  # not a window's worth yet: wait for more bytes
             k = min(kk, limit)
             # all the lines below the horizon are in: one at or above it was seen, or none left
-            full = k == kk and (kk < len(ht[1]) or len(ht[1]) == len(hl))
+            full = k == kk and (kk < len(ht[1]) or (len(ht[1]) == len(hl) and not more))
             wc = w if full else min(w, float(ht[1][k]))
-            m = min(len(ul), 2 * k + 16)
+            m = 2 * k + 16
             while True:
-                ut = line_times(ud, ul.head(m), ud.t_first)
+                ul_all, ul, umore = lines(ud, m)
+                ut = line_times(ud, ul, ud.t_first)
                 j = _prefix_below(ut[1], wc)
-                if j < m or m == len(ul):
+                if j < len(ul) or not umore:
                     break
-                m = min(len(ul), 2 * m)
+                m *= 2
             hk = hl.head(k)
             ev_idx, ev_state = mode_events(hd.data, hk)
             mode = self.mode

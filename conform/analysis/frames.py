@@ -72,8 +72,9 @@ class Lines:
         return Lines(self.start[:n], self.end[:n], self.term[:n], self.bodies.slice(0, n))
 
 
-def split_lines(data: np.ndarray, mode: str = "cr") -> Lines:
-    """Cut the stream into lines (A1: ``cr``, ``cr-or-lf`` or ``crlf``)."""
+def split_lines(data: np.ndarray, mode: str = "cr", max_lines: int | None = None) -> Lines:
+    """Cut the stream into lines (A1: ``cr``, ``cr-or-lf`` or ``crlf``); only the first
+    ``max_lines`` when given (a window of a stream needs no more)."""
     if mode == "cr-or-lf":
         ends = np.flatnonzero((data == CR) | (data == LF))
     else:
@@ -92,6 +93,8 @@ def split_lines(data: np.ndarray, mode: str = "cr") -> Lines:
     if term[-1] == 0 and ends_all[-1] == starts[-1]:
         keep[-1] = False
     starts, ends_all, term = starts[keep], ends_all[keep], term[keep]
+    if max_lines is not None:
+        starts, ends_all, term = starts[:max_lines], ends_all[:max_lines], term[:max_lines]
     return Lines(starts, ends_all, term, _binary(data, starts, ends_all))
 
 
