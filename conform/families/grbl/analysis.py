@@ -14,6 +14,7 @@ they could exceed the buffer, a byte may be lost on the hardware: a hazard.
 from __future__ import annotations
 
 import json
+import re
 import statistics
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -277,12 +278,25 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                         realtime=[(ht[r.offset], r.byte) for r in realtime])
 
 
+_AXIS_WORD = re.compile(r"[XYZ][-+.\d]")
+_NOT_MOTION = re.compile(r"G0*(?:10|28\.1|30\.1|92(?:\.1)?|43\.1)(?![\d.])")
+
+
+def is_motion(line: str) -> bool:
+    """A line that moves the machine: a jog, or g-code with axis words (modal G0-G3 moves
+    need no G word) that is not one of the axis commands that only store or set offsets
+    (G10, G28.1, G30.1, G92, G43.1). ``G21`` is not ``G2``."""
+    text = "".join(line.split()).upper()
+    if text.startswith("$"):
+        return text.startswith("$J=")
+    return bool(_AXIS_WORD.search(text)) and not _NOT_MOTION.search(text)
+
+
 def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blocks: int,
                 rel: Any, out: _Out) -> None:
     """The planner ran dry mid-job: a report says Idle (or Bf: shows every block free while
     running) after the first motion line and before the sender's last line."""
-    motion = [e for e in exchanges if e.text[:2].upper() in ("G0", "G1", "G2", "G3")
-              or e.text[:3].upper() in ("$J=",)]
+    motion = [e for e in exchanges if is_motion(e.text)]
     if len(motion) < 2:
         return
     t_first, t_last = motion[0].t_answer or motion[0].t_sent, motion[-1].t_sent
