@@ -62,6 +62,7 @@ class GrblAnalysis:
     metrics: dict[str, Any]
     notes: list[str] = field(default_factory=list)
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
+    reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -267,7 +268,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
         "streaming_method": method, "paced_share": round(share, 3),
         "max_lines_in_flight": max_lines,
-        "max_bytes_in_flight": max_bytes, "rx_buffer": limit,
+        "max_bytes_in_flight": max_bytes, "rx_buffer": limit, "planner_blocks": v.planner_blocks,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
         "poll_interval_median_s": statistics.median(intervals) if intervals else None,
@@ -275,7 +276,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "hazards": out.counts.get("rx-overflow-hazard", 0),
     }
     return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
-                        realtime=[(ht[r.offset], r.byte) for r in realtime])
+                        realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports)
 
 
 _AXIS_WORD = re.compile(r"[XYZ][-+.\d]")
