@@ -130,9 +130,11 @@ def test_html_report_of_a_clean_session_and_of_no_traffic(tmp_path):
     _u, _traffic, a = run("counting", poll=0.2)
     html = write_report(a, str(tmp_path / "clean"))["html"].read_text()
     assert "No findings" in html and "character-counting" in html and "line to answer" in html
+    assert 'alt="machine state from the status reports"' in html      # polled: the state plot
     empty = analyze_streams([], [])
     html = write_report(empty, str(tmp_path / "empty"))["html"].read_text()
     assert "No findings" in html and "data:image/png" not in html
+    assert "No status reports in this session" in html
 
 
 def test_unknown_protocol_is_reported_as_such(tmp_path):

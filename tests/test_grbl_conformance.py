@@ -105,3 +105,19 @@ def test_the_stop_is_confirmed_by_the_banner():
     # held until still, then reset: no ALARM:3, so Idle (not Alarm) and the position is kept
     assert target.unit.state == "Idle" and not target.unit.planner.blocks
     assert -20.0 < target.unit.position[0] < 0.0
+
+
+def test_ctrl_c_halts_the_unit_and_keeps_the_results():
+    """The engine's runner: Ctrl-C mid-run halts the unit with grbl's stop (feed hold, soft
+    reset, banner) and the run comes back with the checks done and what was sent."""
+    target = EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f")
+    seen = []
+
+    def interrupt(result):
+        seen.append(result)
+        if len(seen) == 3:
+            raise KeyboardInterrupt
+
+    run = run_checks(target, V.id, progress=interrupt)
+    assert len(run.checks) == 3
+    assert run.aborted.startswith("interrupted (Ctrl-C) after 3 checks; stopped: feed hold")

@@ -151,3 +151,21 @@ def test_control_cli_reports_errors(tmp_path):
                         str(tmp_path / "none.sock"), "state"], capture_output=True, text=True,
                        timeout=60)
     assert p.returncode == 2 and p.stderr.count("\n") == 1
+
+
+def test_control_requests_never_raise():
+    """Whatever a control client sends is answered with ok or error, never an exception (the
+    emulator thread runs these)."""
+    from conform.families.grbl.control import GrblControl
+    from conform.families.grbl.faults import GrblFaults
+    from conform.families.grbl.unit import GrblUnit
+
+    unit = GrblUnit(V)
+    control = GrblControl(GrblFaults())
+    for line in ("fault lose inf", "fault lose nan", "fault garble -1", "fault unplug 0",
+                 "fault unplug inf", "fault line latency=1e400", "fault line nonsense",
+                 "press", "press limit-w", "release door extra", "", "state", "help",
+                 "fault lose 3", "press door"):
+        reply = control(unit, line, 0.0)
+        assert reply.startswith(("ok", "error:")), (line, reply)
+    assert control.faults.lose_next == 3 and unit.state == "Door"

@@ -48,7 +48,7 @@ def test_the_right_sender_passes_every_other_scenario(tmp_path):
                                            if n not in ("lost-answers", "link-loss")], moves=50)
     assert not failed(g), {k: v for k, v in g.items() if v in (Grade.FAIL, Grade.DEVIATION)}
     by = {s.scenario.name: s for s in sessions}
-    assert g["feed-hold/hold-respected"] is Grade.PASS
+    assert g["feed-hold/hold-respected"] is Grade.PASS and g["slow-link/planner-fed"] is Grade.PASS
     assert by["garbled-answers"].faults["garbled_answers"] > 0
     assert g["error/error-recovery"] is Grade.PASS and g["alarm/alarm-stops"] is Grade.PASS
     assert g["stream/error-recovery"] is Grade.NOT_APPLICABLE
@@ -66,6 +66,7 @@ BAD = [
     ("continue-after-restart", "link-loss", {"link-loss/restart-stops"}),
     ("auto-resume", "feed-hold", {"feed-hold/hold-respected"}),
     ("fast-poll", "stream", {"stream/poll-rate"}),
+    ("send-response", "slow-link", {"slow-link/planner-fed"}),
 ]
 
 
@@ -75,7 +76,7 @@ def test_each_wrong_sender_is_caught_by_its_rule(tmp_path, mode, scenario, rules
     g, _ = judge(tmp_path, mode, [scenario], timeout=4 if mode == "waits-forever" else 60,
                  moves=40)
     assert rules <= failed(g), g
-    if mode in ("fast-poll", "auto-resume", "ignore-error"):
+    if mode in ("fast-poll", "auto-resume", "ignore-error", "send-response"):
         assert failed(g) == rules, g            # nothing else is wrong with these
 
 

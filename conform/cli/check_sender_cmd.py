@@ -34,8 +34,8 @@ from conform.errors import UserError
               help="Seconds before a program still running is stopped and graded as hung "
                    "(default per scenario, 30).")
 @click.option("--job", "job_file", default=None, type=INPUT_FILE,
-              help="A vector file to use as the job in every scenario instead of the "
-                   "scenario's own.")
+              help="A job file (GVE: vectors; grbl: g-code) to use in every scenario instead "
+                   "of the scenario's own.")
 @click.option("--seed", type=NON_NEGATIVE_INT, default=1, show_default=True, help="Seed of the faults.")
 @json_option("results.json's document")
 @click.argument("command", nargs=-1, type=click.UNPROCESSED)

@@ -98,12 +98,15 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
 @click.argument("words", nargs=-1, required=True)
 def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
     """Send a control command to a running emulator, e.g. `press stop`, `input 1 7 off`,
-    `release sensor`, `state`, `help`.
+    `release sensor`, `state`, `help` (GVE); `press door`, `press probe`, `press limit-x`,
+    `fault lose 2`, `fault unplug 1`, `state`, `help` (grbl).
 
     \b
-    Example:
+    Examples:
       conform emulate gve64-v19 --control /tmp/emu.sock &
       conform emulate control /tmp/emu.sock press stop
+      conform emulate grbl-1.1f --control /tmp/grbl.sock &
+      conform emulate control /tmp/grbl.sock press door
     """
     from conform.emulator.control import send_control
 

@@ -20,6 +20,7 @@ continue-after-restart  after the port came back (or a restart banner) it clears
                 and goes on with the job
 auto-resume     answers a Hold it did not cause with `~`
 fast-poll       polls `?` fifty times a second
+send-response   one line at a time: the next only after the answer to the last
 """
 
 import collections
@@ -124,6 +125,11 @@ class Sender:
                 self.stop = self.stop or "grbl restarted"
         # anything else: a push message, or a damaged line: never taken for an answer
 
+    def room(self, line):
+        if MODE == "send-response":
+            return not self.counted
+        return sum(c[1] for c in self.counted) + len(line) + 1 <= RX
+
     def run(self, lines):
         self.start()
         i, last_poll = 0, 0.0
@@ -135,8 +141,7 @@ class Sender:
                 if MODE == "counts-realtime":
                     self.counted.append(["?", 1])
                 last_poll = now
-            while self.stop is None and i < len(lines) and \
-                    sum(c[1] for c in self.counted) + len(lines[i]) + 1 <= RX:
+            while self.stop is None and i < len(lines) and self.room(lines[i]):
                 if MODE == "uncounted-poll" and i % 10 == 5:
                     self.write(b"$G\n")
                 self.write(lines[i].encode() + b"\n")

@@ -14,6 +14,7 @@ they could exceed the buffer, a byte may be lost on the hardware: a hazard.
 from __future__ import annotations
 
 import json
+import re
 import statistics
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -61,6 +62,7 @@ class GrblAnalysis:
     metrics: dict[str, Any]
     notes: list[str] = field(default_factory=list)
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
+    reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -266,7 +268,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
         "streaming_method": method, "paced_share": round(share, 3),
         "max_lines_in_flight": max_lines,
-        "max_bytes_in_flight": max_bytes, "rx_buffer": limit,
+        "max_bytes_in_flight": max_bytes, "rx_buffer": limit, "planner_blocks": v.planner_blocks,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
         "poll_interval_median_s": statistics.median(intervals) if intervals else None,
@@ -274,15 +276,28 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "hazards": out.counts.get("rx-overflow-hazard", 0),
     }
     return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
-                        realtime=[(ht[r.offset], r.byte) for r in realtime])
+                        realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports)
+
+
+_AXIS_WORD = re.compile(r"[XYZ][-+.\d]")
+_NOT_MOTION = re.compile(r"G0*(?:10|28\.1|30\.1|92(?:\.1)?|43\.1)(?![\d.])")
+
+
+def is_motion(line: str) -> bool:
+    """A line that moves the machine: a jog, or g-code with axis words (modal G0-G3 moves
+    need no G word) that is not one of the axis commands that only store or set offsets
+    (G10, G28.1, G30.1, G92, G43.1). ``G21`` is not ``G2``."""
+    text = "".join(line.split()).upper()
+    if text.startswith("$"):
+        return text.startswith("$J=")
+    return bool(_AXIS_WORD.search(text)) and not _NOT_MOTION.search(text)
 
 
 def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blocks: int,
                 rel: Any, out: _Out) -> None:
     """The planner ran dry mid-job: a report says Idle (or Bf: shows every block free while
     running) after the first motion line and before the sender's last line."""
-    motion = [e for e in exchanges if e.text[:2].upper() in ("G0", "G1", "G2", "G3")
-              or e.text[:3].upper() in ("$J=",)]
+    motion = [e for e in exchanges if is_motion(e.text)]
     if len(motion) < 2:
         return
     t_first, t_last = motion[0].t_answer or motion[0].t_sent, motion[-1].t_sent

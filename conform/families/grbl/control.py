@@ -66,6 +66,8 @@ class GrblControl:
                 return self._fault(args[0].lower(), args[1:], t)
         except (ValueError, UserError) as exc:
             return f"error: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a request never stops the emulator
+            return f"error: {type(exc).__name__}: {exc}"
         return f"error: cannot parse {line.strip()[:80]!r}; {HELP}"
 
     def _fault(self, kind: str, args: list[str], t: float) -> str:
@@ -80,7 +82,7 @@ class GrblControl:
         except ValueError:
             raise ValueError(f"{args[0]!r} is not a number") from None
         if kind in ("lose", "garble"):
-            if not (x >= 0 and x == int(x) and x <= 1_000_000):
+            if not (0 <= x <= 1_000_000 and x == int(x)):
                 raise ValueError(f"fault {kind} {args[0]}: expected a count 0..1000000")
             setattr(f, f"{kind}_next", int(x))
             return f"ok the next {int(x)} answer(s) will be {'lost' if kind == 'lose' else 'garbled'}"

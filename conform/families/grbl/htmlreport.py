@@ -64,6 +64,54 @@ def latency_plot(a: Any) -> str | None:
     return _png(fig)
 
 
+STATE_ROWS = ("Idle", "Run", "Jog", "Hold", "Door", "Home", "Check", "Alarm", "Sleep")
+
+
+def machine_plot(a: Any) -> str | None:
+    """What the status reports said over time: the state, and with ``Bf:`` the planner blocks
+    and receive-buffer bytes in use (where starvation and a full buffer show)."""
+    if not a.reports:
+        return None
+    t0 = min((e.t_sent for e in a.exchanges), default=a.reports[0][0])
+    t, state, blocks, rx = [], [], [], []
+    for when, text in a.reports:
+        fields = text.strip("<>").split("|")
+        name = fields[0].split(":")[0]
+        bf = next((f[3:].split(",") for f in fields if f.startswith("Bf:")), None)
+        t.append(when - t0)
+        state.append(STATE_ROWS.index(name) if name in STATE_ROWS else -1)
+        blocks.append(_in_use(a, bf, 0))
+        rx.append(_in_use(a, bf, 1))
+    fig, ax = _fig(7.5, 2.6 if all(b is None for b in blocks) else 3.6)
+    ax.plot(t, state, "|", ms=10, label="state")
+    ax.set_yticks(range(len(STATE_ROWS)), STATE_ROWS, fontsize=8)
+    ax.set_xlabel("time from the first line (s)")
+    if any(b is not None for b in blocks):
+        ax2 = ax.twinx()
+        ax2.step(t, [np.nan if b is None else b for b in blocks], where="post", color="tab:green",
+                 lw=0.8, label="planner blocks in use")
+        ax2.step(t, [np.nan if r is None else r for r in rx], where="post", color="tab:orange",
+                 lw=0.8, label="receive bytes in use")
+        ax2.set_ylabel("in use")
+        h1, l1 = ax.get_legend_handles_labels()
+        h2, l2 = ax2.get_legend_handles_labels()
+        _legend(ax2, h1 + h2, l1 + l2)
+    else:
+        _legend(ax)
+    return _png(fig)
+
+
+def _in_use(a: Any, bf: list[str] | None, i: int) -> float | None:
+    """Blocks (i=0) or bytes (i=1) in use from a ``Bf:`` field of free ones."""
+    if bf is None or len(bf) < 2:
+        return None
+    size = a.metrics.get("planner_blocks", 15) if i == 0 else a.metrics["rx_buffer"]
+    try:
+        return float(size - int(bf[i]))
+    except ValueError:
+        return None
+
+
 def latency_stats(a: Any) -> dict[str, float] | None:
     _t0, _t, lat = _times(a)
     lat = lat[np.isfinite(lat)] * 1000
@@ -84,6 +132,6 @@ def render_html(a: Any) -> str:
     by_sev: dict[str, int] = {}
     for f in a.findings:
         by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
-    plots = {"buffer": buffer_plot(a), "latency": latency_plot(a)}
+    plots = {"buffer": buffer_plot(a), "latency": latency_plot(a), "machine": machine_plot(a)}
     return env.get_template("report.html.j2").render(a=a, m=a.metrics, by_sev=by_sev,
                                                       plots=plots, latency=latency_stats(a))

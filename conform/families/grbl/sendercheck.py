@@ -40,6 +40,8 @@ SCENARIOS = {s.name: s for s in (
              tags=frozenset({"answers"})),
     Scenario("garbled-answers", "5 % of the answers arrive damaged", garble=0.05,
              tags=frozenset({"answers"})),
+    Scenario("slow-link", "a wireless serial bridge: 40-80 ms each way", faults="latency=40-80",
+             tags=frozenset({"fed"})),
     Scenario("feed-hold", "the machine's feed-hold button a third into the job, cycle start "
              "0.6 s later", actions=(Action("hold", 0.3, 0.6),), tags=frozenset({"hold"})),
     Scenario("link-loss", "the cable pulled a third into the job for 1 s: the port closes, "
@@ -52,7 +54,7 @@ MACHINE = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 5
 
 
 def default_job(n: int = 100) -> list[str]:
-    return ["G21G90", *(f"G1X{-(i % 20) * 0.25:.3f}Y{-(i % 7) * 0.15:.3f}F3000"
+    return ["G21G90", *(f"G1X{-(i % 20 + 1) * 0.25:.3f}Y{-(i % 7) * 0.15:.3f}F3000"
                         for i in range(n)), "M2"]
 
 

@@ -206,6 +206,22 @@ def poll_rate(r: Any) -> Result:
             f"{m['status_polls']} polls, median interval {med * 1000:.0f} ms")
 
 
+def planner_fed(r: Any) -> Result:
+    """Where the link is slow, a sender that waits for each answer leaves the planner dry
+    between lines; character counting keeps lines waiting in grbl's buffer instead."""
+    if "fed" not in r.scenario.tags:
+        return "NOT-APPLICABLE", "", "graded only where the link is slow"
+    if not r.analysis.metrics.get("status_reports"):
+        return "NOT-APPLICABLE", "", "no status reports to see the planner by"
+    dry = [f for f in r.analysis.findings if f.kind == "planner-starved"]
+    if dry:
+        return ("FAIL", "the planner kept fed mid-job",
+                f"{r.analysis.metrics['finding_counts']['planner-starved']} status reports saw "
+                f"it dry ({r.analysis.metrics['streaming_method']}); the first: {dry[0].message}")
+    return "PASS", "the planner kept fed mid-job", \
+        f"{r.analysis.metrics['status_reports']} status reports, none of a dry planner"
+
+
 MUST = "MUST"
 RULES = [
     ("terminates", "the program ends by itself", "docs/grbl.md §Judging a sender (harness rule)",
@@ -235,6 +251,9 @@ RULES = [
     ("hold-respected", "a machine feed hold is ended by the machine",
      "realtime_cmds.md (~ cycle start, ! feed hold); interface.md §Machine State Hold", MUST,
      hold_respected),
+    ("planner-fed", "the planner is kept fed on a slow link",
+     "wiki Interfacing with Grbl §Streaming Protocol: Character-Counting (send-response "
+     "starves the planner); planner.h BLOCK_BUFFER_SIZE", SHOULD, planner_fed),
     ("poll-rate", "status polls at most 10 Hz",
      "wiki Interfacing with Grbl §Status Reporting (at most 5 Hz recommended, 10 Hz may "
      "be possible)", SHOULD,

@@ -43,6 +43,7 @@ class Scenario:
     inject: dict[float, str] = field(default_factory=dict)   # share of the job -> line
     lose: float = 0.0         # probability that an answer line (ok/error:N) is lost
     garble: float = 0.0       # ... that it arrives damaged
+    faults: str = ""          # the link's own faults (conform.link.faults spec)
     actions: tuple[Action, ...] = ()
     tags: frozenset[str] = frozenset()   # answers, hold, restart, may-stop
     timeout: float = 30.0
@@ -90,6 +91,7 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
     from conform.families.grbl.serve import reopen_with_power_cycle
     from conform.families.grbl.tables import load_grbl
     from conform.families.grbl.unit import GrblUnit
+    from conform.link.faults import FaultConfig
     from conform.link.pty import PtyEndpoint
 
     spec = load_grbl()
@@ -102,7 +104,8 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
     job_path.write_text("\n".join(job) + "\n", encoding="ascii")
     t0 = time.monotonic()
     unit = GrblUnit(v, spec, t0=t0, settings=settings, truth=True)
-    faults = GrblFaults(None, seed, t0, lose=scenario.lose, garble=scenario.garble)
+    faults = GrblFaults(FaultConfig.parse(scenario.faults) if scenario.faults else None, seed,
+                        t0, lose=scenario.lose, garble=scenario.garble)
     endpoint = PtyEndpoint(link=link)
     restarts: list[int] = []
     power_cycled = reopen_with_power_cycle(lambda: PtyEndpoint(link=link), unit, faults)
