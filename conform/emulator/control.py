@@ -7,6 +7,7 @@ use.
 
 from __future__ import annotations
 
+import queue
 import socket
 from collections.abc import Callable
 from typing import Any
@@ -33,3 +34,20 @@ def send_control(path: str, line: str, timeout: float = 5.0) -> str:
                 break
             buf += chunk
     return buf.decode(errors="replace").strip()
+
+
+class LocalControl:
+    """An emulator's control queue without a socket, for an emulator served in this process
+    (check-sender's sessions): the emulator's loop takes the requests, so the unit is only
+    ever touched by the thread that owns it."""
+
+    def __init__(self) -> None:
+        self.requests: queue.SimpleQueue = queue.SimpleQueue()
+
+    def ask(self, line: str, timeout: float = 5.0) -> str:
+        reply: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self.requests.put((line, reply))
+        try:
+            return reply.get(timeout=timeout)
+        except queue.Empty:
+            return "error: the emulator did not answer"

@@ -14,7 +14,6 @@ the family's hooks (``observe``, ``settle``, ``analyze``: conform.sendercheck.fa
 from __future__ import annotations
 
 import os
-import queue
 import signal
 import subprocess
 import threading
@@ -24,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from conform.capture.live import ProxyCapture
+from conform.emulator.control import LocalControl
 from conform.emulator.serve import Emulator
 from conform.link.faults import FaultConfig
 from conform.link.pty import PtyEndpoint
@@ -32,21 +32,6 @@ from conform.sendercheck.faults import ScriptedFaults
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL
-
-
-class _Control:
-    """The emulator's control queue without a socket (the emulator thread runs requests)."""
-
-    def __init__(self) -> None:
-        self.requests: queue.SimpleQueue = queue.SimpleQueue()
-
-    def ask(self, line: str, timeout: float = 5.0) -> str:
-        reply: queue.SimpleQueue[str] = queue.SimpleQueue()
-        self.requests.put((line, reply))
-        try:
-            return reply.get(timeout=timeout)
-        except queue.Empty:
-            return "error: the emulator did not answer"
 
 
 @dataclass
@@ -127,7 +112,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     family.prepare(unit, scn, t0)
     cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
     faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
-    control = _Control()
+    control = LocalControl()
     endpoint = PtyEndpoint()
     emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control,
                         control_handler=family.commands)
@@ -166,7 +151,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     return s
 
 
-def _run_program(s: Session, proxy: ProxyCapture, control: _Control, faults: ScriptedFaults,
+def _run_program(s: Session, proxy: ProxyCapture, control: LocalControl, faults: ScriptedFaults,
                  truth: Any, job_path: Path) -> None:
     scn = s.scenario
     env = dict(os.environ, CONFORM_PORT=proxy.host_path, CONFORM_JOB=str(job_path),
@@ -209,7 +194,7 @@ def _run_program(s: Session, proxy: ProxyCapture, control: _Control, faults: Scr
     s.duration = time.monotonic() - start
 
 
-def _act(s: Session, kind: str, on: bool, now: float, control: _Control,
+def _act(s: Session, kind: str, on: bool, now: float, control: LocalControl,
          faults: ScriptedFaults, proxy: ProxyCapture, hold: float) -> None:
     t = round(now - s.started, 6)
     if kind == "stop":

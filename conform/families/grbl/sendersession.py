@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from conform.emulator.control import LocalControl
 from conform.errors import UserError
 from conform.families.grbl.analysis import GrblAnalysis, analyze_capture
-from conform.sendercheck.session import _Control  # the emulator's control queue, no socket
 
 POLL = 0.02   # how often the runner looks at the program and the scenario's triggers
 
@@ -124,7 +124,7 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
     recorder = Recorder(capture, {
         "capture_method": "check-sender", "variant": v.id, "family": "grbl", "line_baud": baud,
         "unit_port": str(link), "scenario": scenario.name}, decode=False)
-    control = _Control()
+    control = LocalControl()
     emulator = Emulator(unit, endpoint, baud=baud, injector=faults, recorder=recorder,
                         control=control, reopen=reopen, control_handler=GrblControl(faults))
     died: list[str] = []
@@ -173,7 +173,7 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
 
 
 def _supervise(proc: subprocess.Popen, scenario: Scenario, unit: Any, n_job: int,
-               control: _Control, recorder: Any, events: list[dict[str, Any]],
+               control: LocalControl, recorder: Any, events: list[dict[str, Any]],
                limit: float) -> tuple[int | None, bool]:
     """Wait for the program, firing the scenario's actions; (exit status, hung)."""
     start = time.monotonic()
