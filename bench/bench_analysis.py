@@ -126,7 +126,7 @@ def bare_iteration(path: str) -> dict:
 
 
 def analysis(path: str) -> dict:
-    from conform.analysis import analyze
+    from conform.families.gve.analysis import analyze
 
     t = time.perf_counter()
     cpu0 = time.process_time()

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conform.analysis import analyze, write_parquet, write_report
+from conform.analysis import write_parquet, write_report
 from conform.analysis.rawread import b64decode_many
 from conform.capture.recorder import Recorder
 from conform.cli.main import cli
 from conform.errors import UserError
+from conform.families.gve.analysis import analyze
 from conform.families.gve.protocol import append_checksum
 
 T0 = 1_750_000_000.0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from conform.analysis import analyze, frames, positions, queue
+from conform.families.gve.analysis import analyze, frames, positions, queue
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"
 

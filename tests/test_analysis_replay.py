@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from conform.analysis import analyze
-from conform.analysis.analyze import accepted_vectors
-from conform.analysis.queue import CONTROL, replay
+from conform.families.gve.analysis import analyze
+from conform.families.gve.analysis.analyze import accepted_vectors
+from conform.families.gve.analysis.queue import CONTROL, replay
 from conform.families.gve.spec import load_spec
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"
@@ -127,7 +127,7 @@ def test_replay_does_not_depend_on_the_chunk(chunk: int) -> None:
 def test_queue_depth_merge_equals_sort() -> None:
     """The merge of sorted pushes and ends gives what sorting all events gives, ties
     (departures first at equal times) included."""
-    from conform.analysis.queue import queue_depth
+    from conform.families.gve.analysis.queue import queue_depth
 
     rng = np.random.default_rng(3)
     for _ in range(50):

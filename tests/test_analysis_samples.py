@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from conform.analysis import analyze
+from conform.families.gve.analysis import analyze
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from conform.analysis import analyze
+from conform.families.gve.analysis import analyze
 
 ROOT = Path(__file__).resolve().parent.parent
 CAPTURES = ROOT / "captures"

@@ -10,12 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from conform.analysis import analyze
 from conform.capture.batch import FRAME_KEYS, BatchSession, rows
 from conform.capture.reader import open_capture
 from conform.capture.recorder import Recorder
 from conform.capture.recover import capture_info
 from conform.families.gve import decode
+from conform.families.gve.analysis import analyze
 from conform.families.gve.decode import LineTracker, make_decoder
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"

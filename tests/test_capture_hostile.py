@@ -78,7 +78,7 @@ def test_zeroed_first_chunk_opcode_is_damage_not_clean(tmp_path, capsys):
 def test_hostile_numbers_are_handled_honestly(tmp_path):
     from hostile_captures import _session, written
 
-    from conform.analysis import analyze
+    from conform.families.gve.analysis import analyze
 
     p = tmp_path / "baud.mcap"
     p.write_bytes(written(_session(), metadata={"baud": "1e400", "variant": "gve64-v19"}))

@@ -1,7 +1,6 @@
 """The engine reaches a protocol family only through the registry (conform.families): no
 module under conform/ outside conform/families/ imports a family package directly, except the
-GVE-only entries listed here, each with its reason (docs/architecture.md names them too).
-conform/analysis/ is outside the rule for now: the GVE analyser moves into its family next."""
+GVE-only entries listed here, each with its reason (docs/architecture.md names them too)."""
 
 from __future__ import annotations
 
@@ -10,7 +9,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent / "conform"
 FAMILY_PACKAGES = ("conform.families.gve", "conform.families.grbl")
-NOT_YET = ("analysis",)   # conform/analysis/: the GVE analyser, being rewritten for streaming
 
 # module (relative to conform/) -> the family modules it may import, and why
 ALLOWED = {
@@ -50,7 +48,7 @@ def _family_imports(path: Path) -> set[str]:
 
 def _engine_modules() -> list[Path]:
     return [p for p in sorted(ROOT.rglob("*.py"))
-            if p.relative_to(ROOT).parts[0] not in ("families", *NOT_YET)]
+            if p.relative_to(ROOT).parts[0] not in ("families",)]
 
 
 def test_the_engine_imports_families_only_through_the_registry():

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conform.analysis import analyze
 from conform.cli.main import cli
 from conform.errors import UserError
+from conform.families.gve.analysis import analyze
 from conform.families.gve.protocol import CommandParser
 from conform.families.gve.sender.core import Sender
 from conform.families.gve.sender.gcode import GcodeOptions, gcode_segments, gcode_to_items, junction_speed

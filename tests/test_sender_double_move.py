@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from conform.analysis import analyze
+from conform.families.gve.analysis import analyze
 from conform.families.gve.protocol import CommandParser
 from conform.families.gve.sender.job import parse_item
 from conform.families.gve.sender.links import LinkModel

@@ -1,8 +1,22 @@
-"""Captured sessions -> pandas tables, metrics, findings and reports (``conform analyze``)."""
+"""Captured sessions -> tables, metrics, findings and reports (``conform analyze``).
 
-from conform.analysis.analyze import Analysis, analyze
-from conform.analysis.findings import Finding
+The engine's side of the analysis: reading captures (``rawread``, ``stream``), mergeable
+summaries, Parquet tables, plots, reports and fleets. What the traffic means is a family's
+(``Family.analyze`` in conform.families); the GVE analyser is conform.families.gve.analysis.
+"""
+
+from typing import Any
+
 from conform.analysis.report import findings_document, write_parquet, write_report
 
-__all__ = ["Analysis", "Finding", "analyze", "findings_document", "write_parquet",
-           "write_report"]
+
+def analyze(path: Any, **options: Any) -> Any:
+    """A capture analysed by the default family (GVE), which judges every capture no other
+    family claims: ``conform analyze`` first hands other families' captures to them
+    (conform.families.capture_hook)."""
+    from conform.families import DEFAULT_FAMILY, family
+
+    return family(DEFAULT_FAMILY).analyze(path, **options)
+
+
+__all__ = ["analyze", "findings_document", "write_parquet", "write_report"]

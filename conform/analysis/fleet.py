@@ -60,7 +60,7 @@ def machine_of(path: Path, metadata: dict[str, dict[str, str]]) -> str:
 
 def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> dict[str, Any]:
     """One fleet task: analyse ``path``, write its Parquet part, return its summary row."""
-    from conform.analysis.analyze import analyze
+    from conform.analysis import analyze
 
     p = Path(path)
     row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)

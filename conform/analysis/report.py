@@ -135,12 +135,11 @@ def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
 
 def frame_categories(a: Any, direction: str) -> dict[str, list[Any] | None]:
     """The category lists of a frames table, from the decoded columns (no table built)."""
-    from conform.analysis.frames import CHECKSUM_NAMES
     from conform.analysis.tables import categories_of
 
     d = a.host if direction == "host" else a.unit
     cols = {"direction": np.array([direction], object), "kind": d.kind, "name": d.name,
-            "checksum_status": CHECKSUM_NAMES, "detail": d.detail}
+            "checksum_status": a.checksum_names, "detail": d.detail}
     if direction == "host":
         cols["packet_role"] = a.exchanges["packet_role"].to_numpy()
     cats: dict[str, list[Any] | None] = {k: categories_of(v) for k, v in cols.items()}

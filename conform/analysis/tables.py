@@ -172,10 +172,10 @@ class ParquetStream:
             w = self.writers[name] = pq.ParquetWriter(path, t.schema)
         w.write_table(t.cast(w.schema), row_group_size=max(len(df), 1))
 
-    def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int) -> None:
-        """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``)."""
-        from conform.analysis.analyze import frames_frame
-
+    def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int,
+              frames_frame: Callable[..., pd.DataFrame]) -> None:
+        """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``);
+        ``frames_frame(lines, t0, base=, arrow_text=)`` is the family's frames table."""
         if self.t0 is None:
             t = np.concatenate([host.t_first, unit.t_first])
             t = t[np.isfinite(t)]

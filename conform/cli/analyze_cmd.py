@@ -60,7 +60,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
       conform analyze captures/good-rs232.mcap --json | jq .metrics.exchanges
       conform analyze captures/ --report fleet/     # every capture in the folder
     """
-    from conform.analysis.analyze import analyze
+    from conform.analysis import analyze
     from conform.analysis.report import findings_document, write_report
 
     def echo(text: str) -> None:

@@ -5,8 +5,8 @@ analysis, CLI) is shared; a family contributes its tables, a reference unit, its
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
 one package, conform.families.gve and conform.families.grbl, with its tables in specs/gve/ and
-specs/grbl/ (the GVE analyser still lives in conform.analysis). The engine reaches a family
-only through this registry (tests/test_family_boundary.py). See docs/architecture.md.
+specs/grbl/. The engine reaches a family only through this registry
+(tests/test_family_boundary.py). See docs/architecture.md.
 
     family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
     detect_family(host_bytes, unit_bytes, metadata)   # -> ("grbl", "why") or ("unknown", ...)

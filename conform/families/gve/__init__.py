@@ -1,8 +1,9 @@
 """The GVE family as a :class:`conform.families.Family`: tables (spec/), codec (protocol/),
 reference unit (unit/), checks, grading and targets (conformance/, driven by the engine's
 runner in conform.conformance),
-reference sender (sender/), check-sender scenarios and rules (sendercheck/); its analysis
-is still conform.analysis."""
+reference sender (sender/), check-sender scenarios and rules (sendercheck/), the capture
+analyser (analysis/, on the engine's capture reading, summaries, tables and reports in
+conform.analysis)."""
 
 from __future__ import annotations
 
@@ -118,7 +119,7 @@ class GveFamily:
         serve(variant, **options)
 
     def analyze(self, path: str, **options: Any) -> Any:
-        from conform.analysis.analyze import analyze
+        from conform.families.gve.analysis import analyze
 
         return analyze(path, **options)
 

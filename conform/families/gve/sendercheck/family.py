@@ -42,7 +42,7 @@ def _settle(s: Any, unit: Any, truth: Any) -> None:
 
 
 def _analyze(capture: Any, variant_id: str) -> Any:
-    from conform.analysis.analyze import analyze
+    from conform.families.gve.analysis.analyze import analyze
 
     return analyze(capture, variant=variant_id, whatif_replays=False)
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from conform.analysis.frames import CS_BAD, CS_MISSING
+from conform.families.gve.analysis.frames import CS_BAD, CS_MISSING
 from conform.sendercheck.family import FAIL, MUST, PASS, SHOULD, Rule
 
 Result = tuple[str, str, list[str]]

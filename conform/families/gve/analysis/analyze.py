@@ -17,15 +17,21 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pandas as pd
 
-from conform.analysis import exchanges as exm
-from conform.analysis import frames as fr
-from conform.analysis.columns import isin, packet_numbers, release_memory
-from conform.analysis.findings import (
+from conform.analysis.plots import PlotData
+from conform.analysis.rawread import RawCapture, read_raw
+from conform.analysis.stream import RawStream, ReadStats
+from conform.analysis.tables import ParquetStream
+from conform.capture.session import escape_bytes
+from conform.errors import UserError
+from conform.families.gve.analysis import exchanges as exm
+from conform.families.gve.analysis import frames as fr
+from conform.families.gve.analysis.columns import isin, packet_numbers, release_memory
+from conform.families.gve.analysis.findings import (
     Context,
     Finding,
     Findings,
@@ -34,15 +40,9 @@ from conform.analysis.findings import (
     protocol_findings,
     recovery_analysis,
 )
-from conform.analysis.metrics import Metrics
-from conform.analysis.plots import PlotData
-from conform.analysis.positions import PositionCheck
-from conform.analysis.queue import QueueReplay, StreamReplay, replay, supply_consumption, whatif
-from conform.analysis.rawread import RawCapture, read_raw
-from conform.analysis.stream import RawStream, ReadStats
-from conform.analysis.tables import ParquetStream
-from conform.capture.session import escape_bytes
-from conform.errors import UserError
+from conform.families.gve.analysis.metrics import Metrics
+from conform.families.gve.analysis.positions import PositionCheck
+from conform.families.gve.analysis.queue import QueueReplay, StreamReplay, replay, supply_consumption, whatif
 
 STANDARD_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
 DEFAULT_VARIANT = "gve64-v19"
@@ -58,6 +58,7 @@ class Analysis:
     longer one is streamed and has ``plot`` (bounded series for the report's plots) and
     ``tables`` (the Parquet files written as it streamed, when asked for) instead."""
 
+    checksum_names: ClassVar[np.ndarray] = fr.CHECKSUM_NAMES  # the report's frames tables
     path: str
     raw: RawCapture
     variant: Any
@@ -271,7 +272,7 @@ class _Session:
         u_lo, u_hi = (int(ou[0]), int(ou[-1]) + 1) if len(ou) else (0, 0)
         hsub, usub = th.take(own_lo, own_hi), tu.take(u_lo, u_hi)
         if self.parquet is not None:
-            self.parquet.write(rows, hsub, usub, self.unit_tail_g + u_lo)
+            self.parquet.write(rows, hsub, usub, self.unit_tail_g + u_lo, frames_frame)
         self.replay.feed(ex, acc, th.result, own_lo, own_hi, self.tail_g)
         self.metrics.feed_rows(rows, acc_own)
         self.metrics.feed_lines(hsub)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.frames import (
+from conform.families.gve.analysis.frames import (
     ANSWER,
     BITS_PER_BYTE,
     COMMA,
@@ -322,7 +322,7 @@ class ExchangeStream:
             yield w
 
     def _next(self) -> Window | None:  # noqa: PLR0915 - one pass, in order
-        from conform.analysis.frames import (
+        from conform.families.gve.analysis.frames import (
             decode_host,
             decode_unit,
             infer_initial_mode,

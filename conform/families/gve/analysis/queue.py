@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.columns import AXES, isin
+from conform.families.gve.analysis.columns import AXES, isin
 from conform.families.gve.spec.model import Variant
 
 MODAL = {"V", "A", "B", "$", "T", "VK", "VN"}
@@ -170,7 +170,7 @@ def _run_compiled(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.n
     """Vectors and modal commands only: the parameters each vector captures are worked out
     here (few modal rows), the scan runs compiled, ``chunk`` events (``REPLAY_CHUNK``) at a
     time with the executor's state and its queued vectors carried from one to the next."""
-    from conform.analysis.replay_kernel import H, N, new_state, replay_vectors
+    from conform.families.gve.analysis.replay_kernel import H, N, new_state, replay_vectors
 
     p = _params(variant)
     states = [p]
@@ -495,8 +495,8 @@ class StreamReplay:
     """
 
     def __init__(self, variant: Variant, keep: bool = True) -> None:
-        from conform.analysis.replay_kernel import new_state
         from conform.analysis.summaries import Quantiles, TimeBins
+        from conform.families.gve.analysis.replay_kernel import new_state
 
         self.variant = variant
         self.naxes = len(variant.axes)
@@ -595,7 +595,7 @@ class StreamReplay:
 
     def _run(self, ev_t: np.ndarray, is_vec: np.ndarray, d: np.ndarray, cont: np.ndarray,
              state: np.ndarray, vrows: np.ndarray, guard: int) -> None:
-        from conform.analysis.replay_kernel import H, N, replay_vectors
+        from conform.families.gve.analysis.replay_kernel import H, N, replay_vectors
 
         F, I = self.F, self.I  # noqa: E741
         done = int(I[H])  # what finished is gone; the queue moves to the front

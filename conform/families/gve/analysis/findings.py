@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from conform.analysis.columns import AXES, isin, packet_numbers, vectors
-from conform.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
+from conform.families.gve.analysis.columns import AXES, isin, packet_numbers, vectors
+from conform.families.gve.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
 
 MAX_LISTED = 50
 SEVERITIES = ("info", "warning", "error", "hazard")

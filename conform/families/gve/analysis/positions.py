@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from conform.analysis.columns import isin
-from conform.analysis.findings import Context, Findings
+from conform.families.gve.analysis.columns import isin
+from conform.families.gve.analysis.findings import Context, Findings
 
 POSITION = {"P": 2, "PF": 3, "P4": 4}
 
