@@ -77,3 +77,50 @@ def test_fleet_on_a_dask_local_cluster(tmp_path):
         s = analyze_fleet([str(root)], parquet_dir=str(tmp_path / "pq"),
                           scheduler=cluster.scheduler_address)
     check(s, tmp_path / "pq")
+
+
+def test_a_fleet_holds_grbl_and_unknown_captures_too(tmp_path):
+    """Each capture is analysed by its own family, as `conform analyze FILE` would: a grbl
+    session overflowing the receive buffer is a grbl row with its hazard and line latency,
+    its tables a dataset of their own; bytes of no known protocol are an error row."""
+    from conform.capture import Recorder
+    from conform.families.grbl.streaming import stream
+    from conform.families.grbl.tables import load_grbl
+    from conform.families.grbl.unit import GrblUnit
+
+    spec = load_grbl()
+    unit = GrblUnit(spec.variant("grbl-1.1f"), spec)
+    unit.poll(0.0)
+    job = [f"G1X{-(i % 20) * 0.5:.3f}Y{-(i % 7) * 0.3:.3f}F2000" for i in range(120)]
+    traffic = stream(unit, job, method="counting", extra={40: "$G", 41: "$G"}, timeout=60)
+    root = tmp_path / "fleet"
+    (root / "router-1").mkdir(parents=True)
+    (root / "mill-1").mkdir()
+    shutil.copy(CAPTURES / "good-rs232.mcap", root / "mill-1" / "good-rs232.mcap")
+    rec = Recorder(root / "router-1" / "shift.mcap", {"capture_method": "test"}, decode=False,
+                   clock=lambda: 1000.0)
+    for t, direction, d in sorted([(t, "host", d) for t, d in traffic.host] +
+                                  [(t, "unit", d) for t, d in traffic.unit]):
+        rec.chunk(direction, d, t_read=1000.0 + t)
+    rec.close()
+    rec = Recorder(root / "router-1" / "noise.mcap", {"capture_method": "test"}, decode=False,
+                   clock=lambda: 1000.0)
+    for i in range(64):
+        rec.chunk("host", bytes((i * 37 + k) % 256 for k in range(16)), t_read=1000.0 + i)
+    rec.close()
+
+    s = analyze_fleet([str(root)], parquet_dir=str(tmp_path / "pq"), jobs=1)
+    by = {(r["machine"], r["session"]): r for r in s["sessions"]}
+    grbl = by[("router-1", "shift")]
+    assert grbl["family"] == "grbl" and grbl["state"] == "clean", grbl
+    assert grbl["hazards"] >= 1 and grbl["findings"].get("rx-overflow-hazard", 0) >= 1
+    assert grbl["exchanges"] == 122 and grbl["rtt_p50_ms"] > 0
+    assert grbl["rtt_p50_ms"] <= grbl["rtt_p95_ms"] <= grbl["rtt_max_ms"]
+    assert by[("mill-1", "good-rs232")]["family"] == "gve"
+    noise = by[("router-1", "noise")]
+    assert noise["state"] == "error" and "protocol unknown" in noise["error"]
+    ex = pd.read_parquet(tmp_path / "pq" / "grbl" / "exchanges")
+    assert set(ex["machine"].astype(str)) == {"router-1"} and len(ex) == 122
+    assert len(pd.read_parquet(tmp_path / "pq" / "exchanges")) > 0   # the GVE dataset as before
+    paths = write_fleet_report(s, tmp_path / "rep")
+    assert "| router-1 | shift | grbl | clean |" in paths["markdown"].read_text()

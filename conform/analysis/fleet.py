@@ -25,8 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
+from conform.families import DEFAULT_FAMILY, family
 
-SUMMARY_KEYS = ("machine", "session", "path", "state", "error", "duration_s", "exchanges",
+SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "duration_s", "exchanges",
                 "vectors_accepted", "exchanges_per_s", "vectors_per_s", "hazards",
                 "findings", "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms", "rtt_max_ms",
                 "starvations", "starved_s", "standstill_s")
@@ -65,6 +66,10 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
     p = Path(path)
     row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)
     row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error")
+    other = _other_family(p, parquet_dir, options, row)
+    if other is not None:
+        return other
+    row["family"] = DEFAULT_FAMILY
     sink = None
     if parquet_dir:  # this capture's exchanges: one file of the fleet's dataset, as it streams
         from conform.analysis.tables import ParquetStream
@@ -73,13 +78,8 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
         part = root / "exchanges" / f"machine={_safe(row['machine'])}" / f"{_safe(p.stem)}.parquet"
         sink = ParquetStream(root, only=("exchanges",), files={"exchanges": part},
                              const={"session": p.stem, "t0": None})
-    try:
-        a = analyze(p, whatif_replays=False, parquet=sink, **options)
-    except UserError as exc:
-        row["error"] = str(exc)
-        return row
-    except Exception as exc:  # noqa: BLE001 - one bad file must not end a fleet run
-        row["error"] = f"{type(exc).__name__}: {exc}"
+    a = _attempt(row, lambda: analyze(p, whatif_replays=False, parquet=sink, **options))
+    if a is None:
         return row
     m = a.metrics
     row["machine"] = machine_of(p, a.raw.metadata)
@@ -102,6 +102,53 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
         standstill_s=q.get("standstill_s"),
     )
     return row
+
+
+def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
+                  row: dict[str, Any]) -> dict[str, Any] | None:
+    """A capture of another family's traffic (conform.families.capture_hook decides, as for
+    one file), analysed by that family: its ``fleet_row()`` fills the row and its tables go
+    to ``DIR/<family>/<table>/machine=M/<session>.parquet``. None: the default family's."""
+    import shutil
+
+    from conform.families.capture_hook import peek_family
+
+    d, meta = peek_family(str(p), options.get("variant"))
+    if d is None:
+        return None
+    row["family"] = d.family
+    if d.family == "unknown":
+        row["error"] = f"protocol unknown ({d.why})"
+        return row
+    a = _attempt(row, lambda: family(d.family).analyze(str(p), variant=options.get("variant"),
+                                                        detected=d.why))
+    if a is None:
+        return row
+    row.update(a.fleet_row())
+    row["machine"] = machine_of(p, {"conform.session": meta})
+    row["state"] = "clean" if not any(n.startswith("capture incomplete") for n in a.notes) \
+        else "damaged"
+    if parquet_dir:
+        base = Path(parquet_dir) / d.family
+        tmp = base / f".{_safe(row['machine'])}-{_safe(p.stem)}"
+        for table in a.write_tables(str(tmp)).values():
+            dest = base / table.stem / f"machine={_safe(row['machine'])}" / f"{_safe(p.stem)}.parquet"
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            table.replace(dest)
+        shutil.rmtree(tmp, ignore_errors=True)
+    return row
+
+
+def _attempt(row: dict[str, Any], run: Callable[[], Any]) -> Any:
+    """``run()``'s analysis, or None with the row's error set: one bad file must not end a
+    fleet run."""
+    try:
+        return run()
+    except UserError as exc:
+        row["error"] = str(exc)
+    except Exception as exc:  # noqa: BLE001 - reported in the row
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    return None
 
 
 def _ms(v: Any) -> float | None:

@@ -78,7 +78,10 @@ class Family(Protocol):
         """Does this traffic look like this family's?"""
 
     def analyze(self, path: str, **options: Any) -> Any:
-        """Analyse a capture of this family's traffic."""
+        """Analyse a capture of this family's traffic. A family other than the default one
+        returns a result with ``summary_lines()``, ``write_report(dir)``, ``write_tables(dir)``
+        and ``fleet_row()``: what ``conform analyze`` prints and writes, and its row in a fleet
+        summary (conform.families.capture_hook, conform.analysis.fleet)."""
 
     def serve(self, variant: str, **options: Any) -> None:
         """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""

@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from conform.families import Detection, divert
+from conform.families import FAMILY_MODULES, Detection, divert, family
 
 PEEK_BYTES = 65536
 
@@ -54,13 +54,18 @@ def peek_capture(path: str, limit: int = PEEK_BYTES) -> tuple[bytes, bytes, dict
 
 def detect_capture(path: str, variant: str | None) -> Detection | None:
     """The non-GVE family of a capture, or None (GVE, or a file the GVE path should judge)."""
+    return peek_family(path, variant)[0]
+
+
+def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[str, Any]]:
+    """:func:`detect_capture` and the session metadata it saw (empty when it had none)."""
     if variant:
-        return divert(b"", b"", {}, variant)
+        return divert(b"", b"", {}, variant), {}
     try:
         host, unit, meta = peek_capture(path)
     except Exception:  # noqa: BLE001 - not ours to report: the GVE path says what is wrong
-        return None
-    return divert(host, unit, meta, variant)
+        return None, {}
+    return divert(host, unit, meta, variant), meta
 
 
 def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
@@ -70,29 +75,19 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     if d is None:
         return False
     if d.family == "unknown":
-        click.echo(f"{path}: protocol unknown ({d.why}); not analysed as GVE or grbl traffic")
+        click.echo(f"{path}: protocol unknown ({d.why}); not analysed as traffic of "
+                   f"{' or '.join(FAMILY_MODULES)}")
         return True
-    from conform.families.grbl.analysis import analyze_capture, write_parquet, write_report
-
+    fam = family(d.family)
     click.echo(f"{path}: protocol family {d.family} ({d.why})")
-    a = analyze_capture(path, variant=variant if variant and d.family == "grbl" else None,
-                        detected=d.why)
-    m = a.metrics
-    click.echo(f"{m['lines']} lines, {m['answered']} answered ({m['ok']} ok, {m['errors']} "
-               f"error) in {m['duration_s']:.3f} s; streaming {m['streaming_method']}, at most "
-               f"{m['max_bytes_in_flight']} bytes in flight (receive buffer {m['rx_buffer']}); "
-               f"{m['status_polls']} status polls ({m['poll_rate_hz']:.1f}/s)")
-    counts = m.get("finding_counts", {})
-    click.echo("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) or "none"))
-    for f in a.findings:
-        if f.severity in ("hazard", "error"):
-            click.echo(f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}")
-    for note in a.notes:
-        click.echo(f"note: {note}")
+    a = fam.analyze(path, variant=variant if variant and d.family == fam.name else None,
+                    detected=d.why)
+    for line in a.summary_lines():
+        click.echo(line)
     if report_dir:
-        paths = write_report(a, report_dir)
+        paths = a.write_report(report_dir)
         click.echo(f"report: {paths['html']}")
     if parquet_dir:
-        write_parquet(a, parquet_dir)
+        a.write_tables(parquet_dir)
         click.echo(f"tables: {parquet_dir}")
     return True

@@ -75,6 +75,50 @@ class GrblAnalysis:
                 "variant": self.variant, "detected": self.detected, "metrics": self.metrics,
                 "findings": [asdict(f) for f in self.findings], "notes": self.notes}
 
+    # what the engine asks of any family's analysis (conform.families.AnalysisResult)
+
+    def summary_lines(self) -> list[str]:
+        """What ``conform analyze`` prints: the session in a line, then findings and notes."""
+        m = self.metrics
+        out = [f"{m['lines']} lines, {m['answered']} answered ({m['ok']} ok, {m['errors']} "
+               f"error) in {m['duration_s']:.3f} s; streaming {m['streaming_method']}, at most "
+               f"{m['max_bytes_in_flight']} bytes in flight (receive buffer {m['rx_buffer']}); "
+               f"{m['status_polls']} status polls ({m['poll_rate_hz']:.1f}/s)"]
+        counts = m.get("finding_counts", {})
+        out.append("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) or "none"))
+        out += [f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}" for f in self.findings
+                if f.severity in ("hazard", "error")]
+        return out + [f"note: {note}" for note in self.notes]
+
+    def write_report(self, directory: str) -> dict[str, Path]:
+        return write_report(self, directory)
+
+    def write_tables(self, directory: str) -> dict[str, Path]:
+        return write_parquet(self, directory)
+
+    def fleet_row(self) -> dict[str, Any]:
+        """This session's row of a fleet summary (conform.analysis.fleet): lines stand for
+        exchanges, motion lines for vectors; the latency is line to ok/error."""
+        m = self.metrics
+        rtt = sorted(e.t_answer - e.t_sent for e in self.exchanges if e.t_answer is not None)
+        starved = m.get("finding_counts", {}).get("planner-starved", 0)
+        motion = sum(1 for e in self.exchanges if e.answer == "ok" and is_motion(e.text))
+        d = m["duration_s"]
+        return {"family": self.family, "duration_s": d, "exchanges": m["lines"],
+                "vectors_accepted": motion, "exchanges_per_s": m["lines_per_s"],
+                "vectors_per_s": motion / d if d > 0 else 0.0, "hazards": m["hazards"],
+                "findings": dict(m.get("finding_counts", {})),
+                "rtt_p50_ms": _pct_ms(rtt, 0.50), "rtt_p95_ms": _pct_ms(rtt, 0.95),
+                "rtt_p99_ms": _pct_ms(rtt, 0.99), "rtt_max_ms": _pct_ms(rtt, 1.0),
+                "starvations": starved}
+
+
+def _pct_ms(ordered: list[float], q: float) -> float | None:
+    """The q-quantile of sorted seconds, in ms (nearest rank), or None without values."""
+    if not ordered:
+        return None
+    return round(ordered[min(len(ordered) - 1, max(0, round(q * len(ordered)) - 1))] * 1000, 4)
+
 
 class _Out:
     def __init__(self) -> None:
