@@ -24,7 +24,7 @@ def _use_agg() -> None:
     matplotlib.use("Agg")
 
 
-def _fig(w: float = 7.5, h: float = 3.2) -> Any:
+def new_figure(w: float = 7.5, h: float = 3.2) -> Any:
     _use_agg()
     import matplotlib.pyplot as plt
 
@@ -32,7 +32,7 @@ def _fig(w: float = 7.5, h: float = 3.2) -> Any:
     return fig, ax
 
 
-def _png(fig: Any) -> str:
+def to_png(fig: Any) -> str:
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -42,7 +42,7 @@ def _png(fig: Any) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _legend(ax: Any, handles: Any = None, labels: Any = None) -> None:
+def legend_beside(ax: Any, handles: Any = None, labels: Any = None) -> None:
     """A legend beside the axes, never over the curves."""
     if handles is None:
         handles, labels = ax.get_legend_handles_labels()
@@ -70,11 +70,11 @@ def _over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str) -> str:
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     _limit(ax, a)
-    _legend(ax)
-    return _png(fig)
+    legend_beside(ax)
+    return to_png(fig)
 
 
-def _thin(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+def thin_points(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     n = len(arrays[0])
     if n <= MAX_POINTS:
         return arrays
@@ -119,14 +119,14 @@ def latency_plots(a: Any) -> str | None:
                               ("host_time", "host turnaround", "#cc6677")):
         v, k = _latency_values(a, col)
         if len(v):
-            xs, ys = _thin(v, np.cumsum(k) / k.sum())
+            xs, ys = thin_points(v, np.cumsum(k) / k.sum())
             c.plot(xs, ys, label=label, color=color)
     c.set_xscale("symlog", linthresh=0.1)
     c.set_xlabel("ms")
     c.set_ylabel("fraction")
     c.set_title("Latency CDF")
-    _legend(c)
-    return _png(fig)
+    legend_beside(c)
+    return to_png(fig)
 
 
 ERROR_CODES = (2, 3, 4, 5, 6, 7)
@@ -152,7 +152,7 @@ def _latency_time_summary(a: Any) -> str | None:
         return None
     t = t - a.t0
     w = _window(a, t)
-    fig, ax = _fig(9.0, 3.4)
+    fig, ax = new_figure(9.0, 3.4)
     ax.fill_between(t[w], lo[w], hi[w], step="post", color="#4477aa", alpha=0.5, lw=0,
                     label="round trip, min to max per bin")
     top = float(hi[w].max()) if w.any() else 1.0
@@ -166,7 +166,7 @@ def _latency_time_summary(a: Any) -> str | None:
     if a.plot.starvations is not None:
         st, total, bucketed = _marks(a, a.plot.starvations)
         st = st[_window(a, st)]
-        for k, x in enumerate(_thin(st)[0]):
+        for k, x in enumerate(thin_points(st)[0]):
             ax.axvline(x, color="#ee7733", lw=0.8, alpha=0.5,
                        label=f"starvation ({total}{', bins with any' if bucketed else ''})"
                        if k == 0 else None)
@@ -188,8 +188,8 @@ def latency_time_plot(a: Any) -> str | None:
     if not ok.any():
         return None
     w = _window(a, t)
-    fig, ax = _fig(9.0, 3.4)
-    ts, ys = _thin(t[ok & w], rtt[ok & w])
+    fig, ax = new_figure(9.0, 3.4)
+    ts, ys = thin_points(t[ok & w], rtt[ok & w])
     ax.plot(ts, ys, ".", ms=2, color="#4477aa", alpha=0.6, label="round trip")
     code = ex["code"].to_numpy()
     err = ok & w & np.isin(code, ERROR_CODES)
@@ -197,17 +197,17 @@ def latency_time_plot(a: Any) -> str | None:
         ex["answer_kind"].to_numpy() == "garbled"))
     top = float(np.nanmax(ys)) if len(ys) else 1.0
     if err.any():
-        et, ey = _thin(t[err], rtt[err])
+        et, ey = thin_points(t[err], rtt[err])
         ax.plot(et, ey, "x", ms=6, color="#cc3311", label=f"error answer ({int(err.sum())})")
     if bad.any():
-        bt = _thin(t[bad])[0]
+        bt = thin_points(t[bad])[0]
         ax.plot(bt, np.full(len(bt), top * 1.05), "|", ms=10, color="#aa3377",
                 label=f"no or garbled answer ({int(bad.sum())})")
     rep = a.queue
     if rep is not None and rep.starvations:
         st = np.array([e["t"] for e in rep.starvations]) - a.t0
         st = st[_window(a, st)]
-        for k, x in enumerate(_thin(st)[0]):
+        for k, x in enumerate(thin_points(st)[0]):
             ax.axvline(x, color="#ee7733", lw=0.8, alpha=0.5,
                        label=f"starvation ({len(st)})" if k == 0 else None)
     pos = ys[ys > 0]
@@ -220,7 +220,7 @@ def throughput_plot(a: Any) -> str | None:
     s = a.series
     if len(s) == 0:
         return None
-    fig, ax = _fig()
+    fig, ax = new_figure()
     ax.plot(s["t"], s["exchanges_per_s"], label="exchanges/s", color="#4477aa")
     ax.plot(s["t"], s["vectors_per_s"], label="vectors/s", color="#228833")
     ax.set_xlabel("s from the start")
@@ -235,12 +235,12 @@ def throughput_plot(a: Any) -> str | None:
         h2, l2 = ax2.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
         fig.subplots_adjust(right=0.7)
-    _legend(ax, handles, labels)
+    legend_beside(ax, handles, labels)
     if "utilisation_host" in s:  # the right axis's labels sit between the plot and the legend
         ax.get_legend().set_bbox_to_anchor((1.12, 1.0))
     ax.set_title("Throughput over time")
     _limit(ax, a)
-    return _png(fig)
+    return to_png(fig)
 
 
 def _queue_summary(a: Any) -> str | None:
@@ -250,7 +250,7 @@ def _queue_summary(a: Any) -> str | None:
     t, _n, lo, hi = p.depth
     t = t - a.t0
     w = _window(a, t)
-    fig, ax = _fig(9.0, 3.4)
+    fig, ax = new_figure(9.0, 3.4)
     ax.fill_between(t[w], lo[w], hi[w], step="post", color="#4477aa", alpha=0.6, lw=0,
                     label="predicted queue depth, min to max per bin")
     ax.axhline(p.capacity, color="#999999", ls="--", lw=0.8, label=f"capacity {p.capacity}")
@@ -270,10 +270,10 @@ def queue_plot(a: Any) -> str | None:
     rep = a.queue
     if rep is None or len(rep.depth_t) == 0:
         return None
-    fig, ax = _fig(9.0, 3.4)
+    fig, ax = new_figure(9.0, 3.4)
     t_all = rep.depth_t - a.t0
     w = _window(a, t_all)
-    t, d = _thin(t_all[w], rep.depth[w])
+    t, d = thin_points(t_all[w], rep.depth[w])
     ax.step(t, d, where="post", color="#4477aa", label="predicted queue depth")
     ax.axhline(rep.capacity, color="#999999", ls="--", lw=0.8, label=f"capacity {rep.capacity}")
     if rep.starvations:
@@ -290,7 +290,7 @@ def _path_summary(a: Any) -> str | None:
     if ps is None or ps.pushed == 0:
         return None
     x, y, stops = ps.points()
-    fig, ax = _fig(8.0, 6.0)
+    fig, ax = new_figure(8.0, 6.0)
     ax.plot(x, y, color="#4477aa", lw=0.8,
             label="path" + (f" (every {ps.step}th junction)" if ps.step > 1 else ""))
     if len(stops):
@@ -300,8 +300,8 @@ def _path_summary(a: Any) -> str | None:
     ax.set_xlabel("X pulses")
     ax.set_ylabel("Y pulses")
     ax.set_title("X/Y path, junctions where the motion stopped")
-    _legend(ax)
-    return _png(fig)
+    legend_beside(ax)
+    return to_png(fig)
 
 
 def path_plot(a: Any) -> str | None:
@@ -316,11 +316,11 @@ def path_plot(a: Any) -> str | None:
     dy = ex["dy"].to_numpy()[rows]
     x = np.concatenate([[0], np.cumsum(dx)])
     y = np.concatenate([[0], np.cumsum(dy)])
-    fig, ax = _fig(8.0, 6.0)
-    xs, ys = _thin(x, y)
+    fig, ax = new_figure(8.0, 6.0)
+    xs, ys = thin_points(x, y)
     ax.plot(xs, ys, color="#4477aa", lw=0.8, label="path")
     if len(x) > 2:  # every junction (a vector's end where the next one starts)
-        jx, jy = _thin(x[1:-1], y[1:-1])
+        jx, jy = thin_points(x[1:-1], y[1:-1])
         ax.plot(jx, jy, ".", ms=2, color="#88aacc", label=f"junction ({len(x) - 2})")
     if len(rep.done_rows):
         # exit speed of every finished vector marks the junction at its end
@@ -335,14 +335,14 @@ def path_plot(a: Any) -> str | None:
         for mask, color, label in ((slow, "#ddaa33", "slowed"), (stop, "#cc3311", "stopped")):
             k = idx[mask] + 1
             if len(k):
-                kx, ky = _thin(x[k], y[k])
+                kx, ky = thin_points(x[k], y[k])
                 ax.plot(kx, ky, "o", ms=3, color=color, label=f"{label} ({int(mask.sum())})")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("X pulses")
     ax.set_ylabel("Y pulses")
     ax.set_title("X/Y path, junctions where the motion stopped or slowed")
-    _legend(ax)
-    return _png(fig)
+    legend_beside(ax)
+    return to_png(fig)
 
 
 def all_plots(a: Any) -> dict[str, str]:

@@ -1,7 +1,7 @@
 """The grbl analysis as a self-contained ``index.html``: findings, the receive buffer (bytes in
 flight per line against its size, hazards marked) and line-to-answer latency, with the page
 pieces every analysis report shares (conform/report/templates/analysis_pieces.html.j2) and
-the plotting helpers of the GVE analysis (matplotlib, Agg, base64 PNG)."""
+the engine's plotting helpers (conform.analysis.plots: matplotlib, Agg, base64 PNG)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from conform.analysis.plots import _fig, _legend, _png, _thin
+from conform.analysis.plots import legend_beside, new_figure, thin_points, to_png
 
 HERE = Path(__file__).resolve().parent
 SHARED = HERE.parent.parent / "report" / "templates"
@@ -32,8 +32,8 @@ def buffer_plot(a: Any) -> str | None:
     _t0, t, _lat = _times(a)
     b = np.fromiter((e.bytes_in_flight for e in ex), float, len(ex))
     limit = a.metrics["rx_buffer"]
-    fig, ax = _fig()
-    tt, bb = _thin(t, b)
+    fig, ax = new_figure()
+    tt, bb = thin_points(t, b)
     ax.step(tt, bb, where="post", lw=0.8, label="bytes in flight")
     ax.axhline(limit, color="tab:red", lw=1, ls="--", label=f"receive buffer ({limit})")
     over = b > limit
@@ -41,8 +41,8 @@ def buffer_plot(a: Any) -> str | None:
         ax.plot(t[over], b[over], "x", color="tab:red", ms=4, label="over the buffer")
     ax.set_xlabel("time from the first line (s)")
     ax.set_ylabel("bytes")
-    _legend(ax)
-    return _png(fig)
+    legend_beside(ax)
+    return to_png(fig)
 
 
 def latency_plot(a: Any) -> str | None:
@@ -50,8 +50,8 @@ def latency_plot(a: Any) -> str | None:
     ok = np.isfinite(lat)
     if not ok.any():
         return None
-    fig, ax = _fig()
-    tt, ll = _thin(t[ok], lat[ok] * 1000)
+    fig, ax = new_figure()
+    tt, ll = thin_points(t[ok], lat[ok] * 1000)
     ax.plot(tt, ll, ".", ms=2, label="line to answer")
     errs = [e for e in a.exchanges if e.answer and e.answer.startswith("error:")]
     if errs:
@@ -60,8 +60,8 @@ def latency_plot(a: Any) -> str | None:
                 "o", color="tab:red", ms=4, label="error:N")
     ax.set_xlabel("time from the first line (s)")
     ax.set_ylabel("ms")
-    _legend(ax)
-    return _png(fig)
+    legend_beside(ax)
+    return to_png(fig)
 
 
 STATE_ROWS = ("Idle", "Run", "Jog", "Hold", "Door", "Home", "Check", "Alarm", "Sleep")
@@ -82,7 +82,7 @@ def machine_plot(a: Any) -> str | None:
         state.append(STATE_ROWS.index(name) if name in STATE_ROWS else -1)
         blocks.append(_in_use(a, bf, 0))
         rx.append(_in_use(a, bf, 1))
-    fig, ax = _fig(7.5, 2.6 if all(b is None for b in blocks) else 3.6)
+    fig, ax = new_figure(7.5, 2.6 if all(b is None for b in blocks) else 3.6)
     ax.plot(t, state, "|", ms=10, label="state")
     ax.set_yticks(range(len(STATE_ROWS)), STATE_ROWS, fontsize=8)
     ax.set_xlabel("time from the first line (s)")
@@ -95,10 +95,10 @@ def machine_plot(a: Any) -> str | None:
         ax2.set_ylabel("in use")
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
-        _legend(ax2, h1 + h2, l1 + l2)
+        legend_beside(ax2, h1 + h2, l1 + l2)
     else:
-        _legend(ax)
-    return _png(fig)
+        legend_beside(ax)
+    return to_png(fig)
 
 
 def _in_use(a: Any, bf: list[str] | None, i: int) -> float | None:
