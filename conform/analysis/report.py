@@ -43,7 +43,10 @@ def findings_document(a: Any) -> dict[str, Any]:
 def _env() -> Any:
     import jinja2
 
-    return jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+    from conform.report.render import TEMPLATES as SHARED  # pieces every analysis report shares
+
+    return jinja2.Environment(loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(TEMPLATES)),
+                                                          jinja2.FileSystemLoader(str(SHARED))]),
                               autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
                               trim_blocks=True, lstrip_blocks=True)
 
