@@ -185,6 +185,8 @@ def main() -> None:
     size = path.stat().st_size / 1e6
     ana = _run("analysis", path)
     target_cpu = TARGET_CPU_1M * ana["exchanges"] / 1e6
+    cpu_ratio = ana["cpu_s"] / target_cpu if target_cpu else None
+    rss_ratio = ana["max_rss_mb"] / TARGET_RSS_MB
     print(f"capture: {path} {size:.1f} MB, {ana['exchanges']} exchanges, "
           f"{ana['vectors']} vectors accepted")
     print(f"analysis: {ana['cpu_s']:.2f} s CPU ({ana['seconds']:.2f} s wall), "
@@ -194,16 +196,21 @@ def main() -> None:
           + ", ".join(f"{k} {v:.0f} MB" for k, v in ana["peaks"].items()))
     print(f"  findings: {ana['findings']}")
     print(f"CPU     {ana['cpu_s']:.2f} s / {target_cpu:.2f} s target: ratio "
-          f"{ana['cpu_s'] / target_cpu:.2f}")
+          f"{cpu_ratio:.2f}")
     print(f"memory  {ana['max_rss_mb']:.0f} MB / {TARGET_RSS_MB:.0f} MB target: ratio "
-          f"{ana['max_rss_mb'] / TARGET_RSS_MB:.2f} (at 2 000 000: at most 1.2x the 1 000 000 "
+          f"{rss_ratio:.2f} (at 2 000 000: at most 1.2x the 1 000 000 "
           "figure)")
-    print(json.dumps({"exchanges": ana["exchanges"], "analyze_cpu_s": round(ana["cpu_s"], 3),
+    print(json.dumps({"exchanges": ana["exchanges"], "vectors": ana["vectors"],
+                      "analyze_cpu_s": round(ana["cpu_s"], 3),
                       "analyze_wall_s": round(ana["seconds"], 3),
                       "peak_rss_mb": round(ana["max_rss_mb"], 1), "capture_mb": round(size, 1),
                       "make_exchanges_per_s": round(make_rate) if make_rate else None,
                       "steps_cpu_s": {k: round(v, 3) for k, v in ana["steps"].items()},
-                      "target_cpu_s": target_cpu, "target_rss_mb": TARGET_RSS_MB}))
+                      "steps_peak_rss_mb": {k: round(v, 1) for k, v in ana["peaks"].items()},
+                      "findings": ana["findings"],
+                      "target_cpu_s": target_cpu, "target_rss_mb": TARGET_RSS_MB,
+                      "cpu_ratio": None if cpu_ratio is None else round(cpu_ratio, 3),
+                      "rss_ratio": round(rss_ratio, 3)}))
     if args.keep is None and os.environ.get("CONFORM_BENCH_KEEP") != "1":
         path.unlink()
 

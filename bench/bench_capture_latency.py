@@ -11,6 +11,7 @@ hits both alike. Target: the proxy adds at most 1 ms at p99.
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import signal
 import statistics
@@ -49,6 +50,8 @@ def main() -> None:
     ap.add_argument("--count", type=int, default=2000, help="round trips per path")
     ap.add_argument("--no-decode", action="store_true")
     args = ap.parse_args()
+    if args.count < 1:
+        ap.error("--count must be at least 1")
 
     workdir = Path(tempfile.mkdtemp(prefix="bench-latency-"))
     direct_unit, direct_path = start_unit()
@@ -75,19 +78,35 @@ def main() -> None:
     stop_unit(direct_unit), stop_unit(proxied_unit)
     info = capture_info(output)
 
+    pct = {name: {q: percentile(xs, q) for q in (50, 90, 99)} for name, xs in (("direct", d),
+                                                                              ("proxy", p))}
+    worst = {"direct": max(d), "proxy": max(p)}
+    mean = {"direct": statistics.mean(d), "proxy": statistics.mean(p)}
+    added = {q: pct["proxy"][q] - pct["direct"][q] for q in (50, 90, 99)}
+    ratio = added[99] / TARGET_ADDED_P99
+    exchanges = info.messages.get('/exchanges', 0)
     print(f"{args.count} round trips per path, {len(COMMAND)}-byte command, 2-byte answer, "
           f"decode={'off' if args.no_decode else 'on'}")
     print(f"{'':8}{'p50':>10}{'p90':>10}{'p99':>10}{'max':>10}   (ms)")
-    for name, xs in (("direct", d), ("proxy", p)):
-        print(f"{name:8}" + "".join(f"{percentile(xs, q) * 1e3:10.3f}" for q in (50, 90, 99))
-              + f"{max(xs) * 1e3:10.3f}")
-    added = {q: percentile(p, q) - percentile(d, q) for q in (50, 90, 99)}
+    for name in ("direct", "proxy"):
+        print(f"{name:8}" + "".join(f"{pct[name][q] * 1e3:10.3f}" for q in (50, 90, 99))
+              + f"{worst[name] * 1e3:10.3f}")
     print(f"{'added':8}" + "".join(f"{added[q] * 1e3:10.3f}" for q in (50, 90, 99)))
     print(f"added at p99: {added[99] * 1e3:.3f} ms (target <= {TARGET_ADDED_P99 * 1e3:.1f} ms, "
-          f"ratio {added[99] / TARGET_ADDED_P99:.2f}); mean direct "
-          f"{statistics.mean(d) * 1e3:.3f} ms, proxy {statistics.mean(p) * 1e3:.3f} ms")
-    print(f"capture: {info.state}, {info.messages.get('/exchanges', 0)} exchanges recorded")
+          f"ratio {ratio:.2f}); mean direct "
+          f"{mean['direct'] * 1e3:.3f} ms, proxy {mean['proxy'] * 1e3:.3f} ms")
+    print(f"capture: {info.state}, {exchanges} exchanges recorded")
+    result: dict = {"count": args.count, "command_bytes": len(COMMAND),
+                    "decode": not args.no_decode}
+    for name in ("direct", "proxy"):
+        result.update({f"{name}_p{q}_ms": round(pct[name][q] * 1e3, 4) for q in (50, 90, 99)})
+        result[f"{name}_max_ms"] = round(worst[name] * 1e3, 4)
+        result[f"{name}_mean_ms"] = round(mean[name] * 1e3, 4)
+    result.update({f"added_p{q}_ms": round(added[q] * 1e3, 4) for q in (50, 90, 99)})
+    result.update({"target_added_p99_ms": TARGET_ADDED_P99 * 1e3, "ratio": round(ratio, 3),
+                   "capture_state": str(info.state), "exchanges_recorded": exchanges})
     shutil.rmtree(workdir, ignore_errors=True)
+    print(json.dumps(result))
 
 
 if __name__ == "__main__":

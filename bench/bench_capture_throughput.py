@@ -125,9 +125,11 @@ def main() -> None:
     lost_to_unit = sent - unit_total
     lost_in_file = sent - host_len
     rate = sent / elapsed
+    rate_ratio = rate / TARGET_RATE
+    capture_mb = output.stat().st_size / 1e6
     print(f"ran {elapsed:.1f} s (target 600 s), decode={'off' if args.no_decode else 'on'}")
     print(f"sender rate      {rate:,.0f} B/s  (target {TARGET_RATE:,} B/s, ratio "
-          f"{rate / TARGET_RATE:.3f}); sender fell behind its schedule by at most "
+          f"{rate_ratio:.3f}); sender fell behind its schedule by at most "
           f"{max_behind * 1000:.1f} ms")
     print(f"sent             {sent:,} bytes in {n_lines:,} lines")
     print(f"unit received    {unit_total:,} bytes, crc {'match' if unit_crc == crc else 'MISMATCH'}"
@@ -136,7 +138,7 @@ def main() -> None:
           f"{'match' if host_stream_crc == crc else 'MISMATCH'}  -> lost {lost_in_file}")
     print(f"answers          {len(answers):,} bytes at the sender, {unit_len:,} recorded "
           f"(expected {2 * n_lines:,})")
-    print(f"capture          {output.stat().st_size / 1e6:.1f} MB, state {info.state}, "
+    print(f"capture          {capture_mb:.1f} MB, state {info.state}, "
           f"{sum(info.messages.values()):,} messages, gaps {info.gaps}")
     ok = (lost_to_unit == 0 and lost_in_file == 0 and unit_crc == crc
           and host_stream_crc == crc and unit_len == 2 * n_lines == len(answers))
@@ -145,20 +147,33 @@ def main() -> None:
           f"proxy finished {finish:.2f} s after SIGTERM")
     print(f"zero bytes lost: {'YES' if ok else 'NO'}")
     writer_cpu = float(end.get("recorder_cpu_s") or "nan")
+    backlog = str(end.get("max_backlog", ""))
+    writer_per_s = writer_cpu / elapsed
     per_s = proxy_cpu / elapsed
+    cpu_ratio = per_s / TARGET_CPU
+    stop_ratio = finish / TARGET_STOP
     print(f"recorder CPU     {per_s:.3f} core-s per s of traffic for the whole proxy process "
-          f"(pumps, recorder, decoding; target <= {TARGET_CPU}, ratio {per_s / TARGET_CPU:.2f}); "
-          f"writer thread alone {writer_cpu / elapsed:.3f}")
+          f"(pumps, recorder, decoding; target <= {TARGET_CPU}, ratio {cpu_ratio:.2f}); "
+          f"writer thread alone {writer_per_s:.3f}")
     print(f"stop             complete file {finish:.2f} s after SIGTERM (target <= {TARGET_STOP} s, "
-          f"ratio {finish / TARGET_STOP:.2f})")
+          f"ratio {stop_ratio:.2f})")
     lost = max(lost_to_unit, lost_in_file, 2 * n_lines - unit_len)
     print(json.dumps({"seconds": round(elapsed, 2), "decode": not args.no_decode,
-                      "sent_bytes": sent, "lost_bytes": lost, "zero_lost": ok,
+                      "sent_bytes": sent, "lines": n_lines, "lost_bytes": lost, "zero_lost": ok,
+                      "sender_rate": round(rate), "target_rate": TARGET_RATE,
+                      "rate_ratio": round(rate_ratio, 4),
+                      "sender_max_behind_ms": round(max_behind * 1000, 2),
+                      "answers_bytes": len(answers), "answers_recorded": unit_len,
+                      "messages": sum(info.messages.values()), "gaps": info.gaps,
+                      "max_backlog": int(backlog) if backlog.isdigit() else None,
                       "recorder_cpu_per_s": round(per_s, 4),
-                      "writer_thread_cpu_per_s": round(writer_cpu / elapsed, 4),
+                      # None, not NaN, when the session end did not say (NaN is not JSON)
+                      "writer_thread_cpu_per_s": (round(writer_per_s, 4)
+                                                  if writer_per_s == writer_per_s else None),
                       "stop_s": round(finish, 3), "state": info.state,
-                      "capture_mb": round(output.stat().st_size / 1e6, 2),
-                      "target_cpu_per_s": TARGET_CPU, "target_stop_s": TARGET_STOP}))
+                      "capture_mb": round(capture_mb, 2),
+                      "target_cpu_per_s": TARGET_CPU, "cpu_ratio": round(cpu_ratio, 3),
+                      "target_stop_s": TARGET_STOP, "stop_ratio": round(stop_ratio, 3)}))
     if args.keep is None:
         shutil.rmtree(workdir, ignore_errors=True)
 

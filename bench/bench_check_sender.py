@@ -10,6 +10,7 @@ is reported because the machine may be shared.
 
 from __future__ import annotations
 
+import argparse
 import json
 import resource
 import statistics
@@ -31,7 +32,11 @@ def cpu() -> float:
 
 
 def main() -> None:
-    repeat = int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=1, help="runs of the whole matrix")
+    repeat = ap.parse_args().repeat
+    if repeat < 1:
+        ap.error("--repeat must be at least 1")
     totals, per, cpus = [], {n: [] for n in GVE.scenarios}, []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as d:
@@ -46,10 +51,13 @@ def main() -> None:
     for name, ts in per.items():
         print(f"  {name:14} {statistics.median(ts):6.2f} s (program run)")
     total = statistics.median(totals)
-    print(f"full matrix: {total:.1f} s wall (median of {repeat}), {statistics.median(cpus):.1f} s "
-          f"CPU; target {TARGET_S:.0f} s, ratio {total / TARGET_S:.2f}")
-    print(json.dumps({"total_s": round(total, 2), "cpu_s": round(statistics.median(cpus), 2),
-                      "target_s": TARGET_S, "ratio": round(total / TARGET_S, 3),
+    cpu_s = statistics.median(cpus)
+    ratio = total / TARGET_S
+    print(f"full matrix: {total:.1f} s wall (median of {repeat}), {cpu_s:.1f} s "
+          f"CPU; target {TARGET_S:.0f} s, ratio {ratio:.2f}")
+    print(json.dumps({"total_s": round(total, 2), "cpu_s": round(cpu_s, 2), "repeat": repeat,
+                      "exit_code": r.exit_code,
+                      "target_s": TARGET_S, "ratio": round(ratio, 3),
                       "scenarios_s": {n: round(statistics.median(t), 2) for n, t in per.items()}}))
 
 

@@ -91,7 +91,8 @@ def main() -> None:
         speedup = ser["wall_s"] / par["wall_s"]
         print(f"one process: {ser['wall_s']:.2f} s wall; speed-up {speedup:.2f}x on {jobs} "
               f"(ideal {jobs}x, ratio {speedup / jobs:.2f})")
-        result.update(serial_wall_s=round(ser["wall_s"], 3), speedup=round(speedup, 3))
+        result.update(serial_wall_s=round(ser["wall_s"], 3), speedup=round(speedup, 3),
+                      ideal_speedup=jobs, speedup_ratio=round(speedup / jobs, 3))
     if args.keep is None:
         shutil.rmtree(root.parent, ignore_errors=True)
     print(json.dumps(result))

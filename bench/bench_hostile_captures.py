@@ -35,18 +35,21 @@ def main() -> None:
     t = time.perf_counter()
     paths = corpus(work / "corpus", seed=args.seed, bomb_bytes=int(args.bomb_gb * (1 << 30)),
                    count=args.count)
-    print(f"made {len(paths)} hostile files in {time.perf_counter() - t:.1f} s under {work}")
+    make_s = time.perf_counter() - t
+    print(f"made {len(paths)} hostile files in {make_s:.1f} s under {work}")
     intact = {name: intact_info(data, work) for name, data in base_files().items()}
     env = dict(os.environ, PYTHONPATH=str(ROOT), CORPUS_TIMEOUT="60")
     t = time.perf_counter()
     counts, failures = check_corpus(paths, intact, work, env, analyze_every=1)
-    print(f"ran in {time.perf_counter() - t:.1f} s")
+    run_s = time.perf_counter() - t
+    print(f"ran in {run_s:.1f} s")
     for cmd, c in counts.items():
         print(f"{cmd:16} " + ", ".join(f"{k} {v}" for k, v in c.items()))
     for f in failures:
         print("FAIL", f)
     print(json.dumps({"files": len(paths), "counts": counts, "failures": len(failures),
-                      "bomb_gb": args.bomb_gb}))
+                      "target_failures": 0, "bomb_gb": args.bomb_gb, "count": args.count,
+                      "seed": args.seed, "make_s": round(make_s, 2), "run_s": round(run_s, 2)}))
 
 
 if __name__ == "__main__":

@@ -10,13 +10,15 @@ Three figures, each printed with its target and the ratio to it:
    nearly every one is accepted and completes a vector (the accepting path, planning included);
    its target is the 140 000 C vectors/s the whole parse+model+answer path must reach.
 
-Run: ``python bench/bench_motion.py`` (``--vectors N`` for a shorter job,
-``--tracemalloc`` to also measure Python allocations of a 100 000-vector job).
+Run: ``python bench/bench_motion.py`` (``--vectors N`` for a shorter job, ``--ops N`` for
+fewer timed pushes and commands, ``--tracemalloc`` to also measure Python allocations of a
+100 000-vector job).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import resource
 import sys
@@ -97,33 +99,44 @@ def model_pattern_rate(n_cmds: int, segs: list, dt: float) -> tuple[float, int]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vectors", type=int, default=1_000_000)
+    ap.add_argument("--ops", type=int, default=1_000_000,
+                    help="pushes and model-pattern commands timed")
     ap.add_argument("--tracemalloc", action="store_true")
     args = ap.parse_args(argv)
+    if args.vectors < 1 or args.ops < 1:
+        ap.error("--vectors and --ops must be at least 1")
 
     segs = circle(10_000, 200_000)          # chords of about 126 pulses: short vectors
     wall, ex = run_job(args.vectors, segs)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     scale = args.vectors / 1_000_000
     target = JOB_TARGET_S * scale
+    job_rate = args.vectors / wall
+    job_ratio = wall / target
+    rss_ratio = rss_mb / RSS_TARGET_MB
     print(f"job: {args.vectors} C vectors in {wall:.2f} s wall "
-          f"({args.vectors / wall:,.0f} vectors/s), virtual time {ex.now:.1f} s, "
+          f"({job_rate:,.0f} vectors/s), virtual time {ex.now:.1f} s, "
           f"final position {ex.position}, starvations {ex.starvations}")
-    print(f"  target <= {target:.1f} s: ratio {wall / target:.3f} "
+    print(f"  target <= {target:.1f} s: ratio {job_ratio:.3f} "
           f"({'OK' if wall <= target else 'MISSED'})")
     print(f"  peak RSS {rss_mb:.0f} MB, target <= {RSS_TARGET_MB:.0f} MB: ratio "
-          f"{rss_mb / RSS_TARGET_MB:.3f} ({'OK' if rss_mb <= RSS_TARGET_MB else 'MISSED'})")
+          f"{rss_ratio:.3f} ({'OK' if rss_mb <= RSS_TARGET_MB else 'MISSED'})")
 
-    rate = push_rate(1_000_000, segs)
+    rate = push_rate(args.ops, segs)
+    push_share = MODEL_TARGET_PER_S / rate
     print(f"push: {rate:,.0f} pushes/s ({1e6 / rate:.2f} us each); "
           f"share of a {MODEL_TARGET_PER_S:,.0f}/s command budget: "
-          f"{MODEL_TARGET_PER_S / rate:.3f}")
+          f"{push_share:.3f}")
 
-    cmd_rate, accepted = model_pattern_rate(1_000_000, segs, ex.now / args.vectors)
+    cmd_rate, accepted = model_pattern_rate(args.ops, segs, ex.now / args.vectors)
+    model_ratio = cmd_rate / MODEL_TARGET_PER_S
+    model_share = MODEL_TARGET_PER_S / cmd_rate
     print(f"model pattern (advance + queue_len + push): {cmd_rate:,.0f} commands/s, "
           f"{accepted} accepted; ratio to {MODEL_TARGET_PER_S:,.0f}/s: "
-          f"{cmd_rate / MODEL_TARGET_PER_S:.2f}x (executor share of the budget "
-          f"{MODEL_TARGET_PER_S / cmd_rate:.3f})")
+          f"{model_ratio:.2f}x (executor share of the budget "
+          f"{model_share:.3f})")
 
+    peak = None
     if args.tracemalloc:
         tracemalloc.start()
         run_job(100_000, segs)
@@ -131,6 +144,17 @@ def main(argv: list[str] | None = None) -> int:
         tracemalloc.stop()
         print(f"tracemalloc: 100000-vector job peak Python allocations {peak / 1e6:.2f} MB")
     ok = wall <= target and rss_mb <= RSS_TARGET_MB
+    print(json.dumps({
+        "vectors": args.vectors, "job_wall_s": round(wall, 3), "job_vectors_per_s": round(job_rate),
+        "virtual_s": round(ex.now, 3), "final_position": list(ex.position),
+        "starvations": ex.starvations, "job_target_s": target, "job_ratio": round(job_ratio, 4),
+        "peak_rss_mb": round(rss_mb, 1), "rss_target_mb": RSS_TARGET_MB,
+        "rss_ratio": round(rss_ratio, 4), "ops": args.ops, "push_per_s": round(rate),
+        "push_us": round(1e6 / rate, 4), "push_budget_share": round(push_share, 4),
+        "model_commands_per_s": round(cmd_rate), "model_accepted": accepted,
+        "model_target_per_s": MODEL_TARGET_PER_S, "model_ratio": round(model_ratio, 3),
+        "model_budget_share": round(model_share, 4),
+        "tracemalloc_peak_mb": None if peak is None else round(peak / 1e6, 3), "ok": ok}))
     return 0 if ok else 1
 
 

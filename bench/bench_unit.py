@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import resource
 import sys
@@ -99,15 +100,18 @@ def job(unit: Unit, lines: list[bytes], count: int, baud: int) -> tuple[float, f
 
 
 def main(argv: list[str] | None = None) -> int:
+    spec = load_spec()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--variant", default="gve64-v19")
+    ap.add_argument("--variant", default="gve64-v19", choices=list(spec.variants))
     ap.add_argument("--vectors", type=int, default=1_000_000)
     ap.add_argument("--throughput", type=int, default=300_000)
     ap.add_argument("--baud", type=int, default=115200)
     args = ap.parse_args(argv)
-    spec = load_spec()
+    if args.vectors < 1 or args.throughput < 1 or args.baud < 1:
+        ap.error("--vectors, --throughput and --baud must be at least 1")
     variant = spec.variant(args.variant)
     lines = make_lines(3600, len(variant.axes))
+    result: dict = {"variant": variant.id, "target_rate": TARGET_RATE}
 
     for peek in (True, False):
         unit = Unit(variant)
@@ -115,22 +119,37 @@ def main(argv: list[str] | None = None) -> int:
             unit.exchange(setup, 0.0)
         secs, accepted, full = throughput(unit, lines, args.throughput, peek)
         rate = accepted / secs
+        lines_rate = (accepted + full) / secs
+        ratio = rate / TARGET_RATE
+        key = "fed" if peek else "blind"
+        result.update({f"{key}_accepted": accepted, f"{key}_seconds": round(secs, 3),
+                       f"{key}_queue_full": full, f"{key}_vectors_per_s": round(rate),
+                       f"{key}_lines_per_s": round(lines_rate), f"{key}_ratio": round(ratio, 3)})
         how = "fed to room " if peek else "blind+retry "
         print(f"throughput  {variant.id} {how}: {accepted:,} C vectors accepted and executed "
               f"in {secs:.2f} s ({full:,} queue-full answers besides) = {rate:,.0f} vectors/s, "
-              f"{(accepted + full) / secs:,.0f} lines/s; target >= {TARGET_RATE:,}/s: "
-              f"ratio {rate / TARGET_RATE:.2f}")
+              f"{lines_rate:,.0f} lines/s; target >= {TARGET_RATE:,}/s: "
+              f"ratio {ratio:.2f}")
 
     unit = Unit(variant)
     for setup in (b"!0V20000\r", b"!0A200\r", b"!0B5000\r", b"!0$200\r"):
         unit.exchange(setup, 0.0)
     wall, virtual, sent, retries = job(unit, lines, args.vectors, args.baud)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    job_ratio = wall / TARGET_JOB_S
+    rss_ratio = rss_mb / TARGET_JOB_MB
     print(f"job         {variant.id}: {sent:,} vectors ({retries:,} retries) at {args.baud} Bd, "
           f"{virtual / 3600:.2f} h of machining simulated in {wall:.1f} s wall "
-          f"(target <= {TARGET_JOB_S:.0f} s: ratio {wall / TARGET_JOB_S:.2f}); "
+          f"(target <= {TARGET_JOB_S:.0f} s: ratio {job_ratio:.2f}); "
           f"peak RSS {rss_mb:.0f} MB (target <= {TARGET_JOB_MB:.0f} MB: "
-          f"ratio {rss_mb / TARGET_JOB_MB:.2f}); starvations {unit.executor.starvations}")
+          f"ratio {rss_ratio:.2f}); starvations {unit.executor.starvations}")
+    result.update({"job_vectors": sent, "job_retries": retries, "baud": args.baud,
+                   "job_virtual_s": round(virtual, 3), "job_wall_s": round(wall, 3),
+                   "job_target_s": TARGET_JOB_S, "job_ratio": round(job_ratio, 4),
+                   "peak_rss_mb": round(rss_mb, 1), "rss_target_mb": TARGET_JOB_MB,
+                   "rss_ratio": round(rss_ratio, 4),
+                   "starvations": unit.executor.starvations})
+    print(json.dumps(result))
     return 0
 
 

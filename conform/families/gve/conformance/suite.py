@@ -4,7 +4,7 @@ what ``conform run`` and the pytest plugin share for GVE units."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 from conform.conformance.results import Grade, TargetRun
@@ -30,13 +30,17 @@ def suite(spec: Any, variant_id: str, *, patterns: Sequence[str] = (),
 
 
 def run_mutants(spec: Any, variant_ids: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                machine: bool = False, progress: Callable[[str], None] | None = None
+                machine: bool = False, progress: Callable[[str], None] | None = None,
+                names: Collection[str] | None = None
                 ) -> tuple[list[dict[str, Any]], list[TargetRun]]:
-    """Run the suite against every mutant; which checks caught each (FAIL) and the runs."""
+    """Run the suite against every mutant (or those in ``names``); which checks caught each
+    (FAIL) and the runs."""
     from conform.families.gve.conformance.mutants import mutant_targets
 
     report, runs = [], []
     for m, vid in mutant_targets(variant_ids):
+        if names is not None and m.name not in names:
+            continue
         t0 = time.perf_counter()
         target = GveEmuTarget(emulator_factory(spec, vid, None, m.name), f"emu:{vid}:{m.name}")
         runner = Runner(spec, target, vid, options=RunOptions(profile=profile, seed=seed))
