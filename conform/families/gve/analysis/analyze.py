@@ -454,18 +454,13 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
     rep_stream = s.replay
     rep: QueueReplay | None = None
     replayed = True
-    if rep_stream.control_row >= 0:
-        if whole and ex is not None:
+    if rep_stream.control_row >= 0 and whole:  # kept: the executor over the whole table
+        if ex is not None:
             try:
                 rep = replay(ex, accepted, host.result, var)
             except Exception as exc:  # noqa: BLE001 - a replay failure must not lose the analysis
                 notes.append(f"queue replay failed: {type(exc).__name__}: {exc}")
                 replayed = False
-        else:
-            notes.append("queue replay stopped at row "
-                         f"{rep_stream.control_row}: H/G/D/K/R/J need the motion executor "
-                         "itself, which replays captures of up to "
-                         f"{KEEP_ROWS} command lines")
     elif whole:
         rep = rep_stream.result()
     whatif_rows: list[dict[str, Any]] = []
@@ -474,7 +469,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
             whatif_rows = whatif(ex, accepted, host.result, var, used, rep)
         except Exception as exc:  # noqa: BLE001
             notes.append(f"what-if replay failed: {type(exc).__name__}: {exc}")
-    elif not whole and whatif_replays and rep_stream.control_row < 0:
+    elif not whole and whatif_replays:
         r = rep_stream  # the scenarios from the summaries, without the simulated replays
         whatif_rows = r.inputs.rows(used, r.durations.median() if r.durations.n else np.nan,
                                     r.starved, r.end_max - r.push_min if r.completed else 0.0)

@@ -88,9 +88,9 @@ def replay(ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, variant: Va
         rows, t, vec, is_vec, cont, names, host_parsed, variant, chunk)
     # every vector row was pushed, in order, at its arrival time
     push_rows_a = rows[is_vec].astype(np.int64)
-    # seq counts pushes per executor; J makes a new executor: map by order of completion
-    done_rows = push_rows_a[np.minimum(_global_seq(seq), max(len(push_rows_a) - 1, 0))] \
-        if len(seq) and len(push_rows_a) else np.zeros(0, np.int64)
+    # seq counts the session's pushes (a J's new executor goes on counting): K/R finish
+    # vectors out of push order, so each completion is mapped by its own number
+    done_rows = push_rows_a[seq] if len(seq) else np.zeros(0, np.int64)
     pushes_a = t[push_rows_a].astype(float)
     removals_a = np.asarray(removals, float)
     depth_t, depth = queue_depth(pushes_a, ends, removals_a)
@@ -159,6 +159,29 @@ def _modal(p: Any, name: str, args: Any) -> Any:
     if name in ("VK", "VN"):
         return p.replace(vk=name == "VK")
     return p
+
+
+def _command(exe: Any, name: str, t: float, host_parsed: Any, row: int) -> list[int] | None:
+    """A modal or control row on the executor at ``t``; raises what the executor refuses.
+    Returns the push numbers of the vectors D deleted (none for the others), or None for J:
+    the caller counts what is queued as removed and starts a new executor (a reset unit)."""
+    if name in MODAL:
+        exe.params = _modal(exe.params, name, getattr(host_parsed(row), "args", ()) or ())
+    elif name == "H":
+        exe.halt(t)
+    elif name == "G":
+        exe.resume(t)
+    elif name == "D":
+        gone = [q[4] for q in exe._q]
+        exe.clear()  # refused while running: then nothing left the queue
+        return gone
+    elif name == "K":
+        exe.park()
+    elif name == "R":
+        exe.restore()
+    elif name == "J":
+        return None
+    return []
 
 
 Completions = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -233,34 +256,27 @@ def _run_python(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.nda
     notes: list[str] = []
     advance, push = exe.advance, exe.push
     done: list[np.ndarray] = []  # finished vectors, drained from the log block by block
+    pushed = 0
     for r, tk, vk, is_v, c in _blocks(rows, t, vec, is_vec, cont, log, done):
         advance(tk)
         if is_v:
             push(vk, c)
+            pushed += 1
             continue
         name = names[r]
         try:
-            if name in MODAL:
-                exe.params = _modal(exe.params, name,
-                                    getattr(host_parsed(r), "args", ()) or ())
-            elif name == "H":
-                exe.halt(tk)
-            elif name == "G":
-                exe.resume(tk)
-            elif name == "D":
-                removals.extend([tk] * exe.queue_len)
-                exe.clear()
-            elif name == "K":
-                exe.park()
-            elif name == "R":
-                exe.restore()
-            elif name == "J":
-                removals.extend([tk] * exe.queue_len)
-                exe = executor()
-                advance, push = exe.advance, exe.push
-                exe.advance(tk)
+            gone = _command(exe, name, tk, host_parsed, r)
         except (MotionStateError, ValueError) as err:
             notes.append(f"replay: {name} at row {r} refused by the model: {err}")
+            continue
+        if gone is None:  # J
+            removals.extend([tk] * exe.queue_len)
+            exe = executor()
+            exe._seq = pushed  # sequence numbers run on over the whole session
+            advance, push = exe.advance, exe.push
+            exe.advance(tk)
+        else:
+            removals.extend([tk] * len(gone))
     end = exe.next_event_time()
     guard = 0
     while end is not None and guard < variant.queue + 10_000:
@@ -305,21 +321,6 @@ def _blocks(rows: np.ndarray, t: np.ndarray, vec: np.ndarray, is_vec: np.ndarray
         yield from zip(r.tolist(), t[r].tolist(), v.tolist(), is_vec[sl].tolist(),
                        cont[sl].tolist(), strict=True)
         _drain(log, done)
-
-
-def _global_seq(seq: np.ndarray) -> np.ndarray:
-    """Executor sequence numbers restart after J; make them a running count of pushes."""
-    if len(seq) == 0:
-        return seq
-    out = seq.copy()
-    base = 0
-    restart = np.flatnonzero(np.diff(seq) < 0) + 1
-    prev = 0
-    for r in restart.tolist():
-        base += int(seq[prev:r].max()) + 1
-        out[r:] = seq[r:] + base
-        prev = r
-    return out
 
 
 def _starvation_events(rep: QueueReplay) -> list[dict[str, Any]]:
@@ -489,9 +490,10 @@ class StreamReplay:
     depth and the last completion. What comes out is summed up as it comes
     (``summaries``); while ``keep`` the whole arrays are kept too, for a ``QueueReplay``.
 
-    A session with H/G/D/K/R/J needs the Python executor: the compiled replay stops at the
-    first of them (``control_row``) and the caller replays the kept table instead, or says
-    that the replay stops there.
+    At the first H/G/D/K/R/J (``control_row``) the compiled scan's state is handed to a
+    ``MotionExecutor`` (the Python executor, which knows those commands) and the rest of
+    the session goes through it a window at a time, its completion log drained into the
+    same summaries: the result is the one ``replay`` gives on the whole session.
     """
 
     def __init__(self, variant: Variant, keep: bool = True) -> None:
@@ -509,7 +511,13 @@ class StreamReplay:
         self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
         self.first = 0  # push index of q_*[0]
         self.pushed = 0
-        self.control_row = -1
+        self.control_row = -1  # the first H/G/D/K/R/J: from there on the executor replays
+        self.exe: Any = None  # conform.families.gve.unit.motion.MotionExecutor, from then on
+        self.log: list = []  # its completions since the last drain
+        self.live: dict[int, tuple[float, int]] = {}  # push number: arrival, exchange row
+        self.now = 0.0  # the time of the last event replayed
+        self.final = False  # the final drain: no event is held back any more
+        self.held = (np.zeros(0), np.zeros(0), np.zeros(0))  # depth events at ``now``
         self.notes: list[str] = []
         self.depth = 0
         self.max_depth = 0
@@ -536,7 +544,7 @@ class StreamReplay:
         self.keep = keep
         self.kept: dict[str, list[np.ndarray]] = {k: [] for k in (
             "pushes", "push_rows", "starts", "ends", "starved", "v_out", "done_rows",
-            "depth_t", "depth")}
+            "removals", "depth_t", "depth")}
         if not keep:
             self.stop_keeping()
 
@@ -547,7 +555,7 @@ class StreamReplay:
     def feed(self, ex: pd.DataFrame, accepted: np.ndarray, host_parsed: Any, lo: int, hi: int,
              base: int) -> None:
         """Rows ``lo:hi`` of ``ex`` (the capture's rows ``base + lo`` …)."""
-        if self.control_row >= 0 or hi <= lo:
+        if hi <= lo:
             return
         sl = slice(lo, hi)
         names = ex["name"].to_numpy()[sl]
@@ -562,10 +570,28 @@ class StreamReplay:
         self.inputs.feed(ex, np.flatnonzero(acc) + lo)
         rows = np.flatnonzero(acc | ctrl)
         is_vec = acc[rows]
-        stop = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
-        if len(stop):
-            self.control_row = int(rows[stop[0]]) + lo + base
-            rows, is_vec = rows[: stop[0]], is_vec[: stop[0]]
+        k = 0  # rows[:k] go through the compiled scan, the rest through the executor
+        if self.exe is None:
+            stop = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
+            k = int(stop[0]) if len(stop) else len(rows)
+            self._feed_compiled(ex, names, t, rows[:k], is_vec[:k], host_parsed, lo, base)
+            if k < len(rows):
+                self.control_row = int(rows[k]) + lo + base
+                self._hand_over()
+        if k < len(rows):
+            self._feed_python(ex, names, t, rows[k:], is_vec[k:], host_parsed, lo, base)
+
+    def _pulses(self, ex: pd.DataFrame, vrows: np.ndarray) -> np.ndarray:
+        d = np.empty((len(vrows), self.naxes), np.int64)
+        for j, c in enumerate(AXES[: self.naxes]):
+            d[:, j] = ex[c].to_numpy()[vrows]
+        if self.path is not None:
+            self.path.push(d)
+        return d
+
+    def _feed_compiled(self, ex: pd.DataFrame, names: np.ndarray, t: np.ndarray,
+                       rows: np.ndarray, is_vec: np.ndarray, host_parsed: Any, lo: int,
+                       base: int) -> None:
         modal = np.flatnonzero(~is_vec)  # few: the parameters they set, one by one
         after = np.empty(len(modal) + 1, np.int32)  # parameter row after each of them
         after[0] = self.states[self._key(self.params)]
@@ -585,11 +611,7 @@ class StreamReplay:
             after[j + 1] = self.states[key]
         state = after[np.cumsum(~is_vec)]  # in force at each row
         vrows = rows[is_vec] + lo
-        d = np.empty((len(vrows), self.naxes), np.int64)
-        for j, c in enumerate(AXES[: self.naxes]):
-            d[:, j] = ex[c].to_numpy()[vrows]
-        if self.path is not None:
-            self.path.push(d)
+        d = self._pulses(ex, vrows)
         self._run(t[rows], is_vec, d, names[rows[is_vec]] == "C", state[is_vec],
                   vrows + base, -1)
 
@@ -612,18 +634,121 @@ class StreamReplay:
                              self.q_t, col("v", float), col("a", float), col("b", float),
                              col("short", np.int64), col("pause", float), col("vk", bool),
                              float(self.variant.max_rate or 0.0), guard, F, I)
+        if len(ev_t):
+            self.now = float(ev_t[-1])
         self.pushed += int(is_vec.sum())
         seq, starts, ends, v_out, starved = out[0], out[1], out[2], out[4], out[6]
         if self.path is not None:
             self.path.done(seq + self.first, v_out)
-        self._summarise(tacc, vrows, seq, starts.copy(), ends.copy(), v_out.copy(),
-                        starved.copy())
+        self._summarise(tacc, vrows, starts.copy(), ends.copy(), v_out.copy(),
+                        starved.copy(), self.q_t[seq], self.q_row[seq], np.zeros(0))
 
-    def _summarise(self, pushes: np.ndarray, push_rows: np.ndarray, seq: np.ndarray,
-                   starts: np.ndarray, ends: np.ndarray, v_out: np.ndarray,
-                   starved: np.ndarray) -> None:
-        arrived = self.q_t[seq]
-        done_rows = self.q_row[seq]
+    def _hand_over(self) -> None:
+        """The compiled scan's state as a ``MotionExecutor`` (at the first H/G/D/K/R/J):
+        the queued vectors with their parameters and arrival times, the planned head and
+        what the last completion left (exit speed, ready time, whether the queue ran dry).
+        The executor numbers its pushes on from the session's count."""
+        import conform.families.gve.analysis.replay_kernel as k
+        from conform.families.gve.unit.motion import MotionExecutor
+
+        F, I = self.F, self.I  # noqa: E741
+        exe = MotionExecutor(axes=self.naxes, capacity=self.variant.queue,
+                             max_rate=self.variant.max_rate, params=self.params, log=self.log)
+        for i in range(int(I[k.H]), int(I[k.N])):
+            g = self.first + i
+            exe._q.append((self.q_d[i].tolist(), bool(self.q_cont[i]),
+                           self.table[int(self.q_state[i])], float(self.q_t[i]), g))
+            self.live[g] = (float(self.q_t[i]), int(self.q_row[i]))
+        exe._seq = self.pushed
+        exe._now = self.now
+        exe._v, exe._ready, exe._dry = float(F[k.V]), float(F[k.READY]), bool(I[k.DRY])
+        if I[k.PLANNED]:
+            exe._planned = True
+            exe._t0, exe._tend, exe._len = float(F[k.T0]), float(F[k.TEND]), float(F[k.LEN])
+            exe._dom = max(map(abs, exe._q[0][0]))
+            exe._vj, exe._vpeak = float(F[k.VJ]), float(F[k.VPEAK])
+            exe._tdec = float(F[k.TDEC])
+            exe._vstart, exe._vin = float(F[k.VSTART]), float(F[k.VIN])
+            exe._prof = tuple(float(x) for x in F[k.PROF : k.PROF + 8])
+            exe._exit = int(I[k.EXIT])
+            exe._vstarved = bool(I[k.STARVED])
+        self.exe = exe
+        self.q = _Queue(self.naxes)  # the executor holds the queue from here on
+        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
+
+    def _new_executor(self) -> None:
+        """J: a unit just reset; its pushes are numbered on from the session's count."""
+        from conform.families.gve.unit.motion import MotionExecutor
+
+        self.exe = MotionExecutor(axes=self.naxes, capacity=self.variant.queue,
+                                  max_rate=self.variant.max_rate, params=_params(self.variant),
+                                  log=self.log)
+        self.exe._seq = self.pushed
+
+    def _feed_python(self, ex: pd.DataFrame, names: np.ndarray, t: np.ndarray,
+                     rows: np.ndarray, is_vec: np.ndarray, host_parsed: Any, lo: int,
+                     base: int) -> None:
+        """Rows through the executor itself, as ``_run_python`` replays a whole session."""
+        from conform.families.gve.unit.motion import MotionStateError
+
+        vrows = rows[is_vec] + lo
+        vecs = iter(self._pulses(ex, vrows).tolist())
+        removals: list[float] = []
+        tk_all = t[rows]
+        for r, tk, is_v in zip((rows + lo).tolist(), tk_all.tolist(), is_vec.tolist(),
+                               strict=True):
+            exe = self.exe
+            exe.advance(tk)
+            name = names[r - lo]
+            if is_v:
+                exe.push(next(vecs), name == "C")
+                self.live[self.pushed] = (tk, r + base)
+                self.pushed += 1
+                continue
+            try:
+                gone = _command(exe, name, tk, host_parsed, r)
+            except (MotionStateError, ValueError) as err:
+                self.notes.append(f"replay: {name} at row {r + base} refused by the model: "
+                                  f"{err}")
+                continue
+            if gone is None:  # J
+                removals.extend([tk] * exe.queue_len)
+                self._drain_python(np.zeros(0), np.zeros(0, np.int64), [])
+                self.live.clear()  # queued and parked: gone with the old executor
+                self._new_executor()
+                self.exe.advance(tk)
+            else:
+                removals.extend([tk] * len(gone))
+                for g in gone:
+                    self.live.pop(g, None)
+        if len(tk_all):
+            self.now = float(tk_all[-1])
+        self._drain_python(tk_all[is_vec], vrows + base, removals)
+
+    def _drain_python(self, pushes: np.ndarray, push_rows: np.ndarray,
+                      removals: list[float]) -> None:
+        """The executor's completions since the last drain, summed up as the compiled
+        scan's are (with the vectors removed by D and J)."""
+        from conform.families.gve.unit.motion import Completion
+
+        log = self.log
+        f = Completion._fields
+        arr = np.array(log, float).reshape(len(log), len(f))
+        del log[:]
+        seq = arr[:, f.index("seq")].astype(np.int64)
+        v_out = arr[:, f.index("v_out")]
+        gone = [self.live.pop(g) for g in seq.tolist()]
+        arrived = np.array([a for a, _ in gone], float)
+        done_rows = np.array([r for _, r in gone], np.int64)
+        if self.path is not None:
+            self.path.done(seq, v_out)
+        self._summarise(pushes, push_rows, arr[:, f.index("t_start")],
+                        arr[:, f.index("t_end")], v_out, arr[:, f.index("starved")] > 0,
+                        arrived, done_rows, np.asarray(removals, float))
+
+    def _summarise(self, pushes: np.ndarray, push_rows: np.ndarray, starts: np.ndarray,
+                   ends: np.ndarray, v_out: np.ndarray, starved: np.ndarray,
+                   arrived: np.ndarray, done_rows: np.ndarray, removals: np.ndarray) -> None:
         if len(pushes):
             self.push_min = min(self.push_min, float(pushes.min()))
         self.completed += len(ends)
@@ -647,7 +772,7 @@ class StreamReplay:
                                          "row": int(done_rows[i])})
         if len(ends):
             self.last_end = float(ends[-1])
-        dt, dv = queue_depth(pushes, ends, np.zeros(0))
+        dt, dv = self._depth_events(pushes, ends, removals)
         dv = dv.astype(np.int64) + self.depth
         if len(dv):
             if self.depth_last is None:
@@ -669,8 +794,26 @@ class StreamReplay:
         else:
             for k, v in (("pushes", pushes), ("push_rows", push_rows), ("starts", starts),
                          ("ends", ends), ("starved", starved), ("v_out", v_out),
-                         ("done_rows", done_rows), ("depth_t", dt), ("depth", dv)):
+                         ("done_rows", done_rows), ("removals", removals),
+                         ("depth_t", dt), ("depth", dv)):
                 self.kept[k].append(v)
+
+    def _depth_events(self, pushes: np.ndarray, ends: np.ndarray, removals: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """``queue_depth`` of the events up to the last time replayed (exclusive), the
+        ones at that time held for the next call: a later window may add events at that
+        very time, and the whole session's order puts departures first at equal times."""
+        hp, he, hr = self.held
+        if len(hp) or len(he) or len(hr):
+            pushes, ends = np.concatenate([hp, pushes]), np.concatenate([he, ends])
+            removals = np.concatenate([hr, removals])
+        if self.final:
+            self.held = (np.zeros(0), np.zeros(0), np.zeros(0))
+            return queue_depth(pushes, ends, removals)
+        cut = self.now
+        mp, me, mr = pushes < cut, ends < cut, removals < cut
+        self.held = (pushes[~mp], ends[~me], removals[~mr])
+        return queue_depth(pushes[mp], ends[me], removals[mr])
 
     def stop_keeping(self) -> None:
         """From now on only summaries: what was kept goes to the sink and the plot series."""
@@ -691,6 +834,17 @@ class StreamReplay:
 
     def finish(self) -> None:
         """The final drain (as ``replay``: at most capacity + 10 000 steps)."""
+        self.final = True
+        if self.exe is not None:
+            exe, guard = self.exe, 0
+            end = exe.next_event_time()
+            while end is not None and guard < self.variant.queue + 10_000:
+                exe.advance(end)
+                end = exe.next_event_time()
+                guard += 1
+            self._drain_python(np.zeros(0), np.zeros(0, np.int64), [])
+            self.live.clear()  # the rest never ran
+            return
         z = np.zeros(0, np.int64)
         self._run(np.zeros(0), np.zeros(0, bool), np.zeros((0, self.naxes), np.int64),
                   np.zeros(0, bool), np.zeros(0, np.int32), z, self.variant.queue + 10_000)
@@ -708,7 +862,7 @@ class StreamReplay:
         k = {name: (np.concatenate(v) if v else np.zeros(0)) for name, v in self.kept.items()}
         rep = QueueReplay(k["pushes"].astype(float), k["push_rows"].astype(np.int64),
                           k["starts"], k["ends"], k["starved"].astype(bool), k["v_out"],
-                          k["done_rows"].astype(np.int64), np.zeros(0), k["depth_t"],
+                          k["done_rows"].astype(np.int64), k["removals"], k["depth_t"],
                           k["depth"].astype(np.int32), notes=list(self.notes),
                           capacity=self.variant.queue)
         rep.starvations = list(self.starvations)
