@@ -5,7 +5,8 @@ The same rules as ``conform.unit.motion.MotionExecutor`` (``_plan_head``, ``adva
 clears, parks or resets the queue: the executor's state lives in two small arrays, the
 queue is a head index into the vectors in push order, and every vector's modal parameters
 (V, A, B, $, T, VK/VN) are given as columns, captured at its push as the executor does.
-Sessions with H, G, D, K, R or J take the Python executor (``queue.replay`` decides).
+Sessions with H, G, D, K, R or J take the Python executor (``queue.replay`` decides; a
+streamed replay hands this scan's state over to it at the first of them).
 ``tests/test_analysis_replay.py`` checks that both give the same completions.
 """
 
