@@ -695,11 +695,10 @@ class StreamReplay:
         vecs = iter(self._pulses(ex, vrows).tolist())
         removals: list[float] = []
         tk_all = t[rows]
-        for r, tk, is_v in zip((rows + lo).tolist(), tk_all.tolist(), is_vec.tolist(),
-                               strict=True):
+        for r, tk, is_v, name in zip((rows + lo).tolist(), tk_all.tolist(), is_vec.tolist(),
+                                     names[rows].tolist(), strict=True):
             exe = self.exe
             exe.advance(tk)
-            name = names[r - lo]
             if is_v:
                 exe.push(next(vecs), name == "C")
                 self.live[self.pushed] = (tk, r + base)
