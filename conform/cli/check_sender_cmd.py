@@ -19,7 +19,6 @@ from conform.cli.params import (
     command_line,
     json_option,
 )
-from conform.errors import UserError
 
 
 @click.command(name="check-sender", context_settings={"ignore_unknown_options": True})
@@ -59,10 +58,9 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
             progress=lambda m: click.echo(f"check-sender: {m}", err=True),
             command_line=command_line()))
     import json
-    from pathlib import Path
 
-    from conform.report.render import default_dir
     from conform.sendercheck.grade import check, default_family, family_for
+    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
     from conform.sendercheck.report import write_reports
 
     if "list" in scenarios:
@@ -70,20 +68,10 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         for s in shapes.scenarios.values():
             click.echo(f"{s.name:14} {s.title}")
         return
-    if not command:
-        raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS... "
-                        "(`{port}` in ARGS becomes the device path)")
-    if timeout is not None and not 0 < timeout <= 86400:
-        raise UserError(f"--timeout {timeout:g}: must be between 0 and 86400 seconds")
-    job_lines = None
-    if job_file is not None:
-        from conform.errors import read_user_text
-
-        job_lines = [x for x in read_user_text(job_file).splitlines() if x.strip()]
-        if not job_lines:
-            raise UserError(f"{job_file}: no commands in the file")
-    directory = Path(report_dir) if report_dir else default_dir().with_name(
-        "check-sender-" + default_dir().name)
+    require_program(list(command))
+    check_timeout(timeout)
+    job_lines = read_job(job_file)
+    directory = report_folder(report_dir)
 
     def say(msg: str) -> None:
         click.echo(f"check-sender: {msg}", err=True)

@@ -8,7 +8,6 @@ harness failed).
 from __future__ import annotations
 
 import shlex
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -19,6 +18,7 @@ from conform.errors import UserError
 from conform.families import DEFAULT_FAMILY, family_for_variant
 from conform.families import family as registered_family
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
+from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
 
 
@@ -129,10 +129,7 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
           directory: Path, timeout: float | None = None, seed: int = 1,
           job_lines: list[str] | None = None,
           progress: Callable[[str], None] | None = None) -> CheckResults:
-    if not command:
-        raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS...")
-    if shutil.which(command[0]) is None:
-        raise UserError(f"{command[0]}: no such program (not found or not executable)")
+    require_program(command)
     shapes = family_for(variant) if variant else default_family()
     var, dialect = shapes.variant(variant or shapes.default_variant)
     family = shapes

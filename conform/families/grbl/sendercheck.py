@@ -122,32 +122,21 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
             command_line: str | None = None) -> int:
     """``conform check-sender --variant grbl-… -- COMMAND``: exit status 0, 1 or 2."""
     import json
-    import shutil
 
     from conform.conformance.suite import results_of
-    from conform.errors import read_user_text
-    from conform.report.render import default_dir, write_reports
+    from conform.report.render import write_reports
+    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
 
     names = [n for x in scenarios for n in x.split(",") if n]
     if "list" in names:
         for sc in SCENARIOS.values():
             echo(f"{sc.name:16} {sc.title}")
         return 0
-    if not command:
-        raise UserError("no program given: conform check-sender --variant grbl-1.1f -- COMMAND "
-                        "ARGS... (`{port}` in ARGS becomes the device path)")
-    if shutil.which(command[0]) is None:
-        raise UserError(f"{command[0]}: no such program (not found or not executable)")
-    if timeout is not None and not 0 < timeout <= 86400:
-        raise UserError(f"--timeout {timeout:g}: must be between 0 and 86400 seconds")
+    require_program(command)
+    check_timeout(timeout)
     load_grbl().variant(variant)
-    job = None
-    if job_file is not None:
-        job = [x for x in read_user_text(job_file).splitlines() if x.strip()]
-        if not job:
-            raise UserError(f"{job_file}: no lines in the file")
-    out = Path(report_dir) if report_dir else default_dir().with_name(
-        "check-sender-" + default_dir().name)
+    job = read_job(job_file)
+    out = report_folder(report_dir)
     run = check_sender(command, variant=variant, scenarios=names or None, job=job,
                        timeout=timeout, directory=out, seed=seed, progress=progress)
     results = results_of([run], command_line or "conform check-sender " + " ".join(command))

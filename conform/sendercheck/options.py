@@ -1,0 +1,44 @@
+"""What ``conform check-sender`` checks of its options before any session starts, whichever
+family judges the sender: one-line errors naming the option or file."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from conform.errors import UserError, read_user_text
+
+MAX_TIMEOUT_S = 86400
+
+
+def require_program(command: list[str]) -> None:
+    """The sender to judge: given, and a program that can be run."""
+    if not command:
+        raise UserError("no program given: conform check-sender [OPTIONS] -- COMMAND ARGS... "
+                        "(`{port}` in ARGS becomes the device path)")
+    if shutil.which(command[0]) is None:
+        raise UserError(f"{command[0]}: no such program (not found or not executable)")
+
+
+def check_timeout(timeout: float | None) -> None:
+    if timeout is not None and not 0 < timeout <= MAX_TIMEOUT_S:
+        raise UserError(f"--timeout {timeout:g}: must be between 0 and {MAX_TIMEOUT_S} seconds")
+
+
+def read_job(job_file: str | None) -> list[str] | None:
+    """The non-blank lines of ``--job`` (None without one)."""
+    if job_file is None:
+        return None
+    lines = [x for x in read_user_text(job_file).splitlines() if x.strip()]
+    if not lines:
+        raise UserError(f"{job_file}: no job lines in the file")
+    return lines
+
+
+def report_folder(report_dir: str | None) -> Path:
+    """``--report``, else ``reports/check-sender-<timestamp>/``."""
+    from conform.report.render import default_dir
+
+    if report_dir:
+        return Path(report_dir)
+    return default_dir().with_name("check-sender-" + default_dir().name)
