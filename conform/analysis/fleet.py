@@ -126,8 +126,6 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
         return row
     row.update(a.fleet_row())
     row["machine"] = machine_of(p, {"conform.session": meta})
-    row["state"] = "clean" if not any(n.startswith("capture incomplete") for n in a.notes) \
-        else "damaged"
     if parquet_dir:
         base = Path(parquet_dir) / d.family
         tmp = base / f".{_safe(row['machine'])}-{_safe(p.stem)}"

@@ -63,6 +63,7 @@ class GrblAnalysis:
     notes: list[str] = field(default_factory=list)
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
     reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
+    complete: bool = True  # the capture file was whole (not truncated or damaged)
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -104,7 +105,8 @@ class GrblAnalysis:
         starved = m.get("finding_counts", {}).get("planner-starved", 0)
         motion = sum(1 for e in self.exchanges if e.answer == "ok" and is_motion(e.text))
         d = m["duration_s"]
-        return {"family": self.family, "duration_s": d, "exchanges": m["lines"],
+        return {"family": self.family, "state": "clean" if self.complete else "damaged",
+                "duration_s": d, "exchanges": m["lines"],
                 "vectors_accepted": motion, "exchanges_per_s": m["lines_per_s"],
                 "vectors_per_s": motion / d if d > 0 else 0.0, "hazards": m["hazards"],
                 "findings": dict(m.get("finding_counts", {})),
@@ -388,6 +390,7 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
                         detected=detected)
     a.notes += notes
     if not raw.status.complete:
+        a.complete = False
         a.notes.append(f"capture incomplete: {raw.status.problem}")
     return a
 
