@@ -58,8 +58,11 @@ def test_a_run_whose_link_dies_writes_an_incomplete_report(emulator, tmp_path):
     run = subprocess.Popen([sys.executable, "-m", "conform", "run", "--target", pty,
                             "--no-machine"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True, cwd=tmp_path, env=_env(CONFORM_PROGRESS_SECONDS="0.2"))
-    line = run.stderr.readline()  # the first progress line: checks are under way
-    assert line.startswith("conform run: "), line
+    seen = []  # the estimate may be announced first; wait for a progress line: checks are under way
+    while not (seen and seen[-1].startswith("conform run: ")):
+        line = run.stderr.readline()
+        assert line, seen  # stderr ended with no progress line
+        seen.append(line)
     emu.kill()
     out, err = run.communicate(timeout=300)
     assert run.returncode == 2, out + err
