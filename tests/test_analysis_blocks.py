@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from conform.families.gve.analysis import analyze, frames, positions, queue
+from conform.families.gve.analysis import analyze, positions, queue
 
 CAPTURES = Path(__file__).resolve().parent.parent / "captures"
 
@@ -25,7 +25,6 @@ def test_results_do_not_depend_on_the_block_sizes(name: str,
     path = CAPTURES / f"{name}.mcap"
     found, metrics = outcome(path)
     assert metrics  # usb-packets has no finding: its metrics still compare
-    monkeypatch.setattr(frames, "DECODE_BLOCK", 5)
     monkeypatch.setattr(positions, "CUM_BLOCK", 3)
     monkeypatch.setattr(queue, "REPLAY_CHUNK", 7)
     tiny_found, tiny_metrics = outcome(path)

@@ -9,7 +9,6 @@ checksum mode (``%+`` / ``%-`` / ``J``) is tracked as a step function over the l
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -130,7 +129,7 @@ def checksum_tails(data: np.ndarray, csum: np.ndarray, start: np.ndarray,
     has = np.zeros(n, bool)
     ok = np.zeros(n, bool)
     value = np.full(n, -1, np.int64)
-    if n == 0:
+    if n == 0 or len(data) < 4:  # no line long enough for a tail (and no byte 4 to point at)
         return has, ok, value
     cand = (end - start) >= 4
     e = np.where(cand, end, 4)
@@ -215,35 +214,16 @@ class DecodedLines:
                    np.concatenate(ids))
 
 
-def _vector_regex(variant: Variant, dialect: Dialect, cmd_id: str) -> tuple[str, int, int] | None:
-    """A regex for the strict form of an L/C row, its lo and hi; None if not strict."""
+def _vector_form(variant: Variant, dialect: Dialect, cmd_id: str) -> tuple[str, int, int] | None:
+    """The mnemonic, lo and hi of an L/C row whose strict form ``vector_scan`` reads; None
+    when the dialect is not strict (the parser takes every line then)."""
     spec = variant.commands.get(cmd_id)
     if spec is None or dialect["A22"] != "strict" or dialect["A21"] != "upper-mnemonics":
         return None
     if len(spec.params) != 1 or not spec.params[0].per_axis or spec.params[0].kind != "int":
         return None
     p = spec.params[0]
-    return re.escape(spec.mnemonic), int(p.lo), int(p.hi)
-
-
-DECODE_BLOCK = 131_072  # lines matched against the vector pattern at a time
-
-
-def _vector_fields(bodies: pa.BinaryArray, cand: np.ndarray, rx: str, naxes: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """(lines of ``cand`` that match ``rx``, their axis values as an (n, naxes) array)."""
-    m = pc.extract_regex(bodies.take(pa.array(cand)), rx)
-    valid = m.is_valid().to_numpy(zero_copy_only=False)
-    if not valid.any():
-        return cand[:0], np.zeros((0, naxes), np.int64)
-    mv = m.filter(pa.array(valid))
-    cols = []
-    for i in range(naxes):
-        f = mv.field(f"a{i}").cast(pa.string())
-        if i >= 3:
-            f = pc.if_else(pc.equal(f, ""), "0", f)
-        cols.append(pc.cast(f, pa.int64()).to_numpy())
-    return cand[valid], np.stack(cols, axis=1)
+    return spec.mnemonic, int(p.lo), int(p.hi)
 
 
 def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray],
@@ -261,7 +241,6 @@ def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
     cs[mode_before & ~has] = CS_MISSING
     strip = mode_before & has
     body_end = np.where(strip, lines.end - 3, lines.end)
-    bodies = _binary(data, lines.start, body_end)
 
     kind = np.full(n, COMMAND, object)
     name = np.full(n, None, object)
@@ -285,29 +264,29 @@ def decode_host(d: Direction, lines: Lines, times: tuple[np.ndarray, np.ndarray]
     done |= partial
 
     # fast path: the motion vectors, straight from their table rows
+    from conform.families.gve.analysis.vector_scan import scan_vectors  # numba: on first use
+
     address = variant.interpolator_address
     naxes = len(variant.axes)
     for cid in ("C", "L"):
-        form = _vector_regex(variant, dialect, cid)
+        form = _vector_form(variant, dialect, cid)
         if form is None or n == 0:
             continue
         mnem, lo, hi = form
-        axes = "".join(f"(?:,(?P<a{i}>-?[0-9]+))?" for i in range(3, naxes))
-        rx = (f"^!{address}{mnem}(?P<a0>-?[0-9]{{1,10}}),(?P<a1>-?[0-9]{{1,10}}),"
-              f"(?P<a2>-?[0-9]{{1,10}}){axes}\\z")
         cand = np.flatnonzero(~done)
-        for b in range(0, len(cand), DECODE_BLOCK):  # a block at a time: flat memory
-            rows, arr = _vector_fields(bodies, cand[b : b + DECODE_BLOCK], rx, naxes)
-            inr = ((arr >= lo) & (arr <= hi)).all(axis=1)
-            rows = rows[inr]
-            vec[rows, :naxes] = arr[inr]
-            name[rows] = cid
-            done[rows] = True
+        ok, arr = scan_vectors(data, lines.start, body_end, cand,
+                               np.frombuffer(f"!{address}{mnem}".encode("latin-1"), np.uint8),
+                               naxes)
+        inr = ok & ((arr >= lo) & (arr <= hi)).all(axis=1)
+        rows = cand[inr]
+        vec[rows, :naxes] = arr[inr]
+        name[rows] = cid
+        done[rows] = True
 
     # everything else: once per distinct body
     rest = np.flatnonzero(~done)
     if len(rest):
-        enc = pc.dictionary_encode(bodies.take(pa.array(rest)))
+        enc = pc.dictionary_encode(_binary(data, lines.start[rest], body_end[rest]))
         idx = enc.indices.to_numpy(zero_copy_only=False).astype(np.int64)
         uniq = enc.dictionary.to_pylist()
         u_kind = np.empty(len(uniq), object)
