@@ -8,7 +8,13 @@ the capture). Prints the figures, the ratio to each target and, last, one JSON o
     python bench/bench_analysis.py --exchanges 2000000 --keep /tmp/b2m.mcap
 
 The synthetic session is a sender streaming C vectors with checksums on at 115200 baud:
-answers ``0``, runs of queue-full ``1`` polls, a ``PF`` every 200 exchanges. It is written
+answers ``0``, runs of queue-full ``1`` polls, a ``PF`` every 200 exchanges. With
+``--halts K`` the operator also pauses the machine every K exchanges (``H``, half a second,
+``G``), which the queue replay follows through the motion executor, with vectors short
+enough for the modelled queue to stay within the unit's capacity:
+
+    python bench/bench_analysis.py --exchanges 1000000 --halts 50000 --keep /tmp/h1m.mcap
+ It is written
 the way the recorder writes a capture without a decoder (format 2: raw batches only), so
 the analyser has to decode everything from the bytes. The analysis runs in its own process
 so that its CPU time and peak memory (ru_maxrss) are its own.
@@ -39,8 +45,9 @@ def _cs(body: bytes) -> bytes:
     return head + b"%02X" % (sum(head) & 0xFF)
 
 
-def make_capture(path: Path, n: int, seed: int = 1) -> None:
-    """Write the synthetic session in the recorder's format 2 (raw batches only)."""
+def make_capture(path: Path, n: int, seed: int = 1, halts: int = 0) -> None:
+    """Write the synthetic session in the recorder's format 2 (raw batches only); a halt
+    and go every ``halts`` exchanges when given."""
     from conform.capture.batch import raw_batch
     from conform.capture.sink import McapSink
 
@@ -90,13 +97,24 @@ def make_capture(path: Path, n: int, seed: int = 1) -> None:
         rnd = rng.random
         lines: dict[tuple[int, int], bytes] = {}
         ok = _cs(b"0") + b"\r"
+        # with halts, short vectors: the queue the replay models then stays within the
+        # unit's capacity, as a real unit's does (the long ones outrun the answers: the
+        # throughput run does not mind, a replay that follows H and G through the motion
+        # executor would carry an ever longer queue)
+        span = 30 if halts else 400
         while done < n:
+            if halts and done % halts == 0 and done < n - 1:
+                exchange(_cs(b"!0H") + b"\r", ok)
+                t += 0.5
+                exchange(_cs(b"!0G") + b"\r", ok)
+                done += 2
+                continue
             if done % 200 == 0:
                 exchange(_cs(b"!0PF") + b"\r",
                          _cs(b"0,%d,%d,0" % tuple(pos)) + b"\r")
                 done += 1
                 continue
-            dx, dy = int(rnd() * 801) - 400, int(rnd() * 801) - 400
+            dx, dy = int(rnd() * (2 * span + 1)) - span, int(rnd() * (2 * span + 1)) - span
             line = lines.get((dx, dy))
             if line is None:
                 line = lines[dx, dy] = _cs(b"!0C%d,%d,0" % (dx, dy)) + b"\r"
@@ -168,6 +186,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--exchanges", type=int, default=1_000_000)
     ap.add_argument("--keep", type=Path, default=None, help="capture path to reuse/keep")
+    ap.add_argument("--halts", type=int, default=0, help="an H ... G every this many exchanges")
     ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -177,7 +196,7 @@ def main() -> None:
     make_rate = None
     if not path.exists():
         t = time.perf_counter()
-        make_capture(path, args.exchanges)
+        make_capture(path, args.exchanges, halts=args.halts)
         dt = time.perf_counter() - t
         make_rate = args.exchanges / dt
         print(f"made {path} ({path.stat().st_size / 1e6:.1f} MB) in {dt:.1f} s "

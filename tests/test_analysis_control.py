@@ -1,10 +1,10 @@
 """A streamed replay goes on past H/G/D/K/R/J: window by window it gives what the motion
 executor gives over the whole session.
 
-``queue.StreamReplay`` runs the compiled scan up to the first H, G, D, K, R or J, hands the
-scan's state to a ``MotionExecutor`` there and replays the rest through it a window at a
-time. The reference is ``queue.replay(..., compiled=False)``: the executor over the whole
-table, fed row by row.
+``queue.StreamReplay`` runs the compiled scan up to an H, G, D, K, R or J, hands the
+scan's state to a ``MotionExecutor`` there and takes it back at a later vector, any number
+of times, a window at a time. The reference is ``queue.replay(..., compiled=False)``: the
+executor over the whole table, fed row by row.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from test_analysis_replay import _Cmd, same
 from test_analysis_replay import session as plain_session
 from test_analysis_stream import BAUD, T0, outcome
 
-from conform.families.gve.analysis import analyze
+from conform.families.gve.analysis import analyze, queue
 from conform.families.gve.analysis.queue import StreamReplay, replay
 from conform.families.gve.spec import load_spec
 
@@ -80,7 +80,13 @@ def test_sessions_with_control_exercise_it() -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("window", [1, 7, 450, 10**9])
-def test_stream_equals_executor(seed: int, window: int) -> None:
+@pytest.mark.parametrize("compiled_rows", [1, queue.COMPILED_ROWS])
+def test_stream_equals_executor(seed: int, window: int, compiled_rows: int,
+                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """With ``compiled_rows`` 1 the scan takes the executor's state back at every vector
+    where it can (tens of times a session), with the default only where the control rows
+    leave room."""
+    monkeypatch.setattr(queue, "COMPILED_ROWS", compiled_rows)
     spec = load_spec()
     var = spec.variant(("gve64-v19", "gve124", "gve64-v10")[seed % 3])
     ex, acc, parsed = session(seed, 1500)
@@ -89,6 +95,8 @@ def test_stream_equals_executor(seed: int, window: int) -> None:
     s = streamed(ex, acc, parsed, var, window)
     assert s.control_row == int(np.flatnonzero(np.isin(ex["name"].to_numpy(),
                                                         list("HGDKRJ")))[0])
+    if compiled_rows == 1:
+        assert s.hand_backs > 3
     same(s.result(), ref)
 
 

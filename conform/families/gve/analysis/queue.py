@@ -482,6 +482,10 @@ class _Queue:
         return [b[self.start : self.end] for b in self.bufs]
 
 
+PYTHON_ROWS = 4096  # rows given to the executor at a time (it may stop at any vector)
+COMPILED_ROWS = 512  # the least run of rows without a control for the scan to take over again
+
+
 class StreamReplay:
     """The compiled replay fed a window of exchange rows at a time (``feed``), finished
     with the final drain (``finish``). Carried: the executor's state, the vectors still
@@ -490,10 +494,13 @@ class StreamReplay:
     depth and the last completion. What comes out is summed up as it comes
     (``summaries``); while ``keep`` the whole arrays are kept too, for a ``QueueReplay``.
 
-    At the first H/G/D/K/R/J (``control_row``) the compiled scan's state is handed to a
-    ``MotionExecutor`` (the Python executor, which knows those commands) and the rest of
-    the session goes through it a window at a time, its completion log drained into the
-    same summaries: the result is the one ``replay`` gives on the whole session.
+    At an H/G/D/K/R/J (the first: ``control_row``) the compiled scan's state is handed to
+    a ``MotionExecutor`` (the Python executor, which knows those commands), its completion
+    log drained into the same summaries; at the first vector after that where the executor
+    is in a state the scan can carry (not halted, braking or parked, its queue in push
+    order) and no control row follows for ``COMPILED_ROWS`` rows, the scan takes it back. The result
+    is the one ``replay`` gives on the whole session, at the compiled speed for all but the
+    stretches around the control commands.
     """
 
     def __init__(self, variant: Variant, keep: bool = True) -> None:
@@ -512,7 +519,8 @@ class StreamReplay:
         self.first = 0  # push index of q_*[0]
         self.pushed = 0
         self.control_row = -1  # the first H/G/D/K/R/J: from there on the executor replays
-        self.exe: Any = None  # conform.families.gve.unit.motion.MotionExecutor, from then on
+        self.exe: Any = None  # conform.families.gve.unit.motion.MotionExecutor, for a while
+        self.hand_backs = 0  # times the executor gave the scan back its state
         self.log: list = []  # its completions since the last drain
         self.live: dict[int, tuple[float, int]] = {}  # push number: arrival, exchange row
         self.now = 0.0  # the time of the last event replayed
@@ -570,22 +578,35 @@ class StreamReplay:
         self.inputs.feed(ex, np.flatnonzero(acc) + lo)
         rows = np.flatnonzero(acc | ctrl)
         is_vec = acc[rows]
-        k = 0  # rows[:k] go through the compiled scan, the rest through the executor
-        if self.exe is None:
-            stop = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
-            k = int(stop[0]) if len(stop) else len(rows)
-            self._feed_compiled(ex, names, t, rows[:k], is_vec[:k], host_parsed, lo, base)
-            if k < len(rows):
-                self.control_row = int(rows[k]) + lo + base
-                self._hand_over()
-        if k < len(rows):
-            self._feed_python(ex, names, t, rows[k:], is_vec[k:], host_parsed, lo, base)
+        stops = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
+        # the executor hands back only where the next control row is far enough ahead: a
+        # hand-over and back costs what the executor spends on a few hundred rows
+        ahead = np.append(stops, len(rows) + COMPILED_ROWS)[np.searchsorted(
+            stops, np.arange(len(rows)))] - np.arange(len(rows))
+        far = ahead >= COMPILED_ROWS
+        k = 0  # the compiled scan up to a control row, the executor from there for a while
+        while k < len(rows):
+            if self.exe is None:
+                j = np.searchsorted(stops, k)
+                stop = int(stops[j]) if j < len(stops) else len(rows)
+                self._feed_compiled(ex, names, t, rows[k:stop], is_vec[k:stop], host_parsed,
+                                    lo, base)
+                if stop < len(rows):
+                    if self.control_row < 0:
+                        self.control_row = int(rows[stop]) + lo + base
+                    self._hand_over()
+                k = stop
+            else:  # a part at a time: the scan may take over again at any vector
+                end = k + PYTHON_ROWS
+                k += self._feed_python(ex, names, t, rows[k:end], is_vec[k:end], far[k:end],
+                                       host_parsed, lo, base)
 
-    def _pulses(self, ex: pd.DataFrame, vrows: np.ndarray) -> np.ndarray:
+    def _pulses(self, ex: pd.DataFrame, vrows: np.ndarray, pushed: bool = True) -> np.ndarray:
+        """The vectors of ``vrows``; ``pushed``: they are pushed now (for the path plot)."""
         d = np.empty((len(vrows), self.naxes), np.int64)
         for j, c in enumerate(AXES[: self.naxes]):
             d[:, j] = ex[c].to_numpy()[vrows]
-        if self.path is not None:
+        if self.path is not None and pushed:
             self.path.push(d)
         return d
 
@@ -676,6 +697,64 @@ class StreamReplay:
         self.q = _Queue(self.naxes)  # the executor holds the queue from here on
         self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
 
+    def _state_row(self, p: Any) -> int:
+        """The parameter table's row for ``p`` (added when new)."""
+        key = self._key(p)
+        if key not in self.states:
+            self.states[key] = len(self.table)
+            self.table.append(p)
+        return self.states[key]
+
+    def _hand_back(self) -> None:
+        """The executor's state back to the compiled scan (``_hand_over`` the other way),
+        once it is one the scan can carry (``_compilable``): the queued vectors with their
+        parameters, arrival times and exchange rows, the planned head and what the last
+        completion left."""
+        import conform.families.gve.analysis.replay_kernel as k
+
+        exe = self.exe
+        F, I = k.new_state()  # noqa: E741
+        F[k.V], F[k.READY], I[k.DRY] = exe._v, exe._ready, int(exe._dry)
+        queued = list(exe._q)
+        n = len(queued)
+        I[k.N] = n
+        if exe._planned:
+            I[k.PLANNED], I[k.EXIT], I[k.STARVED] = 1, exe._exit, int(exe._vstarved)
+            F[k.T0], F[k.TEND], F[k.LEN] = exe._t0, exe._tend, exe._len
+            F[k.VJ], F[k.VPEAK], F[k.TDEC] = exe._vj, exe._vpeak, exe._tdec
+            F[k.VSTART], F[k.VIN] = exe._vstart, exe._vin
+            F[k.PROF : k.PROF + 8] = exe._prof
+        self.F, self.I = F, I
+        self.params = exe.params
+        self._state_row(self.params)
+        self.q = _Queue(self.naxes)
+        if n:
+            gone = [self.live.pop(q[4]) for q in queued]
+            self.q.append(np.array([q[0] for q in queued], np.int64).reshape(n, self.naxes),
+                          np.array([q[1] for q in queued], bool),
+                          np.array([self._state_row(q[2]) for q in queued], np.int32),
+                          np.array([q[3] for q in queued], float),
+                          np.array([r for _, r in gone], np.int64))
+        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
+        self.first = self.pushed - n
+        self.exe = None
+        self.hand_backs += 1
+
+    def _compilable(self, exe: Any) -> bool:
+        """An executor in a state the compiled scan can carry: not halted, braking, parked
+        or part-way through a vector, its queue the last pushes in push order (not a queue
+        that K and R put back around newer vectors) and no longer than the unit's."""
+        if (exe._halted or exe._parked is not None or exe._forced or exe._hoff
+                or not exe._final or (exe._planned and exe._soff)):
+            return False
+        q = exe._q
+        if not q:
+            return True
+        if len(q) > self.variant.queue:  # more than the unit holds: a capture off the model
+            return False  # (and a hand-back would copy it all, again and again)
+        seqs = [v[4] for v in q]
+        return seqs[0] == self.pushed - len(q) and seqs == list(range(seqs[0], self.pushed))
+
     def _new_executor(self) -> None:
         """J: a unit just reset; its pushes are numbered on from the session's count."""
         from conform.families.gve.unit.motion import MotionExecutor
@@ -686,23 +765,35 @@ class StreamReplay:
         self.exe._seq = self.pushed
 
     def _feed_python(self, ex: pd.DataFrame, names: np.ndarray, t: np.ndarray,
-                     rows: np.ndarray, is_vec: np.ndarray, host_parsed: Any, lo: int,
-                     base: int) -> None:
-        """Rows through the executor itself, as ``_run_python`` replays a whole session."""
+                     rows: np.ndarray, is_vec: np.ndarray, far: np.ndarray, host_parsed: Any,
+                     lo: int, base: int) -> int:
+        """Rows through the executor itself, as ``_run_python`` replays a whole session,
+        until a vector comes when the scan can take the executor's state back
+        (``_compilable``), with no control row in
+        the next ``COMPILED_ROWS`` (``far``), and goes back to the
+        compiled scan (``_hand_back``): returns how many rows it took (all of them, or up
+        to that vector, which the compiled scan takes)."""
         from conform.families.gve.unit.motion import MotionStateError
 
         vrows = rows[is_vec] + lo
-        vecs = iter(self._pulses(ex, vrows).tolist())
+        d = self._pulses(ex, vrows, pushed=False)
+        vecs = iter(d.tolist())
         removals: list[float] = []
         tk_all = t[rows]
-        for r, tk, is_v, name in zip((rows + lo).tolist(), tk_all.tolist(), is_vec.tolist(),
-                                     names[rows].tolist(), strict=True):
+        taken, nvec = len(rows), 0
+        for i, (r, tk, is_v, name, f) in enumerate(zip(
+                (rows + lo).tolist(), tk_all.tolist(), is_vec.tolist(), names[rows].tolist(),
+                far.tolist(), strict=True)):
             exe = self.exe
             exe.advance(tk)
             if is_v:
+                if f and self._compilable(exe):
+                    taken = i
+                    break
                 exe.push(next(vecs), name == "C")
                 self.live[self.pushed] = (tk, r + base)
                 self.pushed += 1
+                nvec += 1
                 continue
             try:
                 gone = _command(exe, name, tk, host_parsed, r)
@@ -720,9 +811,14 @@ class StreamReplay:
                 removals.extend([tk] * len(gone))
                 for g in gone:
                     self.live.pop(g, None)
-        if len(tk_all):
-            self.now = float(tk_all[-1])
-        self._drain_python(tk_all[is_vec], vrows + base, removals)
+        if self.path is not None:
+            self.path.push(d[:nvec])
+        if taken:
+            self.now = float(tk_all[taken - 1])
+        self._drain_python(tk_all[:taken][is_vec[:taken]], vrows[:nvec] + base, removals)
+        if taken < len(rows):
+            self._hand_back()
+        return taken
 
     def _drain_python(self, pushes: np.ndarray, push_rows: np.ndarray,
                       removals: list[float]) -> None:
