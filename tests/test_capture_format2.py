@@ -130,3 +130,69 @@ def test_format1_samples_still_match_the_format1_schemas():
             jsonschema.Draft202012Validator(want).validate(json.loads(message.data))
             seen.add(channel.topic)
     assert {"/serial/host", "/serial/unit"} <= seen
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.binary(max_size=40).map(lambda b: b.translate(bytes.maketrans(b"\x00\x01\x02", b"\r\n\r"))),
+                max_size=8))
+def test_cr_spans_split_lines_like_the_byte_loop(blocks):
+    a, b = LineTracker("unit", "cr"), LineTracker("unit", "cr")
+    off = 0
+    for k, data in enumerate(blocks):
+        if not data:
+            continue
+        want = b._feed_bytes(data, off, 10.0 + k, 9.9 + k)
+        assert a.spans(data, off, 10.0 + k, 9.9 + k) == [
+            (ln.data, ln.offset, ln.length, ln.t_first) for ln in want]
+        assert all(ln.t_last == 10.0 + k for ln in want)
+        off += len(data)
+    assert a.partial == b.partial and a.rest(20.0) == b.rest(20.0)
+
+
+def _batch_frames(stream: list[tuple[str, bytes]]) -> tuple[list[dict], list[dict]]:
+    """Frames and exchanges as a recorder stores them (rows -> batch columns -> dicts)."""
+    from conform.capture.batch import EXCHANGE_KEYS
+
+    s = BatchSession(baud=115200, decoder=make_decoder("gve64-v19"))
+    recs, t = [], 100.0
+    for direction, data in stream:
+        t += 0.01
+        recs += s.chunk(direction, data, t)
+    recs += s.finish(t + 1)
+    frames = [f for r in recs if r.topic == "/frames" for f in rows(r.payload, FRAME_KEYS)]
+    ex = [e for r in recs if r.topic == "/exchanges" for e in rows(r.payload, EXCHANGE_KEYS)]
+    return frames, ex
+
+
+def test_a_repeated_line_decodes_by_the_checksum_mode_of_its_moment():
+    from conform.families.gve.protocol.checksum import append_checksum
+
+    summed = append_checksum(b"!0A100") + b"\r"  # !0A100,4F
+    frames, ex = _batch_frames([
+        ("host", b"!0A100\r"), ("unit", b"0\r"),
+        ("host", b"!0%+\r"), ("unit", b"0,5C\r"),
+        ("host", b"!0A100\r"), ("unit", b"4,60\r"),  # checksums on: this one lacks its sum
+        ("host", summed), ("unit", b"0,5C\r"),
+        ("host", b"!0%-,CF\r"), ("unit", b"0\r"),
+        ("host", b"!0A100\r"), ("unit", b"0\r"),  # off again: the same bytes are a command
+    ])
+    host = [f for f in frames if f["direction"] == "host"]
+    assert [(f["kind"], f["checksum_mode"], f["checksum_status"]) for f in host] == [
+        ("command", False, "none"), ("command", False, "none"), ("rejection", True, "missing"),
+        ("command", True, "ok"), ("command", True, "ok"), ("command", False, "none")]
+    assert [e["status"] for e in ex] == ["answered"] * 6
+
+
+def test_a_line_that_switched_checksums_on_is_a_rejection_once_j_turned_them_off():
+    from conform.families.gve.protocol.checksum import append_checksum
+
+    summed = append_checksum(b"!0A100") + b"\r"
+    # first seen with the mode unknown (switches it on), then after J (mode known, off: its
+    # checksum reads as a parameter too many)
+    frames, _ = _batch_frames([("host", summed), ("unit", append_checksum(b"0") + b"\r"),
+                               ("host", append_checksum(b"!0J") + b"\r"),
+                               ("unit", append_checksum(b"0") + b"\r"),
+                               ("host", summed), ("unit", b"1\r")])
+    host = [f for f in frames if f["direction"] == "host"]
+    assert [(f["kind"], f["checksum_mode"]) for f in host] == [
+        ("command", True), ("command", True), ("rejection", False)]

@@ -49,6 +49,16 @@ def columns(items: list[dict[str, Any]], keys: tuple[str, ...]) -> dict[str, Any
     return out
 
 
+def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str, Any]:
+    """Like ``columns``, from tuples whose fields are in ``keys`` order (the decoder's rows)."""
+    out: dict[str, Any] = {"count": len(items)}
+    if items:
+        out.update(zip(keys, map(list, zip(*items, strict=True)), strict=True))
+    else:
+        out.update((k, []) for k in keys)
+    return out
+
+
 def rows(payload: dict[str, Any], keys: tuple[str, ...]) -> list[dict[str, Any]]:
     """The items of a batch; ``ValueError`` if its columns do not hold together."""
     n = payload.get("count")
@@ -115,6 +125,8 @@ class BatchSession(CaptureSession):
         self._exchanges: list[dict[str, Any]] = []
         self._t_frames: float | None = None
         self._calls = 0
+        # a decoder that collects rows (``feed_rows``/``take_rows``) skips the per-item dicts
+        self._feed_rows = getattr(decoder, "feed_rows", None)
 
     def chunk(self, direction: str, data: bytes, t_read: float, t_first: float | None = None
               ) -> list[Record]:
@@ -131,7 +143,9 @@ class BatchSession(CaptureSession):
         p.t_first.append(t_first)
         p.order.append(self._calls)
         self._calls += 1
-        if self.decoder is not None:
+        if self._feed_rows is not None:
+            self._feed_rows(direction, data, offset, t_read, t_first)
+        elif self.decoder is not None:
             self._decode(direction, data, offset, t_read, t_first)
         if len(p.data) >= self.batch_bytes:
             return self.flush()
@@ -162,6 +176,14 @@ class BatchSession(CaptureSession):
                 continue
             out.append(raw_batch(d, p.offset, p.data, p.lengths, p.t_read, p.t_first, p.order))
             self._pending[d] = _Pending()
+        if self._feed_rows is not None:
+            t_rows, frames, exchanges = self.decoder.take_rows()  # type: ignore[union-attr]
+            t = to_ns(t_rows or 0.0)
+            if frames:
+                out.append(Record(TOPIC_FRAMES, t, row_columns(frames, FRAME_KEYS)))
+            if exchanges:
+                out.append(Record(TOPIC_EXCHANGES, t, row_columns(exchanges, EXCHANGE_KEYS)))
+            return out
         t = to_ns(self._t_frames or 0.0)
         if self._frames:
             out.append(Record(TOPIC_FRAMES, t, columns(self._frames, FRAME_KEYS)))
@@ -172,6 +194,9 @@ class BatchSession(CaptureSession):
 
     def finish(self, t: float) -> list[Record]:
         """The decoder's leftovers and every pending batch."""
+        if self._feed_rows is not None:
+            self.decoder.finish_rows(t)  # type: ignore[union-attr]
+            return self.flush()
         for rec in super().finish(t):
             self._derived(rec.topic, rec.log_time / 1e9, rec.payload)
         return self.flush()

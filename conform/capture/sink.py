@@ -12,6 +12,7 @@ import os
 from collections.abc import Mapping
 from typing import IO, Any
 
+import orjson
 from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, Writer
 
@@ -24,7 +25,15 @@ CHUNK_SIZE = 64 * 1024
 
 
 def encode_payload(payload: Mapping[str, Any]) -> bytes:
-    return json.dumps(payload, separators=(",", ":"), ensure_ascii=True).encode("ascii")
+    """Compact JSON (orjson: a batch of thousands of frames encodes ten times faster).
+
+    JSON has no NaN or infinity: orjson writes a non-finite time as ``null``. What orjson
+    refuses (an integer beyond 64 bits, a non-string key) goes through the standard library.
+    """
+    try:
+        return orjson.dumps(payload)
+    except TypeError:  # orjson.JSONEncodeError
+        return json.dumps(payload, separators=(",", ":"), ensure_ascii=True).encode("ascii")
 
 
 class McapSink:

@@ -12,23 +12,34 @@ ignore (another unit's address, garbage; ``Rejection.code`` is None) are owed no
 When a capture starts mid-session with checksums already on, the first command that only
 parses with a valid checksum switches the mode on (shown in ``checksum_mode``); once a ``%``
 or ``J`` has been seen the mode is known and only they change it.
+
+The recorder decodes as it records, thousands of lines a second, so the hot path works on
+plain tuples: a frame or an exchange is one tuple in the order of ``FRAME_KEYS`` /
+``EXCHANGE_KEYS`` (``feed_rows`` / ``take_rows``), which the recorder turns into the columns
+of a batch without ever building a dict per line. What a line decodes to depends only on
+its bytes and the checksum mode, and traffic repeats (``0`` answers, polls, the same
+moves), so those results are kept per distinct line in a bounded cache.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
+from conform.capture.batch import EXCHANGE_KEYS, FRAME_KEYS
 from conform.capture.schemas import TOPIC_EXCHANGES, TOPIC_FRAMES
 from conform.capture.session import Record, escape_bytes, to_ns
-from conform.families.gve.protocol import Answer, Command, CommandParser, Garbled, Rejection, parse_answer
+from conform.families.gve.protocol import Answer, Command, CommandParser, Rejection, parse_answer
 from conform.families.gve.protocol.checksum import split_checksum, verify
 from conform.families.gve.spec import Dialect, Variant, load_spec
 
 _PACKET_END = re.compile(rb"^!\d\*E")
 Item = tuple[str, float, dict[str, Any]]  # (topic, time in seconds, payload)
+Span = tuple[bytes, int, int, float]  # a line: bytes without terminator, offset, length, t_first
+Row = tuple[Any, ...]  # a frame or an exchange, its fields in FRAME_KEYS / EXCHANGE_KEYS order
 MAX_LINE = 4096  # a "line" longer than this is noise: cut it so memory stays bounded
+CACHE_LINES = 4096  # distinct lines whose decoding is kept (per checksum state)
 
 
 @dataclass
@@ -63,8 +74,66 @@ class LineTracker:
             return self._feed_cr(data, offset, t_read, t_first)
         return self._feed_bytes(data, offset, t_read, t_first)
 
+    def spans(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Span]:
+        """The lines ``data`` completes as (bytes, offset, length, t_first); each one's
+        ``t_last`` is ``t_read`` (the recorder's hot path: no object per line)."""
+        if self.mode == "cr":
+            return self._spans_cr(data, offset, t_read, t_first)
+        return [(ln.data, ln.offset, ln.length, ln.t_first)
+                for ln in self._feed_bytes(data, offset, t_read, t_first)]
+
     def _feed_cr(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Line]:
-        """CR-terminated lines, a whole run of bytes at a time (the recorder's hot path)."""
+        d = self.direction
+        return [Line(d, b, o, n, t0, t_read)
+                for b, o, n, t0 in self._spans_cr(data, offset, t_read, t_first)]
+
+    def _spans_cr(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Span]:
+        """CR-terminated lines, split in C (``bytes.split``); a chunk that could hold a
+        line longer than ``MAX_LINE`` goes through ``_cut_cr``, which cuts it."""
+        n = len(data)
+        if not n:
+            return []
+        buf = self._buf
+        parts = data.split(b"\r")
+        if len(buf) + max(map(len, parts)) > MAX_LINE:
+            return [(ln.data, ln.offset, ln.length, ln.t_first)
+                    for ln in self._cut_cr(data, offset, t_read, t_first)]
+        per_byte = (t_read - t_first) / n
+        tail = parts.pop()  # the bytes after the last CR (b"" if data ends with one)
+        out: list[Span] = []
+        pos = 0
+        if buf and parts:  # the line carried over from the previous read ends here
+            head = parts[0]
+            out.append((bytes(buf) + head, self._start, len(buf) + len(head) + 1,
+                        self._t_start))  # type: ignore[arg-type]
+            buf.clear()
+            self._t_start = None
+            pos = len(head) + 1
+            parts = parts[1:]
+        elif buf:  # no CR: the carried-over line goes on
+            buf += tail
+            return out
+        for part in parts:
+            start = pos
+            pos += len(part) + 1
+            if part[:1] == b"\n":  # an LF outside a line is ignored
+                line = part.lstrip(b"\n")
+                start += len(part) - len(line)
+                part = line
+            t0 = t_first + start * per_byte
+            out.append((part, offset + start, len(part) + 1, t0 if t0 < t_read else t_read))
+        if tail[:1] == b"\n":
+            line = tail.lstrip(b"\n")
+            pos += len(tail) - len(line)
+            tail = line
+        if tail:
+            buf += tail
+            self._start = offset + pos
+            self._t_start = min(t_read, t_first + pos * per_byte)
+        return out
+
+    def _cut_cr(self, data: bytes, offset: int, t_read: float, t_first: float) -> list[Line]:
+        """CR-terminated lines, cutting noise at ``MAX_LINE`` + 1 bytes."""
         lines: list[Line] = []
         n = len(data)
         per_byte = (t_read - t_first) / n if n else 0.0
@@ -158,9 +227,12 @@ def _jsonable(value: Any) -> Any:
     return str(value)
 
 
-@dataclass
-class _Pending:
-    frame: dict[str, Any]
+class _Owed(NamedTuple):
+    """A command waiting for its answer (the protocol is simplex: at most one)."""
+
+    name: str | None
+    text: str
+    offset: int
     t_last: float
     packet: int | None
     packet_commands: int | None
@@ -168,8 +240,30 @@ class _Pending:
     resets: bool  # J: checksums off after the answer
 
 
+class _HostLine:
+    """What a host line decodes to in one checksum state (cached per distinct line)."""
+
+    __slots__ = ("kind", "text", "address", "name", "args", "code", "checksum", "status",
+                 "error", "starts_packet", "ends_packet", "checksum_after", "resets", "silent")
+
+
+class _UnitLine:
+    """What a unit line decodes to with or without a checksum (cached per distinct line)."""
+
+    __slots__ = ("kind", "text", "code", "inta", "fields", "checksum", "status", "error",
+                 "is_answer", "bang")
+
+
+_EMPTY: list[Any] = []  # the args/fields of a frame without any (shared: never mutated)
+
+
 class FrameDecoder:
-    """Feed raw chunks in capture order; get ``/frames`` and ``/exchanges`` records."""
+    """Feed raw chunks in capture order; get ``/frames`` and ``/exchanges`` records.
+
+    ``feed_rows``/``finish_rows`` collect frames and exchanges as tuples (see the module
+    docstring) until ``take_rows``; ``feed``/``feed_items``/``finish`` return them one by one
+    as records or dicts.
+    """
 
     def __init__(self, variant: Variant, dialect: Dialect | None = None) -> None:
         spec = load_spec()
@@ -182,11 +276,47 @@ class FrameDecoder:
         self.packet_id = 0
         self.in_packet = False
         self.packet_members = 0
-        self.pending: list[_Pending] = []
-        self.answer_packet: tuple[int, int] | None = None
-        self._answers: dict[tuple[bytes, bool], Answer | Garbled] = {}
+        self.owed: _Owed | None = None
+        # decoded lines per (checksum on, mode known) for the host, per checksum for the unit
+        self._host_cache: dict[tuple[bool, bool], dict[bytes, _HostLine]] = {}
+        self._unit_cache: dict[bool, dict[bytes, _UnitLine]] = {False: {}, True: {}}
+        self.frame_rows: list[Row] = []
+        self.exchange_rows: list[Row] = []
+        self.t_rows: float | None = None  # time of the first frame or exchange collected
+        self._items: list[Item] | None = None  # set while feed_items collects dicts
 
-    # -- entry points (the session's Decoder protocol) ------------------------------------
+    # -- entry points ----------------------------------------------------------------------
+    def feed_rows(self, direction: str, data: bytes, offset: int, t_read: float,
+                  t_first: float) -> None:
+        """Decode one read; its frames and exchanges wait in ``frame_rows``/``exchange_rows``."""
+        spans = self.lines[direction].spans(data, offset, t_read, t_first)
+        if not spans:
+            return
+        if direction == "host":
+            for span in spans:
+                self._command(span, t_read)
+        else:
+            for span in spans:
+                self._answer(span, t_read)
+
+    def finish_rows(self, t: float) -> None:
+        """The unterminated tails and the command still waiting, into the rows."""
+        for tracker in self.lines.values():
+            line = tracker.rest(t)
+            if line is not None:
+                self._frame((line.direction, "garbled", escape_bytes(line.data), line.offset,
+                             line.length, line.t_first, line.t_last, None, None, _EMPTY, None,
+                             None, _EMPTY, None, "none", self.checksum_on, None, None,
+                             "unterminated line at the end of the capture"), line.t_last)
+        if self.owed is not None:
+            self._unanswered()
+
+    def take_rows(self) -> tuple[float | None, list[Row], list[Row]]:
+        """(time of the first item, frames, exchanges) collected since the last call."""
+        out = (self.t_rows, self.frame_rows, self.exchange_rows)
+        self.frame_rows, self.exchange_rows, self.t_rows = [], [], None
+        return out
+
     def feed(self, direction: str, data: bytes, offset: int, t_read: float,
              t_first: float) -> list[Record]:
         return [Record(topic, to_ns(t), payload)
@@ -197,36 +327,50 @@ class FrameDecoder:
 
     def feed_items(self, direction: str, data: bytes, offset: int, t_read: float,
                    t_first: float) -> list[Item]:
-        """Like ``feed``, as plain (topic, time in seconds, payload) tuples (the fast path)."""
-        out: list[Item] = []
-        decode = self._command if direction == "host" else self._answer
-        for line in self.lines[direction].feed(data, offset, t_read, t_first):
-            out.extend(decode(line))
-        return out
+        """Like ``feed``, as plain (topic, time in seconds, payload) tuples."""
+        self._items = items = []
+        try:
+            self.feed_rows(direction, data, offset, t_read, t_first)
+        finally:
+            self._items = None
+        return items
 
     def finish_items(self, t: float) -> list[Item]:
-        out: list[Item] = []
-        for tracker in self.lines.values():
-            line = tracker.rest(t)
-            if line is not None:
-                frame = self._base(line, "garbled")
-                frame["error"] = "unterminated line at the end of the capture"
-                out.append((TOPIC_FRAMES, line.t_last, frame))
-        while self.pending:
-            out.append(self._exchange_unanswered(self.pending.pop(0)))
-        return out
+        self._items = items = []
+        try:
+            self.finish_rows(t)
+        finally:
+            self._items = None
+        return items
+
+    # -- output ----------------------------------------------------------------------------
+    def _frame(self, row: Row, t: float) -> None:
+        if self._items is not None:
+            frame = dict(zip(FRAME_KEYS, row, strict=True))
+            frame["args"], frame["fields"] = list(frame["args"]), list(frame["fields"])
+            self._items.append((TOPIC_FRAMES, t, frame))
+            return
+        if self.t_rows is None:
+            self.t_rows = t
+        self.frame_rows.append(row)
+
+    def _exchange(self, row: Row, t: float) -> None:
+        if self._items is not None:
+            self._items.append((TOPIC_EXCHANGES, t, dict(zip(EXCHANGE_KEYS, row, strict=True))))
+            return
+        if self.t_rows is None:
+            self.t_rows = t
+        self.exchange_rows.append(row)
+
+    def _unanswered(self) -> None:
+        """The waiting command as an ``unanswered`` exchange."""
+        o = self.owed
+        assert o is not None
+        self.owed = None
+        self._exchange(("unanswered", o.text, o.name, None, None, None, o.t_last, None, None,
+                        o.offset, None, o.packet, o.packet_commands), o.t_last)
 
     # -- host side -------------------------------------------------------------------------
-    def _base(self, line: Line, kind: str) -> dict[str, Any]:
-        return {
-            "direction": line.direction, "kind": kind, "text": escape_bytes(line.data),
-            "offset": line.offset, "length": line.length, "t_first": line.t_first,
-            "t_last": line.t_last, "address": None, "name": None, "args": [], "code": None,
-            "inta": None, "fields": [], "checksum": None, "checksum_status": "none",
-            "checksum_mode": self.checksum_on, "packet": None, "packet_role": None,
-            "error": None,
-        }
-
     def _parse_command(self, raw: bytes) -> Command | Rejection:
         result = self.parser.parse(raw, self.checksum_on)
         if isinstance(result, Rejection) and not self.mode_known and not self.checksum_on \
@@ -238,147 +382,149 @@ class FrameDecoder:
                 return other
         return result
 
-    def _command(self, line: Line) -> list[Item]:
-        out: list[Item] = []
-        result = self._parse_command(line.data)
-        frame = self._base(line, "command" if isinstance(result, Command) else "rejection")
-        frame["checksum_mode"] = self.checksum_on
+    def _decode_command(self, raw: bytes) -> _HostLine:
+        """Parse a host line in the current checksum state (may switch checksums on)."""
+        result = self._parse_command(raw)
+        h = _HostLine()
+        h.kind = "command" if isinstance(result, Command) else "rejection"
+        h.text = escape_bytes(raw)
+        h.address, h.name = result.address, result.name
+        h.checksum, h.status = None, "none"
         if self.checksum_on:
-            _, value = split_checksum(line.data)
-            frame["checksum"] = f"{value:02X}" if value is not None else None
+            _, value = split_checksum(raw)
+            h.checksum = f"{value:02X}" if value is not None else None
             if isinstance(result, Rejection) and result.kind == "checksum":
-                frame["checksum_status"] = "missing" if value is None else "bad"
+                h.status = "missing" if value is None else "bad"
             elif value is not None:
-                frame["checksum_status"] = "ok" if verify(line.data) else "bad"
+                h.status = "ok" if verify(raw) else "bad"
             else:
-                frame["checksum_status"] = "missing"
-        frame["address"] = result.address
-        frame["name"] = result.name
-        owed = True
-        packet_commands: int | None = None
-        checksum_after: bool | None = None
-        resets = False
+                h.status = "missing"
+        h.checksum_after, h.resets, h.silent = None, False, False
         if isinstance(result, Command):
-            frame["args"] = [_jsonable(a) for a in result.args]
-            if result.name == "*S":
-                self.packet_id += 1
-                self.in_packet, self.packet_members = True, 0
-                frame["packet"], frame["packet_role"] = self.packet_id, "start"
-                owed = False
-            elif result.name == "*E" and self.in_packet:
-                packet_commands = self._packet_end(frame)
-            elif self.in_packet:
-                self._packet_member(frame)
-                owed = False
-            elif result.name == "%":
-                checksum_after = result.args[0] == "+"
-            elif result.name == "J":
-                resets = True
+            h.args = [_jsonable(a) for a in result.args] if result.args else _EMPTY
+            h.code = h.error = None
+            if result.name == "%":
+                h.checksum_after = result.args[0] == "+"
+            h.resets = result.name == "J"
+            h.starts_packet, h.ends_packet = result.name == "*S", result.name == "*E"
         else:
-            frame["code"] = result.code
-            frame["error"] = f"{result.kind}: {result.detail}"
-            if self.in_packet and _PACKET_END.match(line.data):
-                # a damaged *E still ends the packet; the unit answers it (with an error)
-                packet_commands = self._packet_end(frame)
-            elif self.in_packet:
-                self._packet_member(frame)
+            h.args = _EMPTY
+            h.code = result.code
+            h.error = f"{result.kind}: {result.detail}"
+            h.starts_packet = False
+            # a damaged *E still ends the packet; the unit answers it (with an error)
+            h.ends_packet = _PACKET_END.match(raw) is not None
+            h.silent = result.code is None
+        return h
+
+    def _command(self, span: Span, t_last: float) -> None:
+        raw, offset, length, t_first = span
+        key = (self.checksum_on, self.mode_known)
+        cache = self._host_cache.get(key)
+        if cache is None:
+            cache = self._host_cache[key] = {}
+        h = cache.get(raw)
+        if h is None:
+            if len(cache) >= CACHE_LINES:
+                cache.clear()
+            # a line that switches checksums on (mode unknown) is cached under a state that
+            # never comes back: once switched, the mode is known
+            h = cache[raw] = self._decode_command(raw)
+        owed = True
+        packet = role = packet_commands = None
+        if h.starts_packet:
+            self.packet_id += 1
+            self.in_packet, self.packet_members = True, 0
+            packet, role = self.packet_id, "start"
+            owed = False
+        elif self.in_packet:
+            packet = self.packet_id
+            if h.ends_packet:
+                self.in_packet = False
+                role, packet_commands = "end", self.packet_members
+            else:
+                self.packet_members += 1
+                role = "member"
                 owed = False
-            elif result.code is None:
-                owed = False  # the unit stays silent (another address, not a command)
-        out.append((TOPIC_FRAMES, line.t_last, frame))
+        elif h.silent:
+            owed = False  # the unit stays silent (another address, not a command)
+        self._frame(("host", h.kind, h.text, offset, length, t_first, t_last, h.address, h.name,
+                     h.args, h.code, None, _EMPTY, h.checksum, h.status, self.checksum_on,
+                     packet, role, h.error), t_last)
         if owed:
-            while self.pending:  # simplex: the sender gave up waiting for these
-                out.append(self._exchange_unanswered(self.pending.pop(0)))
-            self.pending.append(_Pending(frame, line.t_last, frame["packet"], packet_commands,
-                                         checksum_after, resets))
-        return out
-
-    def _packet_end(self, frame: dict[str, Any]) -> int:
-        """Close the open packet at this frame; the number of lines it held."""
-        self.in_packet = False
-        frame["packet"], frame["packet_role"] = self.packet_id, "end"
-        return self.packet_members
-
-    def _packet_member(self, frame: dict[str, Any]) -> None:
-        self.packet_members += 1
-        frame["packet"], frame["packet_role"] = self.packet_id, "member"
+            if self.owed is not None:  # simplex: the sender gave up waiting for it
+                self._unanswered()
+            in_packet = role is not None
+            self.owed = _Owed(h.name, h.text, offset, t_last, packet, packet_commands,
+                              None if in_packet else h.checksum_after,
+                              False if in_packet else h.resets)
 
     # -- unit side -------------------------------------------------------------------------
-    def _answer(self, line: Line) -> list[Item]:
-        if (self.pending and self.pending[0].frame["name"] == ">" and line.data[:1] == b"!"):
-            # `>` first sends the line it repeats (A9), then that line's answer
-            frame = self._base(line, "echo")
-            return [(TOPIC_FRAMES, line.t_last, frame)]
-        pending = self.pending.pop(0) if self.pending else None
-        with_sum = self.checksum_on
-        if pending is not None and pending.checksum_after is not None:
-            with_sum = pending.checksum_after  # the answer to %+ already carries one
-        key = (line.data, with_sum)
-        parsed = self._answers.get(key)
-        if parsed is None:
-            if len(self._answers) > 4096:  # answers repeat ("0"); keep the cache bounded
-                self._answers.clear()
-            parsed = self._answers[key] = parse_answer(line.data, with_sum)
-        frame = self._base(line, "answer" if isinstance(parsed, Answer) else "garbled")
-        frame["checksum_mode"] = with_sum
+    def _decode_answer(self, raw: bytes, with_sum: bool) -> _UnitLine:
+        parsed = parse_answer(raw, with_sum)
+        u = _UnitLine()
+        u.text = escape_bytes(raw)
+        u.bang = raw[:1] == b"!"
+        u.is_answer = isinstance(parsed, Answer)
+        u.checksum, u.status = None, "none"
         if isinstance(parsed, Answer):
-            frame["code"], frame["inta"] = parsed.code, parsed.inta
-            frame["fields"] = list(parsed.fields)
+            u.kind, u.error = "answer", None
+            u.code, u.inta = parsed.code, parsed.inta
+            u.fields = list(parsed.fields) if parsed.fields else _EMPTY
             if parsed.checksum is not None:
-                frame["checksum"] = f"{parsed.checksum:02X}"
+                u.checksum = f"{parsed.checksum:02X}"
             if parsed.checksum_ok is None:
-                frame["checksum_status"] = "none"
+                u.status = "none"
             elif parsed.checksum_ok:
-                frame["checksum_status"] = "ok"
+                u.status = "ok"
             else:
-                frame["checksum_status"] = "missing" if parsed.checksum is None else "bad"
-            if pending is not None and parsed.code == 0:
-                if pending.checksum_after is not None:
-                    self.checksum_on = pending.checksum_after
+                u.status = "missing" if parsed.checksum is None else "bad"
+        else:
+            u.kind, u.error = "garbled", parsed.detail
+            u.code = u.inta = None
+            u.fields = _EMPTY
+        return u
+
+    def _answer(self, span: Span, t_last: float) -> None:
+        raw, offset, length, t_first = span
+        o = self.owed
+        if o is not None and o.name == ">" and raw[:1] == b"!":
+            # `>` first sends the line it repeats (A9), then that line's answer
+            self._frame(("unit", "echo", escape_bytes(raw), offset, length, t_first, t_last,
+                         None, None, _EMPTY, None, None, _EMPTY, None, "none", self.checksum_on,
+                         None, None, None), t_last)
+            return
+        self.owed = None
+        with_sum = self.checksum_on
+        if o is not None and o.checksum_after is not None:
+            with_sum = o.checksum_after  # the answer to %+ already carries one
+        cache = self._unit_cache[with_sum]
+        u = cache.get(raw)
+        if u is None:
+            if len(cache) >= CACHE_LINES:  # answers repeat ("0"); keep the cache bounded
+                cache.clear()
+            u = cache[raw] = self._decode_answer(raw, with_sum)
+        packet = role = None
+        if o is not None:
+            if u.code == 0 and u.is_answer:
+                if o.checksum_after is not None:
+                    self.checksum_on = o.checksum_after
                     self.mode_known = True
-                if pending.resets:
+                if o.resets:
                     self.checksum_on = False
                     self.mode_known = True
+            if o.packet is not None:
+                packet, role = o.packet, "answer"
+        self._frame(("unit", u.kind, u.text, offset, length, t_first, t_last, None, None,
+                     _EMPTY, u.code, u.inta, u.fields, u.checksum, u.status, with_sum, packet,
+                     role, u.error), t_last)
+        if o is None:
+            self._exchange(("unsolicited", None, None, u.text, u.code, u.inta, None, t_first,
+                            None, None, offset, None, None), t_last)
         else:
-            frame["error"] = parsed.detail
-        if pending is not None and pending.packet is not None:
-            frame["packet"], frame["packet_role"] = pending.packet, "answer"
-        out = [(TOPIC_FRAMES, line.t_last, frame)]
-        out.append(self._exchange(pending, frame, line))
-        return out
-
-    # -- exchanges -------------------------------------------------------------------------
-    def _exchange(self, pending: _Pending | None, answer: dict[str, Any], line: Line) -> Item:
-        if pending is None:
-            payload = {
-                "status": "unsolicited", "command": None, "name": None,
-                "answer": answer["text"], "code": answer["code"], "inta": answer["inta"],
-                "t_command": None, "t_answer": line.t_first, "latency": None,
-                "command_offset": None, "answer_offset": line.offset, "packet": None,
-                "packet_commands": None,
-            }
-        else:
-            cmd = pending.frame
-            payload = {
-                "status": "answered", "command": cmd["text"], "name": cmd["name"],
-                "answer": answer["text"], "code": answer["code"], "inta": answer["inta"],
-                "t_command": pending.t_last, "t_answer": line.t_first,
-                "latency": line.t_first - pending.t_last,
-                "command_offset": cmd["offset"], "answer_offset": line.offset,
-                "packet": pending.packet, "packet_commands": pending.packet_commands,
-            }
-        return (TOPIC_EXCHANGES, line.t_last, payload)
-
-    def _exchange_unanswered(self, pending: _Pending) -> Item:
-        cmd = pending.frame
-        payload = {
-            "status": "unanswered", "command": cmd["text"], "name": cmd["name"],
-            "answer": None, "code": None, "inta": None, "t_command": pending.t_last,
-            "t_answer": None, "latency": None, "command_offset": cmd["offset"],
-            "answer_offset": None, "packet": pending.packet,
-            "packet_commands": pending.packet_commands,
-        }
-        return (TOPIC_EXCHANGES, pending.t_last, payload)
+            self._exchange(("answered", o.text, o.name, u.text, u.code, u.inta, o.t_last,
+                            t_first, t_first - o.t_last, o.offset, offset, o.packet,
+                            o.packet_commands), t_last)
 
 
 def make_decoder(variant: str | Variant, *, baud: int | None = None,
