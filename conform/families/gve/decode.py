@@ -219,6 +219,9 @@ class LineTracker:
                     self._t_start, t)
 
 
+_PLAIN = frozenset((bool, int, float, str, type(None)))
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, (bool, int, float, str)) or value is None:
         return value
@@ -401,7 +404,13 @@ class FrameDecoder:
                 h.status = "missing"
         h.checksum_after, h.resets, h.silent = None, False, False
         if isinstance(result, Command):
-            h.args = [_jsonable(a) for a in result.args] if result.args else _EMPTY
+            args = result.args
+            if not args:
+                h.args = _EMPTY
+            elif _PLAIN.issuperset(map(type, args)):  # numbers and letters: as they are
+                h.args = list(args)
+            else:
+                h.args = [_jsonable(a) for a in args]
             h.code = h.error = None
             if result.name == "%":
                 h.checksum_after = result.args[0] == "+"
