@@ -26,6 +26,8 @@ CASES = [
     ("bench_capture_latency.py", ["--count", "50"],
      {"count", "direct_p50_ms", "direct_p99_ms", "proxy_p99_ms", "proxy_max_ms",
       "added_p99_ms", "target_added_p99_ms", "ratio", "capture_state", "exchanges_recorded"}),
+    ("bench_capture_writer.py", ["--seconds", "1"],
+     {"seconds", "lines", "reads", "messages", "capture_mb", "writer_cpu_s", "writer_cpu_per_s"}),
 ]
 SLOW_CASES = [
     ("bench_conformance.py", ["--variant", "gve64-v19", "--mutants", "1"],
