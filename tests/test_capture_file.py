@@ -279,3 +279,20 @@ def test_a_lost_first_chunk_does_not_lose_the_rest(tmp_path):
     assert capture_info(broken).bytes["host"] == len(host)
     fixed = open_capture(recover(broken).output)
     assert fixed.clean and fixed.stream("host") == host
+
+
+def test_the_writer_gathers_reads_for_a_flush_interval_and_close_cuts_that_short(tmp_path):
+    path = tmp_path / "gather.mcap"
+    rec = Recorder(path, {"capture_method": "test"}, flush_interval=60.0)
+    rec.chunk("host", b"!0PF\r")  # the first read after a quiet spell is on disk at once
+    deadline = time.monotonic() + 20
+    while capture_info(rec.part).bytes["host"] != 5 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert capture_info(rec.part).bytes["host"] == 5
+    rec.chunk("host", b"!0?\r")  # gathered: the next flush is a minute away...
+    time.sleep(0.2)
+    assert capture_info(rec.part).bytes["host"] == 5
+    t0 = time.monotonic()
+    rec.close()  # ...but closing does not wait for it
+    assert time.monotonic() - t0 < 30
+    assert open_capture(path).stream("host") == b"!0PF\r!0?\r"
