@@ -149,11 +149,26 @@ def test_cr_spans_split_lines_like_the_byte_loop(blocks):
     assert a.partial == b.partial and a.rest(20.0) == b.rest(20.0)
 
 
-def _batch_frames(stream: list[tuple[str, bytes]]) -> tuple[list[dict], list[dict]]:
+class _RecordsOnly:
+    """A decoder with only the ``Decoder`` protocol (``feed``/``finish``): no rows."""
+
+    def __init__(self) -> None:
+        self._d = make_decoder("gve64-v19")
+
+    def feed(self, *a):  # noqa: ANN002, ANN201
+        return self._d.feed(*a)
+
+    def finish(self, t):  # noqa: ANN001, ANN201
+        return self._d.finish(t)
+
+
+def _batch_frames(stream: list[tuple[str, bytes]], rows_decoder: bool = True
+                  ) -> tuple[list[dict], list[dict]]:
     """Frames and exchanges as a recorder stores them (rows -> batch columns -> dicts)."""
     from conform.capture.batch import EXCHANGE_KEYS
 
-    s = BatchSession(baud=115200, decoder=make_decoder("gve64-v19"))
+    s = BatchSession(baud=115200,
+                     decoder=make_decoder("gve64-v19") if rows_decoder else _RecordsOnly())
     recs, t = [], 100.0
     for direction, data in stream:
         t += 0.01
@@ -196,3 +211,11 @@ def test_a_line_that_switched_checksums_on_is_a_rejection_once_j_turned_them_off
     host = [f for f in frames if f["direction"] == "host"]
     assert [(f["kind"], f["checksum_mode"]) for f in host] == [
         ("command", True), ("command", True), ("rejection", False)]
+
+
+def test_a_decoder_without_rows_gives_the_same_batches():
+    """``BatchSession`` takes the records of a decoder that does not collect rows itself."""
+    stream = [("host", b"!0PF\r"), ("unit", b"0,1,2,3\r"), ("host", b"!0%+\r"),
+              ("unit", b"0,5C\r"), ("host", b"!0A100\r"), ("unit", b"4,60\r"),
+              ("host", b"!0*S\r!0L1,2,3\r!0*E\r"), ("unit", b"0,5C\r"), ("host", b"!0PF")]
+    assert _batch_frames(stream, rows_decoder=False) == _batch_frames(stream)

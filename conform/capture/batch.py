@@ -38,19 +38,9 @@ EXCHANGE_KEYS = ("status", "command", "name", "answer", "code", "inta", "t_comma
                  "latency", "command_offset", "answer_offset", "packet", "packet_commands")
 
 
-def columns(items: list[dict[str, Any]], keys: tuple[str, ...]) -> dict[str, Any]:
-    """Items as one batch: ``count`` and one list per field (JSON of lists costs less)."""
-    out: dict[str, Any] = {"count": len(items)}
-    try:
-        cols = [list(c) for c in zip(*map(itemgetter(*keys), items), strict=True)]
-    except KeyError:  # a decoder that leaves fields out
-        cols = [[item.get(k) for item in items] for k in keys]
-    out.update(zip(keys, cols, strict=True)) if cols else out.update((k, []) for k in keys)
-    return out
-
-
 def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str, Any]:
-    """Like ``columns``, from tuples whose fields are in ``keys`` order (the decoder's rows)."""
+    """Items as one batch: ``count`` and one list per field (JSON of lists costs less), from
+    tuples whose fields are in ``keys`` order."""
     out: dict[str, Any] = {"count": len(items)}
     if items:
         out.update(zip(keys, map(list, zip(*items, strict=True)), strict=True))
@@ -114,18 +104,24 @@ class _Pending:
 
 
 class BatchSession(CaptureSession):
-    """``CaptureSession`` writing format 2: ``chunk`` buffers, ``flush`` emits the batches."""
+    """``CaptureSession`` writing format 2: ``chunk`` buffers, ``flush`` emits the batches.
+
+    Frames and exchanges are collected as rows (tuples in ``FRAME_KEYS`` /
+    ``EXCHANGE_KEYS`` order): from a decoder that collects them itself (``feed_rows`` /
+    ``take_rows`` / ``finish_rows``, the GVE family's), or taken from the records of any
+    other ``Decoder``.
+    """
+
+    _GET = {TOPIC_FRAMES: itemgetter(*FRAME_KEYS), TOPIC_EXCHANGES: itemgetter(*EXCHANGE_KEYS)}
 
     def __init__(self, *, baud: int | None = None, decoder: Decoder | None = None,
                  name: str = "conform", batch_bytes: int = BATCH_BYTES) -> None:
         super().__init__(baud=baud, decoder=decoder, name=name)
         self.batch_bytes = batch_bytes
         self._pending = {d: _Pending() for d in DIRECTIONS}
-        self._frames: list[dict[str, Any]] = []
-        self._exchanges: list[dict[str, Any]] = []
-        self._t_frames: float | None = None
+        self._rows: dict[str, list[tuple[Any, ...]]] = {TOPIC_FRAMES: [], TOPIC_EXCHANGES: []}
+        self._t_rows: float | None = None
         self._calls = 0
-        # a decoder that collects rows (``feed_rows``/``take_rows``) skips the per-item dicts
         self._feed_rows = getattr(decoder, "feed_rows", None)
 
     def chunk(self, direction: str, data: bytes, t_read: float, t_first: float | None = None
@@ -146,26 +142,22 @@ class BatchSession(CaptureSession):
         if self._feed_rows is not None:
             self._feed_rows(direction, data, offset, t_read, t_first)
         elif self.decoder is not None:
-            self._decode(direction, data, offset, t_read, t_first)
+            for rec in self.decoder.feed(direction, data, offset, t_read, t_first):
+                self._derived(rec)
         if len(p.data) >= self.batch_bytes:
             return self.flush()
         return []
 
-    def _derived(self, topic: str, t: float, payload: dict[str, Any]) -> None:
-        if self._t_frames is None:
-            self._t_frames = t
-        (self._frames if topic == TOPIC_FRAMES else self._exchanges).append(payload)
-
-    def _decode(self, direction: str, data: bytes, offset: int, t_read: float,
-                t_first: float) -> None:
-        fast = getattr(self.decoder, "feed_items", None)
-        if fast is not None:
-            for item in fast(direction, data, offset, t_read, t_first):
-                self._derived(*item)
-            return
-        assert self.decoder is not None
-        for rec in self.decoder.feed(direction, data, offset, t_read, t_first):
-            self._derived(rec.topic, rec.log_time / 1e9, rec.payload)
+    def _derived(self, rec: Record) -> None:
+        """A frame or exchange record of a decoder without rows, as a row."""
+        if self._t_rows is None:
+            self._t_rows = rec.log_time / 1e9
+        try:
+            row = self._GET[rec.topic](rec.payload)
+        except KeyError:  # a decoder that leaves fields out
+            keys = FRAME_KEYS if rec.topic == TOPIC_FRAMES else EXCHANGE_KEYS
+            row = tuple(rec.payload.get(k) for k in keys)
+        self._rows[rec.topic].append(row)
 
     def flush(self) -> list[Record]:
         """Everything buffered as batch records (raw first, then frames and exchanges)."""
@@ -178,27 +170,25 @@ class BatchSession(CaptureSession):
             self._pending[d] = _Pending()
         if self._feed_rows is not None:
             t_rows, frames, exchanges = self.decoder.take_rows()  # type: ignore[union-attr]
-            t = to_ns(t_rows or 0.0)
-            if frames:
-                out.append(Record(TOPIC_FRAMES, t, row_columns(frames, FRAME_KEYS)))
-            if exchanges:
-                out.append(Record(TOPIC_EXCHANGES, t, row_columns(exchanges, EXCHANGE_KEYS)))
-            return out
-        t = to_ns(self._t_frames or 0.0)
-        if self._frames:
-            out.append(Record(TOPIC_FRAMES, t, columns(self._frames, FRAME_KEYS)))
-        if self._exchanges:
-            out.append(Record(TOPIC_EXCHANGES, t, columns(self._exchanges, EXCHANGE_KEYS)))
-        self._frames, self._exchanges, self._t_frames = [], [], None
+        else:
+            t_rows, frames, exchanges = (self._t_rows, self._rows[TOPIC_FRAMES],
+                                         self._rows[TOPIC_EXCHANGES])
+            self._rows = {TOPIC_FRAMES: [], TOPIC_EXCHANGES: []}
+            self._t_rows = None
+        t = to_ns(t_rows or 0.0)
+        if frames:
+            out.append(Record(TOPIC_FRAMES, t, row_columns(frames, FRAME_KEYS)))
+        if exchanges:
+            out.append(Record(TOPIC_EXCHANGES, t, row_columns(exchanges, EXCHANGE_KEYS)))
         return out
 
     def finish(self, t: float) -> list[Record]:
         """The decoder's leftovers and every pending batch."""
         if self._feed_rows is not None:
             self.decoder.finish_rows(t)  # type: ignore[union-attr]
-            return self.flush()
-        for rec in super().finish(t):
-            self._derived(rec.topic, rec.log_time / 1e9, rec.payload)
+        else:
+            for rec in super().finish(t):
+                self._derived(rec)
         return self.flush()
 
 
