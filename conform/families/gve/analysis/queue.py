@@ -482,6 +482,9 @@ class _Queue:
         return [b[self.start : self.end] for b in self.bufs]
 
 
+# the planned head, in the compiled scan's float state and in the executor's attributes
+_HEAD = (("T0", "_t0"), ("TEND", "_tend"), ("LEN", "_len"), ("VJ", "_vj"),
+         ("VPEAK", "_vpeak"), ("TDEC", "_tdec"), ("VSTART", "_vstart"), ("VIN", "_vin"))
 PYTHON_ROWS = 4096  # rows given to the executor at a time (it may stop at any vector)
 COMPILED_ROWS = 512  # the least run of rows without a control for the scan to take over again
 
@@ -498,9 +501,9 @@ class StreamReplay:
     a ``MotionExecutor`` (the Python executor, which knows those commands), its completion
     log drained into the same summaries; at the first vector after that where the executor
     is in a state the scan can carry (not halted, braking or parked, its queue in push
-    order) and no control row follows for ``COMPILED_ROWS`` rows, the scan takes it back. The result
-    is the one ``replay`` gives on the whole session, at the compiled speed for all but the
-    stretches around the control commands.
+    order) and no control row follows for ``COMPILED_ROWS`` rows, the scan takes it back.
+    The result is the one ``replay`` gives on the whole session, at the compiled speed for
+    all but the stretches around the control commands.
     """
 
     def __init__(self, variant: Variant, keep: bool = True) -> None:
@@ -514,8 +517,7 @@ class StreamReplay:
         self.states: dict[Any, int] = {self._key(self.params): 0}
         self.table: list[Any] = [self.params]
         self.t_max = -np.inf
-        self.q = _Queue(self.naxes)
-        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
+        self._new_queue()
         self.first = 0  # push index of q_*[0]
         self.pushed = 0
         self.control_row = -1  # the first H/G/D/K/R/J: from there on the executor replays
@@ -579,11 +581,7 @@ class StreamReplay:
         rows = np.flatnonzero(acc | ctrl)
         is_vec = acc[rows]
         stops = np.flatnonzero(~is_vec & isin(names[rows], list(CONTROL)))
-        # the executor hands back only where the next control row is far enough ahead: a
-        # hand-over and back costs what the executor spends on a few hundred rows
-        ahead = np.append(stops, len(rows) + COMPILED_ROWS)[np.searchsorted(
-            stops, np.arange(len(rows)))] - np.arange(len(rows))
-        far = ahead >= COMPILED_ROWS
+        far = None  # per row: no control row within COMPILED_ROWS (only the executor asks)
         k = 0  # the compiled scan up to a control row, the executor from there for a while
         while k < len(rows):
             if self.exe is None:
@@ -597,6 +595,10 @@ class StreamReplay:
                     self._hand_over()
                 k = stop
             else:  # a part at a time: the scan may take over again at any vector
+                if far is None:  # a hand-over and back costs a few hundred executor rows
+                    at = np.arange(len(rows))
+                    far = np.append(stops, len(rows) + COMPILED_ROWS)[
+                        np.searchsorted(stops, at)] - at >= COMPILED_ROWS
                 end = k + PYTHON_ROWS
                 k += self._feed_python(ex, names, t, rows[k:end], is_vec[k:end], far[k:end],
                                        host_parsed, lo, base)
@@ -615,7 +617,7 @@ class StreamReplay:
                        base: int) -> None:
         modal = np.flatnonzero(~is_vec)  # few: the parameters they set, one by one
         after = np.empty(len(modal) + 1, np.int32)  # parameter row after each of them
-        after[0] = self.states[self._key(self.params)]
+        after[0] = self._state_row(self.params)
         for j, i in enumerate(modal.tolist()):
             r = int(rows[i]) + lo
             name = str(names[rows[i]])
@@ -625,11 +627,7 @@ class StreamReplay:
             except ValueError as err:
                 self.notes.append(f"replay: {name} at row {r + base} refused by the model: "
                                   f"{err}")
-            key = self._key(self.params)
-            if key not in self.states:
-                self.states[key] = len(self.table)
-                self.table.append(self.params)
-            after[j + 1] = self.states[key]
+            after[j + 1] = self._state_row(self.params)
         state = after[np.cumsum(~is_vec)]  # in force at each row
         vrows = rows[is_vec] + lo
         d = self._pulses(ex, vrows)
@@ -685,16 +683,21 @@ class StreamReplay:
         exe._v, exe._ready, exe._dry = float(F[k.V]), float(F[k.READY]), bool(I[k.DRY])
         if I[k.PLANNED]:
             exe._planned = True
-            exe._t0, exe._tend, exe._len = float(F[k.T0]), float(F[k.TEND]), float(F[k.LEN])
+            for name, attr in _HEAD:
+                setattr(exe, attr, float(F[getattr(k, name)]))
             exe._dom = max(map(abs, exe._q[0][0]))
-            exe._vj, exe._vpeak = float(F[k.VJ]), float(F[k.VPEAK])
-            exe._tdec = float(F[k.TDEC])
-            exe._vstart, exe._vin = float(F[k.VSTART]), float(F[k.VIN])
             exe._prof = tuple(float(x) for x in F[k.PROF : k.PROF + 8])
             exe._exit = int(I[k.EXIT])
             exe._vstarved = bool(I[k.STARVED])
         self.exe = exe
-        self.q = _Queue(self.naxes)  # the executor holds the queue from here on
+        self._new_queue()  # the executor holds the queue from here on
+
+    def _new_queue(self, *columns: np.ndarray) -> None:
+        """A fresh queue buffer, holding ``columns`` (pulses, continuity, parameter row,
+        arrival, exchange row) when given."""
+        self.q = _Queue(self.naxes)
+        if columns:
+            self.q.append(*columns)
         self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
 
     def _state_row(self, p: Any) -> int:
@@ -720,22 +723,18 @@ class StreamReplay:
         I[k.N] = n
         if exe._planned:
             I[k.PLANNED], I[k.EXIT], I[k.STARVED] = 1, exe._exit, int(exe._vstarved)
-            F[k.T0], F[k.TEND], F[k.LEN] = exe._t0, exe._tend, exe._len
-            F[k.VJ], F[k.VPEAK], F[k.TDEC] = exe._vj, exe._vpeak, exe._tdec
-            F[k.VSTART], F[k.VIN] = exe._vstart, exe._vin
+            for name, attr in _HEAD:
+                F[getattr(k, name)] = getattr(exe, attr)
             F[k.PROF : k.PROF + 8] = exe._prof
         self.F, self.I = F, I
         self.params = exe.params
         self._state_row(self.params)
-        self.q = _Queue(self.naxes)
-        if n:
-            gone = [self.live.pop(q[4]) for q in queued]
-            self.q.append(np.array([q[0] for q in queued], np.int64).reshape(n, self.naxes),
-                          np.array([q[1] for q in queued], bool),
-                          np.array([self._state_row(q[2]) for q in queued], np.int32),
-                          np.array([q[3] for q in queued], float),
-                          np.array([r for _, r in gone], np.int64))
-        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
+        gone = [self.live.pop(q[4]) for q in queued]
+        self._new_queue(np.array([q[0] for q in queued], np.int64).reshape(n, self.naxes),
+                        np.array([q[1] for q in queued], bool),
+                        np.array([self._state_row(q[2]) for q in queued], np.int32),
+                        np.array([q[3] for q in queued], float),
+                        np.array([r for _, r in gone], np.int64))
         self.first = self.pushed - n
         self.exe = None
         self.hand_backs += 1
@@ -769,10 +768,9 @@ class StreamReplay:
                      lo: int, base: int) -> int:
         """Rows through the executor itself, as ``_run_python`` replays a whole session,
         until a vector comes when the scan can take the executor's state back
-        (``_compilable``), with no control row in
-        the next ``COMPILED_ROWS`` (``far``), and goes back to the
-        compiled scan (``_hand_back``): returns how many rows it took (all of them, or up
-        to that vector, which the compiled scan takes)."""
+        (``_compilable``) and no control row follows within ``COMPILED_ROWS`` (``far``);
+        there it hands back (``_hand_back``). Returns how many rows it took (all of them,
+        or up to that vector, which the compiled scan takes)."""
         from conform.families.gve.unit.motion import MotionStateError
 
         vrows = rows[is_vec] + lo
@@ -943,8 +941,7 @@ class StreamReplay:
         z = np.zeros(0, np.int64)
         self._run(np.zeros(0), np.zeros(0, bool), np.zeros((0, self.naxes), np.int64),
                   np.zeros(0, bool), np.zeros(0, np.int32), z, self.variant.queue + 10_000)
-        self.q = _Queue(self.naxes)  # the rest never ran
-        self.q_d, self.q_cont, self.q_state, self.q_t, self.q_row = self.q.views()
+        self._new_queue()  # the rest never ran
 
     def mean_depth(self) -> float:
         if self.depth_n < 2:
