@@ -222,7 +222,7 @@ class _Session:
             self.Tu = fr.DecodedLines.join([self.Tu, w.unit])
             self.Tc = np.concatenate([self.Tc, w.cmd_row])
         self.rows += len(w.ex)
-        release_memory()  # what the last window freed goes back, not onto this one's peak
+        release_memory()  # freed heap goes back once it adds up, not onto the next peaks
         if self.keep and self.rows > self.keep_rows:
             self.keep = False
             self.kept = {k: [] for k in self.kept}

@@ -68,11 +68,11 @@ _TRIM, _INFO = _libc()
 KEEP_FREE = 96 << 20
 
 
-def release_memory(force: bool = False) -> None:
+def release_memory() -> None:
     """Hand freed heap back to the system between steps once more than ``KEEP_FREE`` is
     held: glibc keeps the arrays a step freed for reuse, fragmented, and without a trim a
     long capture's resident memory creeps up by tens of MB per million exchanges."""
     if _TRIM is None:
         return
-    if force or _INFO is None or _INFO().fordblks > KEEP_FREE:
+    if _INFO is None or _INFO().fordblks > KEEP_FREE:
         _TRIM(0)

@@ -2,7 +2,7 @@
 
 Almost every line of a busy session is a vector; reading them with one compiled pass over
 the bytes costs a few nanoseconds a line where a regular expression over Arrow strings and
-a cast per axis cost half a microsecond. The form is the one ``frames._vector_regex`` takes
+a cast per axis cost half a microsecond. The form is the one ``frames._vector_form`` takes
 from the table rows (C and L, GVE64 §13.5.2; number syntax A22 ``strict``, GVE64 §13.5.2
 and §13.7; mnemonics A21 ``upper-mnemonics``, GVE64 §13.5.7):
 ``!<address><mnemonic>`` then the axes as optional-minus decimal integers separated by
