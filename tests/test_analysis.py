@@ -183,6 +183,23 @@ def test_packets_long_wait_reset(tmp_path: Path) -> None:
     assert k.get("long-wait") == 1 and k.get("reset") == 1
 
 
+@pytest.mark.parametrize("given", ["folder", "stream"])
+def test_a_second_pass_writes_the_tables_once(tmp_path: Path, given: str) -> None:
+    """A capture re-timed at the estimated baud is decoded twice; its Parquet tables hold
+    the second pass's rows only, whether ``parquet`` is a folder or a stream (a fleet's)."""
+    import pyarrow.parquet as pq
+
+    from conform.analysis.tables import ParquetStream
+
+    pairs = [(b"!0C100,0,0\r", b"0\r"), (b"!0PF\r", b"0,100,0,0\r")] * 30
+    p = record(tmp_path / "b.mcap", simplex(pairs), baud=9600)
+    out = tmp_path / "tables"
+    a = analyze(p, parquet=out if given == "folder" else ParquetStream(out))
+    assert a.baud == 115200  # re-timed: a second pass
+    for name, n in (("exchanges", len(a.exchanges)), ("frames_host", len(a.exchanges))):
+        assert pq.read_table(out / f"{name}.parquet").num_rows == n == 60
+
+
 def test_garbage_half_frames_and_unsolicited(tmp_path: Path) -> None:
     script = [("unit", b"\x00\xff0\r", 0.0005), ("host", b"\xfe\xfegarbage\r", 0.001),
               ("host", b"!0C1,0,0\r", 0.002), ("unit", b"0\r", 0.003),

@@ -428,7 +428,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
         used = float(est)
         say("re-timing at the estimated baud")
         host_exact = p.stats["host"].reads > 0 and p.stats["host"].exact
-        sink = _sink(parquet)
+        sink = _sink(parquet, sink)
         p = _run_pass(path, var, dia, used, False, host_exact, errors, keep, sink, None,
                       reads_per_part, window_lines)
     s = p.session
