@@ -150,12 +150,3 @@ def frame_categories(a: Any, direction: str) -> dict[str, list[Any] | None]:
     return cats
 
 
-def coded(df: Any) -> Any:
-    """A copy whose text columns are integer-coded (categorical: names, kinds, statuses)
-    when their values repeat, else plain strings (command lines)."""
-    df = df.copy()
-    for col in df.columns:
-        if df[col].dtype == object:
-            s = df[col].astype("string")
-            df[col] = s.astype("category") if s.nunique() <= max(1, len(s) // 2) else s
-    return df

@@ -141,8 +141,8 @@ class RawStream:
 
 def first_byte_times(d: Direction, baud: float | None, trust: bool, prev: float
                      ) -> np.ndarray:
-    """``frames.chunk_first_times`` for a part whose earlier reads ended by ``prev`` (the
-    running maximum of their read times; -inf for the first part)."""
+    """First-byte time of every chunk of a part: the capture's, or estimated from ``baud``;
+    ``prev`` is the running maximum of the earlier parts' read times (-inf for the first)."""
     est = d.t_read - (d.length * BITS_PER_BYTE / baud if baud else 0.0)
     if d.chunks:
         before = np.maximum.accumulate(np.concatenate([[prev], d.t_read]))[:-1]

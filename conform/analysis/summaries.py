@@ -73,10 +73,6 @@ class Quantiles:
         self.pos += np.bincount(idx[(v > 0) & ~small], minlength=_NBINS)
         self.neg += np.bincount(idx[(v < 0) & ~small], minlength=_NBINS)
 
-    @property
-    def exact(self) -> bool:
-        return self.parts is not None
-
     def values(self) -> np.ndarray:
         """Every value (only while exact)."""
         assert self.parts is not None

@@ -373,16 +373,3 @@ def open_link(port: str, *, baud: int = 115200, guard: Guard | None = None,
     from conform.link import open_port
 
     return LinkTarget(open_port(port, baud, timeout), port, guard, baud)
-
-
-def open_emulated(text: str, *, baud: int = 115200, guard: Guard | None = None) -> EmuTarget:
-    """``emu:VARIANT``: the reference unit of the family serving VARIANT, in-process."""
-    from conform.families import family_for_variant
-
-    kind, variant, mutant = parse_target(text)
-    if kind != "emu" or not variant:
-        raise UserError(f"target {text!r}: expected emu:VARIANT")
-    if mutant is not None:
-        raise UserError(f"target {text!r}: deviant units are run by the family's own targets")
-    fam = family_for_variant(variant)
-    return EmuTarget(lambda: fam.make_unit(variant), f"emu:{variant}", guard, baud=baud)

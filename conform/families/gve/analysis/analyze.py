@@ -32,6 +32,7 @@ from conform.families.gve.analysis import exchanges as exm
 from conform.families.gve.analysis import frames as fr
 from conform.families.gve.analysis.columns import isin, packet_numbers, release_memory
 from conform.families.gve.analysis.findings import (
+    HAZARDS,
     Context,
     Finding,
     Findings,
@@ -508,8 +509,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
                        "lower_bound_from_reads": low, "from_answer_lengths": slope}
     metrics["positions"] = pos
     metrics["finding_counts"] = dict(sorted(out.counts.items()))
-    metrics["hazards"] = sum(out.counts.get(k, 0) for k in ("blind-resend", "double-move",
-                                                             "lost-vector"))
+    metrics["hazards"] = sum(out.counts.get(k, 0) for k in HAZARDS)
     metrics["capture"] = {"complete": raw.status.complete, "problem": raw.status.problem,
                           "damaged_chunks": raw.status.damaged_chunks,
                           "bytes": raw.status.size, "topics": raw.topics,

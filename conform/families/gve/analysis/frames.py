@@ -47,13 +47,6 @@ def byte_times(d: Direction, t_first: np.ndarray, idx: np.ndarray) -> np.ndarray
     return t_first[k] + (d.t_read[k] - t_first[k]) * frac
 
 
-def chunk_first_times(d: Direction, baud: float | None, trust_capture: bool) -> np.ndarray:
-    """First-byte time of every chunk: the capture's, or estimated from ``baud``."""
-    from conform.analysis.stream import first_byte_times
-
-    return first_byte_times(d, baud, trust_capture, -np.inf)
-
-
 @dataclass
 class Lines:
     """The lines of one direction: body = data[start:end], terminator at ``end``."""

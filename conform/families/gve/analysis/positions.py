@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from conform.families.gve.analysis.columns import isin
-from conform.families.gve.analysis.findings import Context, Findings
+from conform.families.gve.analysis.findings import Context
 
 POSITION = {"P": 2, "PF": 3, "P4": 4}
 
@@ -51,14 +51,6 @@ class _Motion:
             for j, c in enumerate(self.cols):
                 acc[u, j] += np.add.reduceat(c[lo : lo + CUM_BLOCK] * w, first)
         return np.cumsum(acc[:-1], axis=0)
-
-
-def check_positions(ctx: Context, unit: Any, rec: dict[str, np.ndarray],
-                    out: Findings) -> dict[str, Any]:
-    """The whole table at once (a stream uses ``PositionCheck`` window by window)."""
-    pc = PositionCheck()
-    pc.feed(ctx, unit, rec, out, 0, len(ctx.ex), 0)
-    return pc.finish(out)
 
 
 class _Report:
