@@ -25,9 +25,8 @@ from typing import Any
 import numpy as np
 import zstandard
 
-from conform.capture.scan import Walk, check_magic, decompress_chunk, opcode_damaged, walk_records
+from conform.capture.scan import Walk, decompress_chunk, opcode_damaged, walk_records
 from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
-from conform.errors import UserError
 
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
 OP_METADATA, OP_DATA_END = 0x0C, 0x0F
@@ -285,14 +284,10 @@ def _chunk_data(body: bytes) -> bytes:
     return decompress_chunk(compression, raw, usize, crc)
 
 
-def _walk(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None) -> None:
-    for _ in walk_iter(path, status, col, progress):
-        pass
-
-
 def walk_iter(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None
               ) -> Iterator[None]:
-    """``_walk`` one record at a time: the caller takes ``col.parts`` between records."""
+    """Walk the capture's records one at a time: the caller takes ``col.parts`` between
+    records."""
     walk = Walk()
     with open(path, "rb") as f:
         size = status.size = os.fstat(f.fileno()).st_size
@@ -626,53 +621,15 @@ def _merge(name: str, parts: list[Direction]) -> Direction:
 MAX_TIME = 1e11  # seconds since the epoch (the year 5138): later is not a time
 
 
-def _sane_times(d: Direction) -> int:
-    """Replace read times that are not usable numbers; how many there were.
-
-    A NaN, infinite, negative or absurd ``t_read`` takes the last good one before it (the
-    first good one at the start), as does one earlier than the read before it; a ``t_first``
-    that is not finite or not within 10 s before its read is dropped (estimated from the
-    baud later).
-    """
-    t = d.t_read
-    bad = ~np.isfinite(t) | (t < 0) | (t > MAX_TIME)
-    n = int(bad.sum())
-    if n:
-        good = np.flatnonzero(~bad)
-        if len(good):
-            k = np.maximum.accumulate(np.where(bad, 0, np.arange(len(t))))
-            k[: good[0]] = good[0]
-            d.t_read = t[k]
-        else:
-            d.t_read = np.zeros(len(t))
-    # reads of one direction come back in stream order, so their times cannot go backwards
-    mono = np.maximum.accumulate(d.t_read) if len(d.t_read) else d.t_read
-    back = mono > d.t_read
-    if back.any():
-        n += int((back & ~bad).sum())
-        d.t_read = mono
-    tf = d.t_first
-    with np.errstate(invalid="ignore"):
-        off = ~np.isfinite(tf) | (tf > d.t_read + 1e-6) | (d.t_read - tf > 10.0) | bad
-    d.t_first = np.where(off, np.nan, tf)
-    return n
-
-
 def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
-    """Read ``path`` (an MCAP capture) as far as it is intact."""
-    p = check_magic(path)
-    status = ReadStatus(p)
-    col = _Collector()
-    col.status = status
-    try:
-        _walk(p, status, col, progress)
-    except OSError as exc:
-        raise UserError(f"{p}: cannot read: {exc.strerror}") from None
-    col.flush()
-    host = _merge("host", col.parts["host"])
-    unit = _merge("unit", col.parts["unit"])
-    for d in (host, unit):
-        status.bad_times += _sane_times(d)
-    if status.bad_payloads:
-        status.notes.append(f"{status.bad_payloads} raw chunk message(s) unreadable, skipped")
-    return RawCapture(status, col.metadata, host, unit, col.link, col.topics)
+    """Read ``path`` (an MCAP capture) as far as it is intact: ``stream.RawStream``'s parts
+    (times made usable as they come, ``TimeSanitizer``) joined into whole directions."""
+    from conform.analysis.stream import RawStream
+
+    rs = RawStream(path, progress)
+    parts: dict[str, list[Direction]] = {"host": [], "unit": []}
+    for part in rs.parts():
+        parts[part.name].append(part)
+    c = rs.capture()
+    return RawCapture(c.status, c.metadata, _merge("host", parts["host"]),
+                      _merge("unit", parts["unit"]), c.link_events, c.topics)

@@ -6,8 +6,8 @@ Family-agnostic machinery of the streaming analysis:
   out the raw reads of each direction a part at a time, in file order, as soon as a batch of
   chunks is decoded (``rawread.BATCH_BYTES`` of decompressed records, or ``reads_per_part``
   reads when smaller parts are asked for). Read times are made sane on the way
-  (:class:`TimeSanitizer`, the rules of ``rawread._sane_times`` with the last good time and
-  the running maximum carried from one part to the next).
+  (:class:`TimeSanitizer`, with the last good time and the running maximum carried from
+  one part to the next); ``rawread.read_raw`` joins the parts into whole directions.
 * :class:`LineBuffer` holds one direction's bytes from the first line not yet consumed to
   the last byte received, with the reads that cover them (a read cut by the start of the
   buffer keeps its full length and a negative start, so the times of its bytes are
@@ -36,15 +36,19 @@ from conform.analysis.rawread import (
     walk_iter,
 )
 from conform.capture.scan import check_magic
+from conform.capture.session import BITS_PER_BYTE
 from conform.errors import UserError
 
-BITS_PER_BYTE = 10  # start, 8 data bits, stop
 MAX_LEAD = 10.0  # s: a first-byte time more than this before its read is not believed
 
 
 class TimeSanitizer:
-    """``rawread._sane_times`` for a stream of parts: the last good read time and the
-    running maximum are carried, so the result does not depend on where parts are cut."""
+    """Read times made usable, a part at a time: a NaN, infinite, negative or absurd
+    ``t_read`` takes the last good one before it (the first good one at the start), as does
+    one earlier than the read before it (reads of one direction come back in stream order);
+    a ``t_first`` that is not finite or not within ``MAX_LEAD`` before its read is dropped
+    (estimated from the baud later). The last good read time and the running maximum are
+    carried, so the result does not depend on where parts are cut."""
 
     def __init__(self) -> None:
         self.last_good: float | None = None

@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from conform.capture.session import BITS_PER_BYTE
 from conform.families.gve.analysis.frames import (
     ANSWER,
-    BITS_PER_BYTE,
     COMMA,
     COMMAND,
     CS_MISSING,

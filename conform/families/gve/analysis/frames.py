@@ -21,7 +21,6 @@ from conform.families.gve.protocol import Command, CommandParser, Garbled, Rejec
 from conform.families.gve.spec.model import Dialect, Variant
 
 CR, LF, COMMA, BANG = 13, 10, 44, 33
-BITS_PER_BYTE = 10
 
 # frame kinds
 COMMAND, REJECTION, ANSWER, GARBLED, PARTIAL, ECHO = (
