@@ -43,7 +43,7 @@ from conform.families.gve.analysis.findings import (
 )
 from conform.families.gve.analysis.metrics import Metrics
 from conform.families.gve.analysis.positions import PositionCheck
-from conform.families.gve.analysis.queue import QueueReplay, StreamReplay, replay, supply_consumption, whatif
+from conform.families.gve.analysis.queue import QueueReplay, StreamReplay, supply_consumption, whatif
 
 STANDARD_BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
 DEFAULT_VARIANT = "gve64-v19"
@@ -453,17 +453,9 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
         unit = fr.DecodedLines.join(s.kept["unit"]) if s.kept["unit"] else None
         accepted = np.concatenate(s.kept["acc"]) if s.kept["acc"] else np.zeros(0, bool)
     rep_stream = s.replay
-    rep: QueueReplay | None = None
-    replayed = True
-    if rep_stream.control_row >= 0 and whole:  # kept: the executor over the whole table
-        if ex is not None:
-            try:
-                rep = replay(ex, accepted, host.result, var)
-            except Exception as exc:  # noqa: BLE001 - a replay failure must not lose the analysis
-                notes.append(f"queue replay failed: {type(exc).__name__}: {exc}")
-                replayed = False
-    elif whole:
-        rep = rep_stream.result()
+    # kept: the streamed replay's whole arrays (the same completions, depth and notes as
+    # ``replay`` over the whole table, control commands or not: tests/test_analysis_control)
+    rep: QueueReplay | None = rep_stream.result() if whole else None
     whatif_rows: list[dict[str, Any]] = []
     if rep is not None and whole and whatif_replays and ex is not None:
         try:
@@ -478,7 +470,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
         rep.whatif = whatif_rows
         notes.extend(rep.notes[:10])
         _starvation_findings(_events(rep), out)
-    elif replayed:
+    else:
         notes.extend(rep_stream.notes[:10])
         _starvation_findings(rep_stream, out)
 
@@ -496,14 +488,14 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
                     float(link.get("t", t0)), "warning",
                     f"link {kind} ({link.get('side', '')}): {link.get('detail', '')}",
                     cause=f"link-{kind}")
-    metrics, series = s.metrics.compute(used, rep_stream if replayed else None)
+    metrics, series = s.metrics.compute(used, rep_stream)
     if rep is not None and rep_stream.control_row >= 0:
         metrics["queue"] = _queue_metrics(rep, t0)
         sc = supply_consumption(rep, np.linspace(t0, t0 + metrics["duration_s"],
                                                  len(series) + 1))
         series["supplied_per_s"] = sc["supplied_per_s"].to_numpy()
         series["consumed_per_s"] = sc["consumed_per_s"].to_numpy()
-    elif replayed:
+    else:
         metrics["queue"] = rep_stream.metrics(t0, whatif_rows)
     metrics["baud"] = {"declared": declared, "source": source, "used": used,
                        "lower_bound_from_reads": low, "from_answer_lengths": slope}
