@@ -285,6 +285,16 @@ def queue_plot(a: Any) -> str | None:
                       "Queue depth over time (replayed through the unit's motion model)")
 
 
+def _path_png(fig: Any, ax: Any, title: str) -> str:
+    """An X/Y path figure finished (equal scales, axis names, legend beside) as PNG."""
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("X pulses")
+    ax.set_ylabel("Y pulses")
+    ax.set_title(title)
+    legend_beside(ax)
+    return to_png(fig)
+
+
 def _path_summary(a: Any) -> str | None:
     ps = a.plot.path
     if ps is None or ps.pushed == 0:
@@ -296,12 +306,7 @@ def _path_summary(a: Any) -> str | None:
     if len(stops):
         ax.plot(stops[:, 0], stops[:, 1], "o", ms=3, color="#cc3311",
                 label=f"stopped ({ps.n_stops})")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("X pulses")
-    ax.set_ylabel("Y pulses")
-    ax.set_title("X/Y path, junctions where the motion stopped")
-    legend_beside(ax)
-    return to_png(fig)
+    return _path_png(fig, ax, "X/Y path, junctions where the motion stopped")
 
 
 def path_plot(a: Any) -> str | None:
@@ -337,12 +342,7 @@ def path_plot(a: Any) -> str | None:
             if len(k):
                 kx, ky = thin_points(x[k], y[k])
                 ax.plot(kx, ky, "o", ms=3, color=color, label=f"{label} ({int(mask.sum())})")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("X pulses")
-    ax.set_ylabel("Y pulses")
-    ax.set_title("X/Y path, junctions where the motion stopped or slowed")
-    legend_beside(ax)
-    return to_png(fig)
+    return _path_png(fig, ax, "X/Y path, junctions where the motion stopped or slowed")
 
 
 def all_plots(a: Any) -> dict[str, str]:

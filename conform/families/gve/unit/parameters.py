@@ -53,46 +53,35 @@ class ParameterCommands(UnitState):
             v=v if v > MIN_SPEED else MIN_SPEED, a=self._A * 1000.0, b=float(self._B),
             short=self._short, pause=self._T / 1000.0, vk=self._VK, vl=vl)
 
-    # modal
-    def _cmd_T(self, args: tuple, t: float) -> Reply:
-        self._T = args[0]
+    # modal: a value for the vectors pushed from now on (the queued ones keep theirs)
+    def _set_modal(self, attr: str, value: Any) -> Reply:
+        setattr(self, attr, value)
         self._rebuild_params()
         return OK
+
+    def _cmd_T(self, args: tuple, t: float) -> Reply:
+        return self._set_modal("_T", args[0])
 
     def _cmd_short(self, args: tuple, t: float) -> Reply:
-        self._short = args[0]
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_short", args[0])
 
     def _cmd_A(self, args: tuple, t: float) -> Reply:
-        self._A = args[0]
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_A", args[0])
 
     def _cmd_V(self, args: tuple, t: float) -> Reply:
-        self._V = args[0]
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_V", args[0])
 
     def _cmd_VL(self, args: tuple, t: float) -> Reply:
-        self._VL = tuple(args)
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_VL", tuple(args))
 
     def _cmd_B(self, args: tuple, t: float) -> Reply:
-        self._B = args[0]
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_B", args[0])
 
     def _cmd_VK(self, args: tuple, t: float) -> Reply:
-        self._VK = True
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_VK", True)
 
     def _cmd_VN(self, args: tuple, t: float) -> Reply:
-        self._VK = False
-        self._rebuild_params()
-        return OK
+        return self._set_modal("_VK", False)
 
     # speed changes of queued vectors
     def _cmd_XA(self, args: tuple, t: float) -> Reply:
