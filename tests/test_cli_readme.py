@@ -39,7 +39,7 @@ def test_quick_start_is_two_commands():
     quick = README.split("## Quick start", 1)[1].split("\n## ", 1)[0]
     blocks = re.findall(r"```sh\n(.*?)```", quick, flags=re.S)
     assert [b.strip() for b in blocks] == ["pip install -e . && conform run",
-                                           "pip install -e . && python -m pytest"]
+                                           "pip install -e '.[test]' && python -m pytest"]
     assert "reports/latest/" in quick
 
 
@@ -50,7 +50,7 @@ def test_no_placeholder_in_a_command():
 
 @pytest.mark.parametrize("line", _commands())
 def test_readme_command_parses(line, tmp_path, monkeypatch):
-    for name in ("captures", "specs"):
+    for name in ("captures", "conform"):
         (tmp_path / name).symlink_to(REPO / name)
     for made in MADE_BY_THE_README:
         (tmp_path / made).parent.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""specs/grbl: the tables load, cover what the protocol has, cite a source on every row, and a
+"""conform/families/grbl/spec/tables: the tables load, cover what the protocol has, cite a source on every row, and a
 broken row is one clear line naming file, row and field."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 
 from conform.errors import UserError
 from conform.families import detect_family, family, family_for_variant
-from conform.families.grbl.tables import SPEC_DIR, load_grbl
+from conform.families.grbl.tables import load_grbl, spec_dir
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_message_kinds(g, line, kind):
 ])
 def test_a_broken_row_is_one_line(tmp_path, file, old, new, msg):
     root = tmp_path / "grbl"
-    shutil.copytree(SPEC_DIR, root)
+    shutil.copytree(spec_dir(), root)
     path = root / f"{file}.toml"
     text = path.read_text(encoding="utf-8")
     assert old in text

@@ -4,8 +4,8 @@ The engine (spec tooling, emulator adapter, conformance results and reports, cap
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
-one package, conform.families.gve and conform.families.grbl, with its tables in specs/gve/ and
-specs/grbl/. The engine reaches a family only through this registry
+one package, conform.families.gve and conform.families.grbl, with its tables in conform/families/gve/spec/tables/ and
+conform/families/grbl/spec/tables/. The engine reaches a family only through this registry
 (tests/test_family_boundary.py). See docs/architecture.md.
 
     family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
@@ -15,8 +15,11 @@ specs/grbl/. The engine reaches a family only through this registry
 from __future__ import annotations
 
 import importlib
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 from conform.errors import UserError
@@ -122,6 +125,21 @@ class Family(Protocol):
 
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
+
+
+SPECS_ENV = "CONFORM_SPECS"
+
+
+def table_folder(name: str, package: str) -> Path:
+    """The folder of family ``name``'s tables: ``$CONFORM_SPECS/<name>/`` when that exists (a
+    modified copy to try), else the tables shipped inside ``package`` (its ``tables/`` data
+    folder, found through importlib.resources so a wheel install finds them too)."""
+    env = os.environ.get(SPECS_ENV)
+    if env:
+        override = Path(env) / name
+        if override.is_dir():
+            return override
+    return Path(str(files(package).joinpath("tables")))
 
 
 FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}

@@ -1,4 +1,4 @@
-"""Load ``specs/grbl/*.toml`` into typed tables, validating every row.
+"""Load ``conform/families/grbl/spec/tables/*.toml`` into typed tables, validating every row.
 
 A mistake in a table is one ``UserError`` line naming the file, the row and the field, so a
 new grbl variant or a corrected code is a data change that either loads or says what is wrong.
@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
+from conform.families import table_folder
 
-SPEC_DIR = Path(__file__).resolve().parents[3] / "specs" / "grbl"
+SPEC_PACKAGE = "conform.families.grbl.spec"
 FILES = ("variants", "codes", "settings", "protocol", "status", "examples")
 SETTING_TYPES = ("int", "bool", "mask", "float")
 
@@ -293,9 +294,18 @@ def load_grbl(root: str | Path | None = None) -> GrblSpec:
     return _load(Path(root))
 
 
-@lru_cache(maxsize=1)
+def spec_dir() -> Path:
+    """``$CONFORM_SPECS/grbl/`` when it exists, else the tables shipped in the package."""
+    return table_folder("grbl", SPEC_PACKAGE)
+
+
 def _load_default() -> GrblSpec:
-    return _load(SPEC_DIR)
+    return _load_cached(spec_dir())
+
+
+@lru_cache(maxsize=4)
+def _load_cached(root: Path) -> GrblSpec:
+    return _load(root)
 
 
 def _load(root: Path) -> GrblSpec:

@@ -1,9 +1,8 @@
-"""Load ``specs/gve/*.toml`` into the typed model, validating every row."""
+"""Load ``conform/families/gve/spec/tables/*.toml`` into the typed model, validating every row."""
 
 from __future__ import annotations
 
 import math
-import os
 import re
 import tomllib
 from functools import lru_cache
@@ -29,6 +28,7 @@ from conform.families.gve.spec.model import (
     StatusWord,
     Variant,
 )
+from conform.families import table_folder
 from conform.families.gve.spec.schema import Row, SpecError, each, key_line
 
 FILES = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
@@ -39,11 +39,8 @@ FAMILIES = (
 
 
 def default_root() -> Path:
-    """``$CONFORM_SPECS``, else the ``specs/gve/`` folder beside the package."""
-    env = os.environ.get("CONFORM_SPECS")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[4] / "specs" / "gve"
+    """``$CONFORM_SPECS/gve/`` when it exists, else the tables shipped in this package."""
+    return table_folder("gve", __package__)
 
 
 def load_spec(root: str | Path | None = None) -> Spec:

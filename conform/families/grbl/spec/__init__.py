@@ -1,0 +1,1 @@
+"""The tables of the grbl family, shipped as package data (``tables/*.toml``)."""
