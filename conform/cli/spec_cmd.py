@@ -148,7 +148,7 @@ def check_cmd(root: str | None) -> None:
 
     \b
     Example:
-      conform spec check --specs conform/families/gve/spec/tables
+      conform spec check --specs gve/spec/tables
     """
     from conform.families import DEFAULT_FAMILY, families, family
 

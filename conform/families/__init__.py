@@ -4,8 +4,8 @@ The engine (spec tooling, emulator adapter, conformance results and reports, cap
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
-one package, conform.families.gve and conform.families.grbl, with its tables in conform/families/gve/spec/tables/ and
-conform/families/grbl/spec/tables/. The engine reaches a family only through this registry
+one package, conform.families.gve and conform.families.grbl, with its tables in gve/spec/tables/ and
+grbl/spec/tables/. The engine reaches a family only through this registry
 (tests/test_family_boundary.py). See docs/architecture.md.
 
     family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
@@ -14,10 +14,11 @@ conform/families/grbl/spec/tables/. The engine reaches a family only through thi
 
 from __future__ import annotations
 
-import importlib
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -142,22 +143,45 @@ def table_folder(name: str, package: str) -> Path:
     return Path(str(files(package).joinpath("tables")))
 
 
-FAMILY_MODULES = {"gve": "conform.families.gve", "grbl": "conform.families.grbl"}
+ENTRY_POINT_GROUP = "conform.families"
+"""Families are found through this entry point group (``name = "package.module:FAMILY"``);
+the built-in ones are registered the same way as a third party's (pyproject.toml)."""
+
 DEFAULT_FAMILY = "gve"   # serves a variant nobody claims; its table comes first in `spec list`
 _loaded: dict[str, Family] = {}
 
 
+@functools.cache
+def _entry_points() -> dict[str, EntryPoint]:
+    found: dict[str, EntryPoint] = {}
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        found.setdefault(ep.name, ep)
+    # the default family first: its table leads `spec list` and it serves an unclaimed variant
+    return dict(sorted(found.items(), key=lambda kv: kv[0] != DEFAULT_FAMILY))
+
+
+def family_names() -> list[str]:
+    """The registered families: the default one first, then by name."""
+    return list(_entry_points())
+
+
 def family(name: str) -> Family:
     """The registered family called ``name``."""
-    if name not in FAMILY_MODULES:
-        raise UserError(f"unknown protocol family {name!r} (known: {', '.join(FAMILY_MODULES)})")
+    eps = _entry_points()
+    if name not in eps:
+        raise UserError(f"unknown protocol family {name!r} (known: {', '.join(eps) or 'none'})")
     if name not in _loaded:
-        _loaded[name] = importlib.import_module(FAMILY_MODULES[name]).FAMILY
+        try:
+            loaded = eps[name].load()
+        except Exception as exc:  # a broken plugin is named, not a traceback
+            raise UserError(f"protocol family {name!r} ({eps[name].value}) does not load: "
+                            f"{type(exc).__name__}: {exc}") from None
+        _loaded[name] = loaded
     return _loaded[name]
 
 
 def families() -> list[Family]:
-    return [family(n) for n in FAMILY_MODULES]
+    return [family(n) for n in family_names()]
 
 
 def family_for_variant(variant: str) -> Family:

@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from conform.families import FAMILY_MODULES, Detection, divert, family
+from conform.families import Detection, divert, family, family_names
 
 PEEK_BYTES = 65536
 
@@ -76,7 +76,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
         return False
     if d.family == "unknown":
         click.echo(f"{path}: protocol unknown ({d.why}); not analysed as traffic of "
-                   f"{' or '.join(FAMILY_MODULES)}")
+                   f"{' or '.join(family_names())}")
         return True
     fam = family(d.family)
     click.echo(f"{path}: protocol family {d.family} ({d.why})")

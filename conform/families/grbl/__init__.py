@@ -1,7 +1,7 @@
-"""grbl 1.1f as a protocol family: tables in conform/families/grbl/spec/tables/, a sans-I/O reference unit, the
+"""grbl 1.1f as a protocol family: tables in grbl/spec/tables/, a sans-I/O reference unit, the
 conformance checks generated from the tables, traffic detection and capture analysis.
 
-Modules: ``tables`` (load and validate conform/families/grbl/spec/tables), ``codec`` (split a byte stream into lines
+Modules: ``tables`` (load and validate grbl/spec/tables), ``codec`` (split a byte stream into lines
 and realtime bytes, classify what grbl sends), ``gcode`` (the parser and its modal state),
 ``planner`` (motion in virtual time), ``unit`` + ``system`` + ``report`` (the reference unit),
 ``serve`` (the emulator on a pty/TCP), ``checks`` (conformance), ``analysis`` (captures).

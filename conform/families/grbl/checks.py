@@ -1,11 +1,11 @@
-"""grbl conformance checks, generated from conform/families/grbl/spec/tables and graded per clause.
+"""grbl conformance checks, generated from grbl/spec/tables and graded per clause.
 
 The checks produce the engine's own result objects (:class:`CheckResult` in a
 :class:`TargetRun`), so ``conform run`` writes the same reports (results.json, index.html,
 summary.md, junit.xml) for grbl as for GVE. A check id reads
 ``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
 
-Groups: ``example`` (the documented exchanges, conform/families/grbl/spec/tables/examples.toml), ``error`` (every
+Groups: ``example`` (the documented exchanges, grbl/spec/tables/examples.toml), ``error`` (every
 code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x accepts its
 default and prints it back), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
 ``buffer`` (the line limit and the receive ring), ``state`` (check mode, unlock, sleep).

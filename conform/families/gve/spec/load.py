@@ -1,4 +1,4 @@
-"""Load ``conform/families/gve/spec/tables/*.toml`` into the typed model, validating every row."""
+"""Load ``gve/spec/tables/*.toml`` into the typed model, validating every row."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from types import MappingProxyType
 from typing import Any
 
 from conform.errors import UserError, read_user_text
+from conform.families import table_folder
 from conform.families.gve.spec.model import (
     ANSWER_RADIXES,
     PARAM_KINDS,
@@ -28,7 +29,6 @@ from conform.families.gve.spec.model import (
     StatusWord,
     Variant,
 )
-from conform.families import table_folder
 from conform.families.gve.spec.schema import Row, SpecError, each, key_line
 
 FILES = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
