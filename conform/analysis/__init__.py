@@ -11,12 +11,12 @@ from conform.analysis.report import findings_document, write_parquet, write_repo
 
 
 def analyze(path: Any, **options: Any) -> Any:
-    """A capture analysed by the default family (GVE), which judges every capture no other
-    family claims: ``conform analyze`` first hands other families' captures to them
+    """A capture analysed by the default family, which judges every capture no other family
+    claims: ``conform analyze`` first hands other families' captures to them
     (conform.families.capture_hook)."""
-    from conform.families import DEFAULT_FAMILY, family
+    from conform.families import default_family
 
-    return family(DEFAULT_FAMILY).analyze(path, **options)
+    return default_family().analyze(path, **options)
 
 
 __all__ = ["analyze", "findings_document", "write_parquet", "write_report"]

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families import DEFAULT_FAMILY, family
+from conform.families import default_family, family
 
 SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "duration_s", "exchanges",
                 "vectors_accepted", "exchanges_per_s", "vectors_per_s", "hazards",
@@ -69,7 +69,7 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
     other = _other_family(p, parquet_dir, options, row)
     if other is not None:
         return other
-    row["family"] = DEFAULT_FAMILY
+    row["family"] = default_family().name
     sink = None
     if parquet_dir:  # this capture's exchanges: one file of the fleet's dataset, as it streams
         from conform.analysis.tables import ParquetStream

@@ -17,12 +17,13 @@ from conform.cli.params import (
     OUTPUT_DIR,
     VARIANT,
     command_line,
+    default_variant_text,
     json_option,
 )
 
 
 @click.command(name="check-sender", context_settings={"ignore_unknown_options": True})
-@click.option("--variant", type=VARIANT, default=None, help="The unit to emulate (default gve64-v19).")
+@click.option("--variant", type=VARIANT, default=None, help=f"The unit to emulate (default {default_variant_text()}).")
 @click.option("--scenario", "scenarios", multiple=True, metavar="NAME",
               help="Run only these scenarios (repeatable; default: all). `--scenario list` "
                    "lists them.")
@@ -33,7 +34,8 @@ from conform.cli.params import (
               help="Seconds before a program still running is stopped and graded as hung "
                    "(default per scenario, 30).")
 @click.option("--job", "job_file", default=None, type=INPUT_FILE,
-              help="A job file (GVE: vectors; grbl: g-code) to use in every scenario instead "
+              help="A job file in the unit's own language (its family's job format) to use in every "
+                   "scenario instead "
                    "of the scenario's own.")
 @click.option("--seed", type=NON_NEGATIVE_INT, default=1, show_default=True, help="Seed of the faults.")
 @json_option("results.json's document")
@@ -51,7 +53,7 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     from conform.families import family_for_variant
 
     fam = family_for_variant(variant or "")
-    if fam.check_sender is None:  # a family that judges senders its own way (grbl)
+    if fam.check_sender is None:  # a family that judges senders its own way
         sys.exit(fam.check_sender_cli(
             list(command), variant or "", list(scenarios), report_dir, timeout, job_file,
             as_json, echo=click.echo, seed=seed,

@@ -9,10 +9,12 @@
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import click
 
-from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
+from conform.cli.family_options import family_options, split
+from conform.cli.params import BAUD, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
 from conform.errors import UserError
 
 
@@ -43,16 +45,13 @@ def cli() -> None:
     """
 
 
+@family_options("emulate serve")
 @cli.command("serve")
 @click.argument("variant", type=VARIANT)
 @click.option("--baud", type=BAUD, default=None,
               help="Pace both directions at this wire speed (10 bits per byte).")
 @click.option("--tcp", "tcp_port", type=PORT_NUMBER, default=None,
               help="Serve socket://127.0.0.1:PORT instead of a pty (0: any free port).")
-@click.option("--dialect", "dialect_pairs", multiple=True, metavar="A<n>=ALT",
-              help="Choose an open-question alternative (repeatable).")
-@click.option("--profile", type=INPUT_FILE, default=None,
-              help="A TOML file whose [dialect] table chooses alternatives.")
 @click.option("--faults", default=None, metavar="SPEC",
               help="Noise, drops, latency, garbled answers, disconnects "
                    "(e.g. corrupt=1e-3,drop=1e-4,latency=1-16,garble=0.01,disconnect=0.02).")
@@ -64,17 +63,11 @@ def cli() -> None:
               help="Also create a symlink PATH to the pty (stable across injected disconnects).")
 @click.option("--record", "record_path", default=None, metavar="FILE.mcap",
               help="Record the session as an MCAP capture.")
-@click.option("--switch", "switch_pairs", multiple=True, metavar="AXIS=PULSES",
-              help="Distance from a W's start to that axis's reference switch (default 3000).")
 @click.option("--answer-delay", type=NON_NEGATIVE, default=0.0, show_default=True,
               help="Processing time of the unit before each answer, seconds.")
-@click.option("--truth", "truth_path", default=None, metavar="FILE.json",
-              help="On exit, write what the unit accepted and executed (every vector, D/K/R/"
-                   "H/G/J, final position) as JSON: the ground truth beside a recording.")
-def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pairs: tuple[str, ...],
-              profile: str | None, faults: str | None, seed: int | None,
-              control_path: str | None, link_path: str | None, record_path: str | None,
-              switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None) -> None:
+def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str | None,
+              seed: int | None, control_path: str | None, link_path: str | None,
+              record_path: str | None, answer_delay: float, **family_values: Any) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
 
     \b
@@ -82,15 +75,12 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
       conform emulate serve gve64-v19 --baud 115200
       conform emulate serve gve64-v19 --faults "corrupt=1e-3,latency=1-16" --seed 1
     """
-    from conform.families import DEFAULT_FAMILY, family_for_variant
+    from conform.families import family_for_variant
 
     fam = family_for_variant(variant)
-    if fam.name != DEFAULT_FAMILY and (dialect_pairs or profile or switch_pairs or truth_path):
-        raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")
     fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
               link_path=link_path, record_path=record_path, answer_delay=answer_delay,
-              dialect_pairs=dialect_pairs, profile=profile, switch_pairs=switch_pairs,
-              control_path=control_path, truth_path=truth_path)
+              control_path=control_path, **split("emulate serve", fam.name, family_values))
 
 
 @cli.command("control", context_settings={"ignore_unknown_options": True})

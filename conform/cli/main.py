@@ -13,6 +13,7 @@ import sys
 import click
 
 from conform import __version__
+from conform.cli.family_options import add_family_commands
 from conform.errors import UserError
 
 # module name -> attribute; each module defines a click command/group named in the value
@@ -22,12 +23,10 @@ SUBCOMMANDS: tuple[str, ...] = (
     "run",
     "report",
     "characterize",
-    "profile",
     "proxy",
     "sniff",
     "capture",
     "analyze",
-    "send",
     "check-sender",
     "ports",
 )
@@ -36,7 +35,7 @@ SUBCOMMANDS: tuple[str, ...] = (
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="conform")
 def cli() -> None:
-    """Conformance, emulation, capture and analysis for Gravos GVE64/GVE124 interpolators.
+    """Conformance, emulation, capture and analysis for serial motion controllers.
 
     Exit status: 0 done, 1 something failed (a FAIL, a failed send, a damaged capture), 2 a
     usage or input mistake, a link that cannot be opened, or a run that stopped early; 130
@@ -60,6 +59,20 @@ def _register() -> None:
                 continue  # not built yet
             raise
         cli.add_command(module.cli, name=name)
+    add_family_commands(cli)
+    _name_the_families()
+
+
+def _name_the_families() -> None:
+    """The first line of ``conform --help`` names every registered family."""
+    from conform.families import families
+
+    try:
+        titles = [f.title or f.name for f in families()]
+    except UserError:
+        return
+    first, rest = (cli.help or "").split("\n", 1)
+    cli.help = f"{first.rstrip('.')}: {'; '.join(titles)}.\n{rest}"
 
 
 _register()

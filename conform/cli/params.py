@@ -21,6 +21,18 @@ def _variant_ids() -> list[str]:
     return ids
 
 
+def default_variant_text() -> str:
+    """The variant commands address when given none, for help texts (never an error here: a
+    bad ``$CONFORM_VARIANT`` is reported when a command runs)."""
+    from conform.errors import UserError
+    from conform.families import default_variant
+
+    try:
+        return default_variant()
+    except UserError:
+        return "the default family's first variant"
+
+
 class VariantType(click.ParamType):
     """A variant id of the tables (``gve64-v19``)."""
 

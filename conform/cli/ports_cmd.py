@@ -1,15 +1,12 @@
-"""``conform ports``: the serial ports of this machine, and which of them a GVE unit answers on."""
+"""``conform ports``: the serial ports of this machine, and which unit answers on which."""
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict, dataclass
-from typing import Any
 
 import click
 
 from conform.cli.params import BAUD, POSITIVE, echo_json, json_option
-from conform.errors import UserError
 
 
 @dataclass
@@ -30,51 +27,34 @@ def listed_ports() -> list[Port]:
             for p in sorted(list_ports.comports(), key=lambda p: p.device)]
 
 
-def probe(port: Port, spec: Any, baud: int, timeout: float) -> Port:
-    """Ask ``?`` (harmless: it only reads the firmware string, GVE64 §13.5.1), plain and, if
-    the unit wants them, with a checksum; map the firmware string to a variant."""
-    from conform.conformance.target import HarnessError
-    from conform.families.gve.conformance.safety import Guard
-    from conform.families.gve.conformance.target import open_target, variant_for_firmware
+def probe(port: Port, baud: int, timeout: float) -> Port:
+    """Ask the port each family's harmless question, in the families' probe order, until one
+    family's unit answers (conform.families: ``Family.probe``)."""
+    from conform.families import families
 
-    try:
-        target, _ = open_target(port.device, spec, baud=baud, guard=Guard(False, None, False))
-    except UserError as exc:
-        port.how = str(exc)
-        return port
-    try:
-        for checksum in (False, True):
-            try:
-                reply = target.exchange(target.frame("!0?", checksum=checksum), timeout=timeout)
-            except HarnessError as exc:
-                port.how = f"no answer to ? ({exc})"
-                continue
-            text = reply.lines[0].decode("latin-1").strip() if reply.lines else ""
-            if not text.startswith("0,"):
-                port.answer = text or None
-                port.how = f"answered {text!r}, not a firmware string" if text else "no answer"
-                continue
-            firmware = text.split(",", 1)[1]
-            if checksum:
-                firmware = re.sub(r",[0-9A-Fa-f]{2}$", "", firmware)
-            port.answer = text
-            port.variant, port.how = variant_for_firmware(spec, firmware)
-            break
-    finally:
-        target.close()
+    tried: list[str] = []
+    for fam in sorted(families(), key=lambda f: f.probe_rank):
+        got = fam.probe(port.device, baud=baud, timeout=timeout)
+        if got.variant:
+            port.answer, port.variant, port.how = got.answer, got.variant, got.how
+            return port
+        port.answer = port.answer or got.answer
+        tried.append(got.how)
+    port.how = "; ".join(tried) or "no family can probe"
     return port
 
 
 @click.command(name="ports")
 @click.argument("paths", nargs=-1, metavar="[PATH]...")
 @click.option("--probe", "do_probe", is_flag=True,
-              help="Ask each port '?' and say which unit answered (sends nothing that moves).")
+              help="Ask each port each family's harmless question and say which unit answered "
+                   "(sends nothing that moves or holds a unit).")
 @click.option("--baud", type=BAUD, default=115200, show_default=True, help="For --probe.")
 @click.option("--timeout", type=POSITIVE, default=1.0, show_default=True,
               help="Seconds to wait for each answer (--probe).")
 @json_option()
 def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_json: bool) -> None:
-    """List serial ports with description and hardware id; with --probe, which answer as a GVE.
+    """List serial ports with description and hardware id; with --probe, which unit answers.
 
     With PATHs (ports, ptys, pyserial URLs), only those: ptys are not in the system's listing.
 
@@ -89,14 +69,12 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
         else list(listed.values())
     if do_probe:
         from conform.cli.progress import progress
-        from conform.families.gve.spec import load_spec
 
-        spec = load_spec()
         with progress("conform ports", transient=True) as bar:
             task = bar.task("probing", len(ports))
             for p in ports:
                 task.update(step=p.device)
-                probe(p, spec, baud, timeout)
+                probe(p, baud, timeout)
                 task.update(advance=1)
     if as_json:
         echo_json({"ports": [asdict(p) for p in ports]})
@@ -109,5 +87,5 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
         line = f"{p.device:<{width}}  {p.description or '-'}  [{p.hwid or 'no hardware id'}]"
         if do_probe:
             line += f"\n{'':<{width}}  -> {p.variant}: {p.how}" if p.variant else \
-                f"\n{'':<{width}}  -> no GVE unit: {p.how}"
+                f"\n{'':<{width}}  -> no unit recognised: {p.how}"
         click.echo(line)

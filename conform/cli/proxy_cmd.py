@@ -23,7 +23,7 @@ from conform.errors import LinkError
 @click.option("--baud", default=115200, show_default=True, type=BAUD,
               help="Baud rate of the unit's port (also used for wire-time estimates).")
 @click.option("--variant", type=VARIANT, default=None,
-              help="Decode frames with this variant's tables (e.g. gve64-v19).")
+              help="Decode frames with this variant's tables (`conform spec list` names them).")
 @click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
 @click.option("--reconnect", is_flag=True,
               help="If the unit's port vanishes, wait for it to come back and go on.")

@@ -9,18 +9,20 @@ from typing import Any
 
 import click
 
+from conform.cli.family_options import family_options, split
 from conform.cli.params import (
     BAUD,
-    INPUT_FILE,
     NON_NEGATIVE_INT,
     OUTPUT_DIR,
     POSITIVE_INT,
     TARGET,
     VARIANT,
     command_line,
+    default_variant_text,
     echo_json,
     json_option,
 )
+from conform.conformance.plan import run_targets
 from conform.conformance.results import Grade
 from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
@@ -28,12 +30,13 @@ from conform.errors import UserError
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 
 
+@family_options("run")
 @click.command(name="run")
 @click.option("--target", "targets", multiple=True, metavar="T", type=TARGET,
               help="emu:VARIANT[:MUTANT], a device path, a pty or a pyserial URL "
-                   "(socket://, rfc2217://). Repeat for several. Default: emu:gve64-v19.")
+                   f"(socket://, rfc2217://). Repeat for several. Default: emu:{default_variant_text()}.")
 @click.option("--variant", type=VARIANT, default=None, help="The model expected (default: the emulator's, "
-              "else ask '?' and map the firmware string, else gve64-v19).")
+              f"else identify the unit, else {default_variant_text()}).")
 @click.option("--baud", type=BAUD, default=115200, show_default=True)
 @click.option("--profile", type=click.Choice(PROFILE_NAMES), default="quick", show_default=True)
 @click.option("--report", "report_dir", type=OUTPUT_DIR, default=None,
@@ -47,8 +50,6 @@ from conform.report.render import default_dir, link_latest, not_verified_lines, 
 @click.option("--replay", default=None, metavar="ID[@SEED]",
               help="Re-run one check (a state-machine check with the seed that found it).")
 @click.option("--seed", type=NON_NEGATIVE_INT, default=0, show_default=True, help="State-machine seed.")
-@click.option("--dialect", "dialect_file", type=INPUT_FILE, default=None,
-              help="Expect this characterised profile's dialect instead of the defaults.")
 @click.option("--allow-motion", is_flag=True, help="Real units: allow checks that move axes, "
               "switch outputs or start the spindle (needs --max-steps).")
 @click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
@@ -61,9 +62,9 @@ from conform.report.render import default_dir, link_latest, not_verified_lines, 
 @json_option("the results in results.json's format, plus the report folder")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
-        mutants: bool, replay: str | None, seed: int, dialect_file: str | None,
+        mutants: bool, replay: str | None, seed: int,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        inputs_control: str | None, quiet: bool, as_json: bool) -> None:
+        inputs_control: str | None, quiet: bool, as_json: bool, **family_values: Any) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
     usage or link error (or a run that stopped early).
 
@@ -74,19 +75,18 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
       conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
       xdg-open reports/latest/index.html            # the last run's report
     """
-    from conform.families import DEFAULT_FAMILY
-
     fam = _family_of(targets, variant)
-    if fam.name != DEFAULT_FAMILY and (mutants or matrix or replay or dialect_file):
-        raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
+    if mutants and not fam.mutants():
+        raise fam.lacks("mutants (--mutants)")
     command = command_line()
-    planned = fam.run_targets(
-        list(targets), variant, baud=baud, profile=profile, patterns=patterns,
+    planned = run_targets(
+        fam, list(targets), variant, baud=baud, profile=profile, patterns=patterns,
         list_only=list_only, matrix=matrix, mutants=mutants, replay=replay, seed=seed,
-        dialect_file=dialect_file, allow_motion=allow_motion, max_steps=max_steps,
+        allow_motion=allow_motion, max_steps=max_steps,
         allow_eeprom=allow_eeprom, no_machine=no_machine, inputs_control=inputs_control,
         quiet=quiet, as_json=as_json, echo=click.echo,
-        announce=None if quiet else (lambda text: click.echo(text, err=True)))
+        announce=None if quiet else (lambda text: click.echo(text, err=True)),
+        **split("run", fam.name, family_values))
     if planned is None:   # --list: the family printed the checks
         return
     runs, mutant_report = planned
@@ -108,14 +108,14 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
 
 def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
     """The family whose units this run addresses (conform.families); one per run."""
-    from conform.families import DEFAULT_FAMILY, family, family_for_variant
+    from conform.families import default_family, family, family_for_variant
 
     wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
     named = {family_for_variant(v).name for v in wanted if v}
     if len(named) > 1:
         raise UserError(f"this run names units of {' and '.join(sorted(named))}: run each "
                         "family's targets separately")
-    return family(named.pop() if named else DEFAULT_FAMILY)
+    return family(named.pop()) if named else default_family()
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001

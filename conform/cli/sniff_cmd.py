@@ -19,7 +19,7 @@ from conform.errors import LinkError
               help="The MCAP file to write (FILE.part until finished).")
 @click.option("--baud", default=115200, show_default=True, type=BAUD)
 @click.option("--variant", type=VARIANT, default=None,
-              help="Decode frames with this variant's tables (e.g. gve64-v19).")
+              help="Decode frames with this variant's tables (`conform spec list` names them).")
 @click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
 @click.option("--reconnect", is_flag=True,
               help="If an adapter vanishes, wait for it to come back and go on.")

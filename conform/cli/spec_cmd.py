@@ -48,38 +48,25 @@ def cli() -> None:
 @cli.command("list")
 @_JSON
 def list_cmd(as_json: bool) -> None:
-    """List the modelled variants.
+    """List the modelled variants of every family, one table per family.
 
     \b
     Example:
       conform spec list --json | jq -r '.variants[].variant'
     """
-    from conform.families import DEFAULT_FAMILY, families, family
+    from conform.families import families
 
-    title, columns, rows = family(DEFAULT_FAMILY).variant_table(pretty=not as_json)
-    others = {}
-    if as_json:
-        others = {f.name: [{"variant": v.id, "title": v.title, "firmware": v.firmware,
-                            "axes": v.axes, "buffers": v.buffer, "notes": v.notes}
-                           for v in f.variants()] for f in families() if f.name != DEFAULT_FAMILY}
-    _emit(title, columns, rows, as_json, "variants", other_families=others)
-    if not as_json:
-        _other_families()
-
-
-def _other_families() -> None:
-    """Variants of the other protocol families (conform.families), one table each."""
-    from conform.families import DEFAULT_FAMILY, families
-
+    doc: dict[str, Any] = {"variants": [], "families": {}}
     for fam in families():
-        if fam.name == DEFAULT_FAMILY:
+        title, columns, rows = fam.variant_table(pretty=not as_json)
+        if not as_json:
+            _emit(title, columns, rows, False, "variants")
             continue
-        table = Table(title=f"{fam.name} variants")
-        for col in ("variant", "title", "firmware", "axes", "buffers", "notes"):
-            table.add_column(col)
-        for v in fam.variants():
-            table.add_row(v.id, v.title, v.firmware, v.axes, v.buffer, v.notes)
-        _console().print(table)
+        records = [dict(zip(columns, row, strict=True)) for row in rows]
+        doc["families"][fam.name] = {"title": fam.title or fam.name, "variants": records}
+        doc["variants"] += [{"family": fam.name, **r} for r in records]
+    if as_json:
+        echo_json(doc)
 
 
 @cli.command("show")
@@ -87,7 +74,7 @@ def _other_families() -> None:
 @click.argument("command", required=False)
 @_JSON
 def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
-    """Show a variant's commands (or one command) with ranges and manual clauses.
+    """Show a variant's commands (or one command) with ranges and the clauses they cite.
 
     \b
     Examples:
@@ -104,56 +91,68 @@ def show_cmd(variant: str, command: str | None, as_json: bool) -> None:
 @click.argument("b", type=VARIANT)
 @_JSON
 def diff_cmd(a: str, b: str, as_json: bool) -> None:
-    """What differs from variant A to variant B.
+    """What differs from variant A to variant B (two variants of one family).
 
     \b
     Example:
       conform spec diff gve64-v19 gve124
     """
-    from conform.families.gve.spec import load_spec  # GVE-only: the variant diff of its tables
-    from conform.families.gve.spec.diff import diff_variants
+    from conform.errors import UserError
+    from conform.families import family_for_variant
 
-    spec = load_spec()
-    va, vb = spec.variant(a), spec.variant(b)
-    diffs = diff_variants(va, vb)
-    rows = [(d.kind, d.what, d.a, d.b, d.clause) for d in diffs]
-    _emit(f"{va.id} → {vb.id}: {len(diffs)} differences", ("kind", "what", a, b, "clause"),
-          rows if as_json else [(*r[:2], str(r[2]), str(r[3]), r[4]) for r in rows], as_json,
+    fam = family_for_variant(a)
+    other = family_for_variant(b)
+    if other is not fam:
+        raise UserError(f"{a} ({fam.name}) and {b} ({other.name}) are of different families: "
+                        "a diff compares two variants of one family's tables")
+    title, columns, rows = fam.diff_variants(a, b)
+    _emit(title, columns, rows if as_json else [tuple(str(x) for x in r) for r in rows], as_json,
           "differences", a=a, b=b)
 
 
 @cli.command("questions")
-def questions_cmd() -> None:
-    """The open questions the manuals leave, with the assumed default.
+@click.option("--family", "family_name", default=None, metavar="NAME",
+              help="Whose open questions (default: every family that has some).")
+@_JSON
+def questions_cmd(family_name: str | None, as_json: bool) -> None:
+    """The open questions each family's sources leave, with the default assumed here.
 
     \b
     Example:
       conform spec questions
     """
-    from conform.families.gve.spec import load_spec  # GVE-only: its A-register
+    from conform.families import families, family
 
-    spec = load_spec()
-    table = Table(title="Open questions (A-register)")
-    for col in ("id", "question", "default", "alternatives", "settled"):
-        table.add_column(col, overflow="fold")
-    for q in spec.questions.values():
-        table.add_row(q.id, q.question, q.default, ", ".join(q.alternatives), q.settled or "")
-    _console().print(table)
+    chosen = [family(family_name)] if family_name else families()
+    shown = 0
+    for fam in chosen:
+        table = fam.open_questions()
+        if table is None:
+            if family_name:
+                raise fam.lacks("open questions")
+            continue
+        title, columns, rows = table
+        _emit(title, columns, rows, as_json, "questions", family=fam.name)
+        shown += 1
+    if not shown and not as_json:
+        click.echo("no family has open questions")
 
 
 @cli.command("check")
-@click.option("--specs", "root", type=click.Path(), default=None, help="A spec folder to validate.")
+@click.option("--specs", "root", type=click.Path(), default=None,
+              help="A folder of one family's tables (a modified copy) to validate.")
 def check_cmd(root: str | None) -> None:
     """Load and validate the tables; one line per problem, non-zero exit.
 
     \b
-    Example:
-      conform spec check --specs gve/spec/tables
+    Examples:
+      conform spec check
+      conform spec check --specs my-tables/   # a modified copy of one family's tables
     """
-    from conform.families import DEFAULT_FAMILY, families, family
+    from conform.families import families, family_of_tables
 
-    click.echo(family(DEFAULT_FAMILY).tables_summary(root))
-    if root is None:   # a folder given is checked as the default family's tables
+    if root is None:
         for fam in families():
-            if fam.name != DEFAULT_FAMILY:
-                click.echo(fam.tables_summary())
+            click.echo(fam.tables_summary())
+        return
+    click.echo(family_of_tables(root).tables_summary(root))

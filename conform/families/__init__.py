@@ -4,12 +4,13 @@ The engine (spec tooling, emulator adapter, conformance results and reports, cap
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
-one package, conform.families.gve and conform.families.grbl, with its tables in gve/spec/tables/ and
-grbl/spec/tables/. The engine reaches a family only through this registry
-(tests/test_family_boundary.py). See docs/architecture.md.
+one package (``conform.families.<name>``, its tables in ``<name>/spec/tables/``) registered in
+the ``conform.families`` entry point group. The engine reaches a family only through this
+registry (tests/test_family_boundary.py). See docs/architecture.md and
+docs/writing-a-family.md.
 
-    family_for_variant("grbl-1.1f").make_unit("grbl-1.1f", t0=0.0)
-    detect_family(host_bytes, unit_bytes, metadata)   # -> ("grbl", "why") or ("unknown", ...)
+    family_for_variant(variant).make_unit(variant, t0=0.0)
+    detect_family(host_bytes, unit_bytes, metadata)   # -> Detection(name, score, why)
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 from conform.errors import UserError
 
@@ -48,84 +49,236 @@ class Detection:
     why: str
 
 
-@runtime_checkable
-class Family(Protocol):
-    """What a protocol family provides to the engine (docs/architecture.md).
+class Family:
+    """What a protocol family provides to the engine, with a default for every optional ability
+    (docs/architecture.md, docs/writing-a-family.md).
 
-    The default family (``DEFAULT_FAMILY``) also gives ``variant_table(pretty)``: its own
-    columns for the first table of ``conform spec list`` (title, columns, rows)."""
+    A family subclasses this, sets ``name`` and implements at least ``load_tables``,
+    ``variants``, ``make_unit``, ``detect`` and the abilities it has (a run, an emulator, an
+    analyser, check-sender); what it leaves at the default answers with a one-line
+    ``UserError`` naming the family and the missing ability, or with "nothing" where nothing is
+    a fine answer (no mutants, no live decoder, no extra options). The engine never branches
+    on a family's name: what differs between families is asked of them here.
+    """
 
-    name: str
+    name: str = ""
+    title: str = ""
+    """What the family covers, for the top-level help (``conform --help``)."""
 
-    def variants(self) -> Sequence[VariantInfo]:
-        """The variants this family serves."""
+    default_rank: int = 100
+    """The family with the lowest rank serves commands given no variant (its
+    ``default_variant``); ``$CONFORM_VARIANT`` overrides (see :func:`default_variant`)."""
 
-    def load_tables(self, root: str | None = None) -> Any:
-        """Its tables, validated (one-line ``UserError`` on a bad row)."""
-
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
-        """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
-        ``now``."""
-
-    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
-        """Run its checks on an open target; a ``conform.conformance.results.TargetRun``."""
-
-    def run_targets(self, targets: list[str], variant: str | None, **options: Any
-                    ) -> tuple[list[Any], list[dict[str, Any]]] | None:
-        """``conform run``: open each target (``emu:VARIANT`` or a port), run its checks in
-        the engine's runner; (TargetRuns, mutant report), or None after ``list_only`` printed
-        the checks. Options are the command's (``baud``, ``profile``, ``patterns``,
-        ``allow_motion``, ``echo``, ``announce``...); a family ignores those it has no use for.
-        The command writes the reports, the summary and the exit code."""
-
-    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
-        """Does this traffic look like this family's?"""
-
-    def analyze(self, path: str, **options: Any) -> Any:
-        """Analyse a capture of this family's traffic. A family other than the default one
-        returns a result with ``summary_lines()``, ``write_report(dir)``, ``write_tables(dir)``
-        and ``fleet_row()``: what ``conform analyze`` prints and writes, and its row in a fleet
-        summary (conform.families.capture_hook, conform.analysis.fleet)."""
-
-    def serve(self, variant: str, **options: Any) -> None:
-        """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
-
-    def runner(self, target: Any, variant: str, **options: Any) -> Any:
-        """A ``conform.conformance.runner.Runner`` for this family's checks on ``target``: the
-        engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for what is the
-        family's — grading a check, keeping the unit in a check's starting state, halting the
-        unit (retried until acknowledged) and estimating a check's duration."""
-
-    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
-        """A frame decoder for the capture recorder (``conform.capture.session.Decoder``) that
-        turns this family's traffic into frames while it is recorded, or None: the capture
-        then holds the raw bytes only (they are decoded when analysed)."""
-
-    pytest_plugin: str | None
+    pytest_plugin: str | None = None
     """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
     engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
 
-    check_sender: Any
-    """check-sender's scenarios, rules and hooks for this family
-    (``conform.sendercheck.family.Family``), or None when it judges senders its own way: then
-    ``check_sender_cli(command, variant, scenarios, report_dir, timeout, job_file, as_json,
-    echo=...)`` runs ``conform check-sender`` and returns the exit code."""
+    table_files: tuple[str, ...] = ()
+    """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
+    whose tables a folder holds."""
 
-    def characterize(self, target: str, output: str, variant: str | None, **options: Any
-                     ) -> None:
-        """``conform characterize``: probe what the unit does where the source leaves a choice
-        and write the profile (options: ``baud``, ``allow_motion``, ``max_steps``,
-        ``allow_eeprom``, ``echo``)."""
+    check_sender: Any = None
+    """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), or
+    None when it judges senders its own way (``check_sender_cli``)."""
+
+    # -- tables ---------------------------------------------------------------------------
+    def load_tables(self, root: str | None = None) -> Any:
+        """Its tables, validated (one-line ``UserError`` on a bad row)."""
+        raise self.lacks("tables")
+
+    def variants(self) -> Sequence[VariantInfo]:
+        """The variants this family serves."""
+        raise self.lacks("variants")
+
+    @property
+    def default_variant(self) -> str:
+        """The variant a command addresses when none is named: the first in the tables."""
+        return self.variants()[0].id
+
+    def variant_table(self, pretty: bool = False) -> tuple[str, list[str], list[list[Any]]]:
+        """``conform spec list``'s table of this family: (title, columns, rows)."""
+        return (f"{self.name} variants", ["variant", "title", "firmware", "axes", "buffers", "notes"],
+                [[v.id, v.title, v.firmware, v.axes, v.buffer, v.notes] for v in self.variants()])
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:
         """``conform spec show``: a variant's commands (or one) from its tables."""
+        raise self.lacks("`spec show`")
+
+    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+        """``conform spec diff A B``: (title, columns, rows) of what differs from A to B."""
+        raise self.lacks("`spec diff`")
+
+    def open_questions(self) -> tuple[str, list[str], list[tuple[Any, ...]]] | None:
+        """``conform spec questions``: (title, columns, rows) of the choices its sources leave
+        open and the default assumed, or None when it has none."""
+        return None
 
     def tables_summary(self, root: str | None = None) -> str:
         """``conform spec check``: the one ``ok: ...`` line of its validated tables."""
+        self.load_tables(root)
+        return f"ok: {self.name}: {len(self.variants())} variants"
+
+    # -- the reference unit ------------------------------------------------------------------
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+        """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
+        ``now``."""
+        raise self.lacks("a reference unit")
 
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
+        return ()
+
+    def serve(self, variant: str, **options: Any) -> None:
+        """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
+        raise self.lacks("an emulator")
+
+    # -- conformance: what ``conform run``'s loop (conform.conformance.plan) asks -------------
+    def open_target(self, text: str, *, baud: int, permissions: Any,
+                    inputs_control: str | None = None, **family_values: Any) -> tuple[Any, str | None]:
+        """Open ``emu:VARIANT[:MUTANT]`` or a port; (the target, the variant its name implies).
+        By default an emulator is this family's unit on the engine's virtual clock
+        (``make_unit(variant, mutant=NAME)`` for a mutant) and a port is a plain link."""
+        from conform.conformance.target import EmuTarget, open_link, parse_target
+
+        kind, what, mutant = parse_target(text)
+        if kind != "emu":
+            return open_link(text, baud=baud), None
+        vid = what or self.default_variant
+        if mutant is not None and mutant not in self.mutants():
+            known = ", ".join(self.mutants()) or "none"
+            raise UserError(f"target {text!r}: {self.name} has no mutant {mutant!r} (known: {known})")
+        options = {"mutant": mutant} if mutant else {}
+        return EmuTarget(lambda: self.make_unit(vid, **options), text if what else f"emu:{vid}",
+                         baud=baud), vid
+
+    def identify(self, target: Any) -> tuple[str, str]:
+        """Ask an open unit which variant it is; (variant, how it was decided)."""
+        return self.default_variant, f"assumed {self.default_variant} ({self.name} units are not asked)"
+
+    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **family_values: Any
+                    ) -> list[Any]:
+        """The checks of ``variant`` for a run (each with ``id``, ``level``, ``clause``,
+        ``title``), filtered by the globs ``patterns``; ``machine``: with the random
+        sequences, where the family has them."""
+        raise self.lacks("conformance checks")
+
+    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
+               **family_values: Any) -> Any:
+        """A ``conform.conformance.runner.Runner`` that grades this family's checks on
+        ``target``: the engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for
+        grading a check, keeping the unit in a check's starting state, halting the unit
+        (retried until acknowledged) and estimating a check's duration."""
+        raise self.lacks("conformance checks")
+
+    def permission_notes(self, permissions: Any) -> list[str]:
+        """What a run on a real unit leaves out for want of an opt-in (the report says it)."""
+        notes = []
+        if not permissions.allow_motion:
+            notes.append("motion-bearing checks SKIPPED (no --allow-motion)")
+        if not permissions.allow_eeprom:
+            notes.append("setting writes SKIPPED (no --allow-eeprom)")
+        return notes
+
+    def mutant_count(self, variants: Sequence[str]) -> int:
+        return len(variants) * len(self.mutants())
+
+    def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
+                    progress: Any = None) -> list[dict[str, Any]]:
+        """Run the checks against every deviant unit: which checks caught each (FAIL)."""
+        import time
+
+        from conform.conformance.plan import Permissions
+        from conform.conformance.results import Grade
+        from conform.conformance.runner import RunAborted, RunOptions
+
+        report = []
+        perms = Permissions.of(True, True, None, True)
+        for vid in variants:
+            for name in self.mutants():
+                t0 = time.perf_counter()
+                target, _ = self.open_target(f"emu:{vid}:{name}", baud=115200, permissions=perms)
+                checks = self.plan_checks(vid, permissions=perms, profile=profile, machine=False)
+                runner = self.runner(target, vid, options=RunOptions(profile=profile, seed=seed),
+                                     permissions=perms)
+                try:
+                    run = runner.run(checks)
+                except RunAborted as exc:
+                    run = exc.run
+                caught_by = [c.id for c in run.checks if c.grade is Grade.FAIL]
+                report.append({"name": name, "variant": vid, "fault": self.mutant_fault(name),
+                               "catches": [], "caught_by": caught_by, "expected_hit": [],
+                               "killed": bool(caught_by),
+                               "seconds": round(time.perf_counter() - t0, 3)})
+                if progress is not None:
+                    progress(f"mutant {name} on {vid}: "
+                             f"{f'killed by {len(caught_by)} checks' if caught_by else 'SURVIVED'}")
+        return report
+
+    def mutant_fault(self, name: str) -> str:
+        """What the deviant unit ``name`` does wrong, in a few words."""
+        return name
+
+    def characterize(self, target: str, output: str, variant: str | None, **options: Any
+                     ) -> None:
+        """``conform characterize``: probe what the unit does where the source leaves a choice
+        and write the profile."""
+        raise self.lacks("`characterize`")
+
+    probe_rank: int = 100
+    """``ports --probe`` asks the families in this order: a family whose question could
+    disturb another family's unit (a byte another protocol acts on at once) asks late."""
+
+    def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
+        """``conform ports --probe``: ask the port something harmless to every family's units
+        (nothing that moves, holds or changes a setting) and say whether this family's unit
+        answered. The default: this family has no probe."""
+        return ProbeAnswer(None, None, f"{self.name}: no probe")
+
+    # -- capture and analysis ------------------------------------------------------------------
+    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+        """Does this traffic look like this family's?"""
+        return Detection(self.name, 0.0, f"{self.name} does not detect traffic")
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        """A frame decoder for the capture recorder (``conform.capture.session.Decoder``), or
+        None: the capture then holds the raw bytes only (decoded when analysed)."""
+        return None
+
+    def analyze(self, path: str, **options: Any) -> Any:
+        """Analyse a capture of this family's traffic: a result with ``summary_lines()``,
+        ``write_report(dir)``, ``write_tables(dir)`` and ``fleet_row()``."""
+        raise self.lacks("capture analysis")
+
+    # -- the command line ------------------------------------------------------------------------
+    def commands(self) -> Sequence[Any]:
+        """Click commands this family adds to ``conform`` (e.g. its reference sender)."""
+        return ()
+
+    def command_options(self, command: str) -> Sequence[Any]:
+        """Click options this family adds to the engine's ``command`` (``run``, ``emulate
+        serve``, ...); their values reach this family's hook for that command and are refused
+        when the command addresses another family's unit."""
+        return ()
+
+    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
+        """``conform check-sender`` for a family with no ``check_sender`` shapes."""
+        raise self.lacks("check-sender")
+
+    # -- helpers ------------------------------------------------------------------------------
+    def lacks(self, what: str) -> UserError:
+        """The one-line error for an ability this family does not have."""
+        return UserError(f"the {self.name} family has no {what}")
+
+
+@dataclass(frozen=True)
+class ProbeAnswer:
+    """What ``ports --probe`` learnt from one port for one family."""
+
+    variant: str | None   # the unit's variant when this family's unit answered
+    answer: str | None    # what it answered, as text
+    how: str              # how the variant was decided, or why not
 
 
 SPECS_ENV = "CONFORM_SPECS"
@@ -147,7 +300,9 @@ ENTRY_POINT_GROUP = "conform.families"
 """Families are found through this entry point group (``name = "package.module:FAMILY"``);
 the built-in ones are registered the same way as a third party's (pyproject.toml)."""
 
-DEFAULT_FAMILY = "gve"   # serves a variant nobody claims; its table comes first in `spec list`
+VARIANT_ENV = "CONFORM_VARIANT"
+"""A variant named here is what commands address when given none (else the default family's)."""
+
 _loaded: dict[str, Family] = {}
 
 
@@ -156,13 +311,12 @@ def _entry_points() -> dict[str, EntryPoint]:
     found: dict[str, EntryPoint] = {}
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
         found.setdefault(ep.name, ep)
-    # the default family first: its table leads `spec list` and it serves an unclaimed variant
-    return dict(sorted(found.items(), key=lambda kv: kv[0] != DEFAULT_FAMILY))
+    return found
 
 
 def family_names() -> list[str]:
-    """The registered families: the default one first, then by name."""
-    return list(_entry_points())
+    """The registered families: by rank (the default one first), then by name."""
+    return [f.name for f in families()]
 
 
 def family(name: str) -> Family:
@@ -181,16 +335,44 @@ def family(name: str) -> Family:
 
 
 def families() -> list[Family]:
-    return [family(n) for n in family_names()]
+    """Every registered family, the default one (lowest ``default_rank``) first."""
+    return sorted((family(n) for n in _entry_points()), key=lambda f: (f.default_rank, f.name))
+
+
+def default_family() -> Family:
+    """The family that serves commands given no variant (``$CONFORM_VARIANT``'s, else the
+    lowest ``default_rank``)."""
+    named = os.environ.get(VARIANT_ENV)
+    if named:
+        owner = _owner(named)
+        if owner is None:
+            raise UserError(f"${VARIANT_ENV}: {unknown_variant(named, '')}")
+        return owner
+    return families()[0]
+
+
+def default_variant() -> str:
+    """The variant commands address when given none."""
+    return os.environ.get(VARIANT_ENV) or default_family().default_variant
+
+
+def _owner(variant: str) -> Family | None:
+    return next((f for f in families() if any(v.id == variant for v in f.variants())), None)
+
+
+def family_of_tables(root: str | Path) -> Family:
+    """Whose tables the folder ``root`` holds: the family most of whose table files are there
+    (the default family when none is)."""
+    present = {p.stem for p in Path(root).glob("*.toml")} if Path(root).is_dir() else set()
+    ranked = sorted(families(), key=lambda f: -len(present & set(f.table_files)))
+    best = ranked[0]
+    return best if present & set(best.table_files) else default_family()
 
 
 def family_for_variant(variant: str) -> Family:
-    """The family serving ``variant`` (GVE when nobody claims it, so GVE errors stay as they
-    were)."""
-    for f in families():
-        if f.name != DEFAULT_FAMILY and any(v.id == variant for v in f.variants()):
-            return f
-    return family(DEFAULT_FAMILY)
+    """The family serving ``variant``; the default family when nobody claims it (its tables
+    then say what is wrong with the name)."""
+    return _owner(variant) or default_family()
 
 
 def unknown_variant(variant_id: str, family_name: str) -> str:
@@ -216,9 +398,9 @@ def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = No
     meta = metadata or {}
     declared = str(meta.get("variant", "") or "")
     if declared:
-        f = family_for_variant(declared)
-        if f.name != "gve" or any(v.id == declared for v in f.variants()):
-            return Detection(f.name, 1.0, f"the capture names variant {declared}")
+        owner = _owner(declared)
+        if owner is not None:
+            return Detection(owner.name, 1.0, f"the capture names variant {declared}")
     best = Detection("unknown", 0.0, "no family recognises the traffic")
     for f in families():
         d = f.detect(host, unit, meta)
@@ -230,27 +412,29 @@ def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = No
     return best
 
 
-UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the GVE analyser, as before
+UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the default family's analyser
 
 
 def divert(host: bytes, unit: bytes, metadata: dict[str, Any], variant: str | None
            ) -> Detection | None:
-    """Which non-GVE family should analyse this traffic (None: the GVE analyser, as always).
+    """Which family other than the default one should analyse this traffic (None: the default
+    family's analyser, which also reads damaged or unrecognised captures).
 
     An explicit ``--variant`` or the capture's own variant decides; otherwise the bytes do.
     Traffic no family recognises is diverted as ``unknown`` only when there is enough of it
-    and it holds no GVE command line at all, so damaged or tiny GVE captures keep their
-    GVE findings.
+    and the default family sees none of its own lines in it, so damaged or tiny captures of
+    the default family keep their findings.
     """
+    home = default_family()
     named = variant or str(metadata.get("variant", "") or "")
     if named:
         fam = family_for_variant(named)
-        return None if fam.name == "gve" else Detection(fam.name, 1.0, f"variant {named}")
+        return None if fam is home else Detection(fam.name, 1.0, f"variant {named}")
     d = detect_family(host, unit, metadata)
-    if d.family == "gve":
+    if d.family == home.name:
         return None
     if d.family != "unknown":
         return d
-    if len(host) + len(unit) >= UNKNOWN_MIN_BYTES and family("gve").detect(host, unit, metadata).score == 0:
+    if len(host) + len(unit) >= UNKNOWN_MIN_BYTES and home.detect(host, unit, metadata).score == 0:
         return d
     return None

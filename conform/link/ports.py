@@ -18,8 +18,6 @@ import serial
 from conform.errors import LinkError
 from conform.link.endpoint import PortGone, WriteTimeout
 
-GVE_BAUDS = (19200, 38400, 57600, 115200, 230400, 460800, 921600)
-
 
 class SerialEndpoint:
     """A pyserial port with ``read(max, timeout)`` that returns as soon as bytes arrive."""

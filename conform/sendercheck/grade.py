@@ -15,16 +15,16 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families import DEFAULT_FAMILY, family_for_variant
-from conform.families import family as registered_family
+from conform.families import default_family as registered_default
+from conform.families import family_for_variant
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
 from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
 
 
 def default_family() -> Family:
-    """check-sender's family when no variant is given: the default family's (GVE)."""
-    return registered_family(DEFAULT_FAMILY).check_sender  # type: ignore[attr-defined]
+    """check-sender's shapes when no variant is given: the default family's."""
+    return registered_default().check_sender
 
 
 def family_for(variant_id: str) -> Family:

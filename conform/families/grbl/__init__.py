@@ -12,11 +12,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from conform.families import Detection, VariantInfo
+from conform.families import Detection, Family, VariantInfo
 
 
-class GrblFamily:
+class GrblFamily(Family):
     name = "grbl"
+    title = "grbl 1.1f"
+    table_files = ("variants", "codes", "settings", "protocol", "status", "examples")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.grbl.tables import load_grbl
@@ -35,29 +37,23 @@ class GrblFamily:
         spec = self.load_tables()
         return GrblUnit(spec.variant(variant), spec, t0=t0, **options)
 
-    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
-        from conform.families.grbl.checks import run_checks
-
-        return run_checks(target, variant, **options)
-
-    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
+               allow_motion: bool = False, allow_eeprom: bool = False, **_: Any) -> Any:
         """grbl's checks in the engine's runner (checks.GrblRunner): fresh unit by soft reset,
         halt by feed hold then soft reset."""
         from conform.families.grbl.checks import GrblRunner
 
-        return GrblRunner(target, variant, **options)
+        if permissions is not None:
+            allow_motion, allow_eeprom = permissions.allow_motion, permissions.allow_eeprom
+        return GrblRunner(target, variant, allow_motion=allow_motion, allow_eeprom=allow_eeprom,
+                          options=options)
 
-    def run_targets(self, targets: list[str], variant: str | None, *, baud: int = 115200,
-                    patterns: Any = (), profile: str = "quick", allow_motion: bool = False,
-                    allow_eeprom: bool = False, list_only: bool = False, echo: Any = print,
-                    announce: Any = None, **_options: Any) -> Any:
-        from conform.families.grbl.checks import run_targets
+    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
+        from conform.families.grbl.checks import generate, select
 
-        runs = run_targets(targets or [f"emu:{variant}"], variant, baud=baud,
-                           patterns=patterns, profile=profile, allow_motion=allow_motion,
-                           allow_eeprom=allow_eeprom, list_only=list_only, echo=echo,
-                           announce=announce)
-        return None if list_only else (runs, [])
+        spec = self.load_tables()
+        return select(generate(spec, variant), patterns)
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
@@ -89,8 +85,10 @@ class GrblFamily:
                 f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
                 f"{len(g.commands)} $ commands, {len(g.examples)} examples")
 
-    def mutants(self) -> Sequence[str]:
-        return ()
+    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+        from conform.families.grbl.probe import probe
+
+        return probe(device, baud=baud, timeout=timeout)
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.codec import detect

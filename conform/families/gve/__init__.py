@@ -11,7 +11,7 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
-from conform.families import Detection, VariantInfo
+from conform.families import Detection, Family, VariantInfo
 
 # a GVE command line: '!', an address digit, a mnemonic (GVE64 §13.5); answers: a hex status
 # code, maybe with comma-separated fields, ended by CR (GVE64 §13.7)
@@ -19,8 +19,11 @@ _HOST_LINE = re.compile(rb"![0-7][A-Z?$@>%*]")
 _ANSWER = re.compile(rb"(?:^|\r)[0-9A-F](?:,[^\r]*)?\r")
 
 
-class GveFamily:
+class GveFamily(Family):
     name = "gve"
+    title = "Gravos GVE64/GVE124 interpolators"
+    default_rank = 0   # the units conform was first written for: commands without a variant
+    table_files = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.gve.spec import load_spec
@@ -39,27 +42,65 @@ class GveFamily:
         dialect = options.pop("dialect", None) or spec.dialect()
         return Unit(spec.variant(variant), dialect, t0=t0, **options)
 
-    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
-        from conform.conformance.runner import RunOptions
-        from conform.families.gve.conformance.suite import run_one, suite
-
-        spec = self.load_tables()
-        checks = suite(spec, variant, patterns=options.get("patterns", ()),
-                       profile=options.get("profile", "quick"))
-        return run_one(spec, target, variant, checks,
-                       options=RunOptions(profile=options.get("profile", "quick")))
-
-    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
+               dialect_file: str | None = None, **kw: Any) -> Any:
         """Grading against the reference unit, the state keeper, H, D, O0,FF
-        (conformance/runner.py); options: ``options`` (RunOptions), ``dialect``, ``unit_cls``."""
+        (conformance/runner.py); ``dialect_file``: a characterised profile's dialect expected
+        instead of the defaults; ``dialect``, ``unit_cls`` as the Runner takes them."""
         from conform.families.gve.conformance.runner import Runner
 
-        return Runner(self.load_tables(), target, variant, **options)
+        if dialect_file:
+            kw["dialect"] = self._dialect(dialect_file)
+        return Runner(self.load_tables(), target, variant, options=options, **kw)
 
-    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
-        from conform.families.gve.conformance.run import run_targets
+    def _dialect(self, dialect_file: str | None) -> Any:
+        from conform.families.gve.conformance.profile import load_profile_dialect
 
-        return run_targets(targets, variant, **options)
+        return load_profile_dialect(self.load_tables(), dialect_file) if dialect_file else None
+
+    def open_target(self, text: str, *, baud: int, permissions: Any,
+                    inputs_control: str | None = None, dialect_file: str | None = None,
+                    **_: Any) -> Any:
+        from conform.families.gve.conformance.safety import Guard
+        from conform.families.gve.conformance.target import open_target
+
+        guard = Guard(permissions.allow_motion, permissions.max_steps, permissions.allow_eeprom)
+        target, implied = open_target(text, self.load_tables(), baud=baud, guard=guard,
+                                      dialect=self._dialect(dialect_file))
+        if inputs_control and not target.emulated:
+            target.inputs = inputs_control  # type: ignore[attr-defined]
+        return target, implied
+
+    def identify(self, target: Any) -> tuple[str, str]:
+        from conform.families.gve.conformance.target import identify
+
+        return identify(target, self.load_tables())
+
+    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
+        from conform.families.gve.conformance.safety import Guard
+        from conform.families.gve.conformance.suite import suite
+
+        guard = Guard(permissions.allow_motion, permissions.max_steps, permissions.allow_eeprom)
+        return suite(self.load_tables(), variant, patterns=patterns, guard=guard,
+                     machine=machine, profile=profile)
+
+    def permission_notes(self, permissions: Any) -> list[str]:
+        # EEPROM checks say their own reason when SKIPPED (conformance/safety.py)
+        return [] if permissions.allow_motion else ["motion-bearing checks SKIPPED (no --allow-motion)"]
+
+    def mutant_count(self, variants: Sequence[str]) -> int:
+        from conform.families.gve.conformance.mutants import mutant_targets
+
+        return len(list(mutant_targets(variants)))
+
+    def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
+                    progress: Any = None) -> list[dict[str, Any]]:
+        from conform.families.gve.conformance.suite import run_mutants
+
+        report, _ = run_mutants(self.load_tables(), variants, profile=profile, seed=seed,
+                                progress=progress)
+        return report
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         from conform.families.gve.decode import make_decoder
@@ -80,15 +121,46 @@ class GveFamily:
 
         show_spec(variant, command, console=console, as_json=as_json)
 
+    @property
+    def default_variant(self) -> str:
+        return "gve64-v19"
+
     def variant_table(self, pretty: bool = False) -> Any:
         from conform.families.gve.cli import variant_table
 
         return variant_table(pretty)
 
+    def diff_variants(self, a: str, b: str) -> Any:
+        from conform.families.gve.cli import diff_table
+
+        return diff_table(a, b)
+
+    def open_questions(self) -> Any:
+        from conform.families.gve.cli import questions_table
+
+        return questions_table()
+
     def tables_summary(self, root: str | None = None) -> str:
         from conform.families.gve.cli import tables_summary
 
         return tables_summary(root)
+
+    def commands(self) -> Sequence[Any]:
+        from conform.families.gve.commands import commands
+
+        return commands()
+
+    def command_options(self, command: str) -> Sequence[Any]:
+        from conform.families.gve.commands import command_options
+
+        return command_options(command)
+
+    probe_rank = 200   # '!' opens every GVE line; other protocols may act on it at once
+
+    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+        from conform.families.gve.conformance.portprobe import probe
+
+        return probe(device, baud=baud, timeout=timeout)
 
     def mutants(self) -> Sequence[str]:
         from conform.families.gve.conformance.mutants import MUTANTS

@@ -146,6 +146,25 @@ def tables_summary(root: str | None = None) -> str:
     """``conform spec check``'s line: the tables loaded and validated."""
     spec = load_spec(root)
     n = sum(len(v.commands) for v in spec.variants.values())
-    return (f"ok: {len(spec.commands)} commands, {len(spec.variants)} variants "
+    return (f"ok: gve: {len(spec.commands)} commands, {len(spec.variants)} variants "
             f"({n} variant commands), {len(spec.questions)} open questions, "
             f"{len(spec.examples)} examples")
+
+
+def diff_table(a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+    """``conform spec diff``: what differs from variant ``a`` to ``b`` in the GVE tables."""
+    from conform.families.gve.spec.diff import diff_variants
+
+    spec = load_spec()
+    va, vb = spec.variant(a), spec.variant(b)
+    diffs = diff_variants(va, vb)
+    return (f"{va.id} → {vb.id}: {len(diffs)} differences", ["kind", "what", a, b, "clause"],
+            [(d.kind, d.what, d.a, d.b, d.clause) for d in diffs])
+
+
+def questions_table() -> tuple[str, list[str], list[tuple[Any, ...]]]:
+    """``conform spec questions``: the A-register, each question with its default."""
+    spec = load_spec()
+    return ("Open questions (A-register)", ["id", "question", "default", "alternatives", "settled"],
+            [(q.id, q.question, q.default, ", ".join(q.alternatives), q.settled or "")
+             for q in spec.questions.values()])
