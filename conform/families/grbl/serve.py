@@ -34,10 +34,10 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           control_path: str | None = None, **_ignored: Any) -> None:
     from conform.emulator.launch import announce, check_pacing, control_server, open_endpoint, report, run_until_signal
     from conform.emulator.serve import Emulator
-    from conform.families.grbl.control import GrblControl
-    from conform.families.grbl.faults import GrblFaults
-    from conform.families.grbl.tables import load_grbl
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.spec.load import load_grbl
+    from conform.families.grbl.unit.control import GrblControl
+    from conform.families.grbl.unit.faults import GrblFaults
+    from conform.families.grbl.unit.model import GrblUnit
     from conform.link.faults import FaultConfig
 
     spec = load_grbl()
@@ -53,7 +53,7 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
     if record_path:
         from conform.capture import Recorder
 
-        try:  # "line_baud", not "baud": see sendersession.run_sender
+        try:  # "line_baud", not "baud": see sendercheck.session.run_sender
             recorder = Recorder(record_path, {
                 "capture_method": "emulator", "variant": v.id, "family": "grbl",
                 "line_baud": baud or "", "unit_port": endpoint.name, "dialect": "",
