@@ -21,10 +21,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from conform.families.grbl.analysis import analyze_streams  # noqa: E402
-from conform.families.grbl.streaming import stream  # noqa: E402
-from conform.families.grbl.tables import load_grbl  # noqa: E402
-from conform.families.grbl.unit import GrblUnit  # noqa: E402
+from conform.families.grbl.analysis.analyze import analyze_streams  # noqa: E402
+from conform.families.grbl.analysis.streaming import stream  # noqa: E402
+from conform.families.grbl.spec.load import load_grbl  # noqa: E402
+from conform.families.grbl.unit.model import GrblUnit  # noqa: E402
 
 REALTIME_TARGET = 20.0      # virtual seconds per CPU second
 ANALYSIS_TARGET = 100_000   # lines per CPU second

@@ -84,9 +84,9 @@ def test_a_fleet_holds_grbl_and_unknown_captures_too(tmp_path):
     session overflowing the receive buffer is a grbl row with its hazard and line latency,
     its tables a dataset of their own; bytes of no known protocol are an error row."""
     from conform.capture import Recorder
-    from conform.families.grbl.streaming import stream
-    from conform.families.grbl.tables import load_grbl
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.analysis.streaming import stream
+    from conform.families.grbl.spec.load import load_grbl
+    from conform.families.grbl.unit.model import GrblUnit
 
     spec = load_grbl()
     unit = GrblUnit(spec.variant("grbl-1.1f"), spec)

@@ -11,8 +11,8 @@ from conform.conformance.results import Grade
 from conform.conformance.runner import RunAborted, Runner, RunOptions
 from conform.conformance.target import EmuTarget, open_link
 from conform.families import family
-from conform.families.grbl.checks import generate, select
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.conformance.checks import generate, select
+from conform.families.grbl.spec.load import load_grbl
 
 G = load_grbl()
 VID = "grbl-1.1f"

@@ -47,10 +47,10 @@ def test_the_engine_imports_families_only_through_the_registry():
 
 def test_the_check_sees_lazy_and_from_imports(tmp_path):
     probe = tmp_path / "probe.py"
-    probe.write_text("def f():\n    from conform.families.grbl.checks import run_checks\n"
+    probe.write_text("def f():\n    from conform.families.grbl.conformance.checks import run_checks\n"
                      "import conform.families.gve.spec\nfrom conform.families import gve\n"
                      "from conform.families import family_for_variant\n")
-    assert _family_imports(probe) == {"conform.families.grbl.checks", "conform.families.gve.spec",
+    assert _family_imports(probe) == {"conform.families.grbl.conformance.checks", "conform.families.gve.spec",
                                       "conform.families.gve"}
 
 

@@ -9,10 +9,10 @@ import sys
 import pytest
 
 from conform.capture import Recorder
-from conform.families.grbl.analysis import analyze_streams
-from conform.families.grbl.streaming import stream
-from conform.families.grbl.tables import load_grbl
-from conform.families.grbl.unit import GrblUnit
+from conform.families.grbl.analysis.analyze import analyze_streams
+from conform.families.grbl.analysis.streaming import stream
+from conform.families.grbl.spec.load import load_grbl
+from conform.families.grbl.unit.model import GrblUnit
 
 G = load_grbl()
 V = G.variant("grbl-1.1f")
@@ -125,7 +125,7 @@ def test_analyze_detects_grbl_from_the_traffic(tmp_path):
 
 
 def test_html_report_of_a_clean_session_and_of_no_traffic(tmp_path):
-    from conform.families.grbl.analysis import write_report
+    from conform.families.grbl.analysis.analyze import write_report
 
     _u, _traffic, a = run("counting", poll=0.2)
     html = write_report(a, str(tmp_path / "clean"))["html"].read_text()
@@ -158,7 +158,7 @@ def test_gve_capture_stays_with_the_gve_analyser(tmp_path):
 def test_the_two_host_splitters_agree():
     import random
 
-    from conform.families.grbl.codec import HostLine, HostSplitter, split_host
+    from conform.families.grbl.protocol.codec import HostLine, HostSplitter, split_host
 
     rng = random.Random(1)
     for _ in range(300):

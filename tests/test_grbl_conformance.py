@@ -10,9 +10,9 @@ import sys
 
 from conform.conformance.results import Grade
 from conform.conformance.target import EmuTarget
-from conform.families.grbl.checks import generate, run_checks
-from conform.families.grbl.tables import load_grbl
-from conform.families.grbl.unit import GrblUnit
+from conform.families.grbl.conformance.checks import generate, run_checks
+from conform.families.grbl.spec.load import load_grbl
+from conform.families.grbl.unit.model import GrblUnit
 
 G = load_grbl()
 V = G.variant("grbl-1.1f")
@@ -73,11 +73,11 @@ def test_conform_run_on_the_emulator_writes_reports(tmp_path):
         f"grbl-1.1f/error_codes/error/{n}" for n in (2, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29)]
     bad = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
                           "emu:grbl-1.1f:nonsense"], capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "no deviant units" in bad.stderr
+    assert bad.returncode == 2 and "has no mutant 'nonsense'" in bad.stderr
 
 
 def test_characterize_reads_what_the_build_does(tmp_path):
-    from conform.families.grbl.characterize import characterize, write_profile
+    from conform.families.grbl.conformance.characterize import characterize, write_profile
 
     obs = {o.name: o for o in characterize(EmuTarget(lambda: BigRing(), "emu:deviant"), V.id)}
     assert obs["rx_buffer"].observed == 256 and not obs["rx_buffer"].same
@@ -95,7 +95,7 @@ def test_characterize_reads_what_the_build_does(tmp_path):
 
 
 def test_the_stop_is_confirmed_by_the_banner():
-    from conform.families.grbl.checks import _stop
+    from conform.families.grbl.conformance.checks import _stop
 
     target = EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f")
     target.send(b"G1X-20F300\n")

@@ -13,7 +13,7 @@ import time
 import serial
 
 from conform.emulator.control import send_control
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.spec.load import load_grbl
 from tests.test_grbl_emulator import read_lines, start, stop
 
 V = load_grbl().variant("grbl-1.1f")
@@ -156,9 +156,9 @@ def test_control_cli_reports_errors(tmp_path):
 def test_control_requests_never_raise():
     """Whatever a control client sends is answered with ok or error, never an exception (the
     emulator thread runs these)."""
-    from conform.families.grbl.control import GrblControl
-    from conform.families.grbl.faults import GrblFaults
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.unit.control import GrblControl
+    from conform.families.grbl.unit.faults import GrblFaults
+    from conform.families.grbl.unit.model import GrblUnit
 
     unit = GrblUnit(V)
     control = GrblControl(GrblFaults())

@@ -12,7 +12,7 @@ import time
 import pytest
 import serial
 
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.spec.load import load_grbl
 
 G = load_grbl()
 V = G.variant("grbl-1.1f")

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from conform.conformance.results import Grade
-from conform.families.grbl.sendercheck import SCENARIOS, default_job, run_scenarios
+from conform.families.grbl.sendercheck.scenarios import SCENARIOS, default_job, run_scenarios
 
 SENDER = Path(__file__).resolve().parent / "senders" / "grbl_counting.py"
 
@@ -123,9 +123,9 @@ def test_usage_errors_are_one_line(tmp_path, args, capsys):
     (["G1X-1F100"], "error", "FAIL"),
 ])
 def test_job_in_order_rule(sent, scenario, grade):
-    from conform.families.grbl.analysis import Exchange, GrblAnalysis
-    from conform.families.grbl.senderrules import in_order
-    from conform.families.grbl.sendersession import SenderRun
+    from conform.families.grbl.analysis.analyze import Exchange, GrblAnalysis
+    from conform.families.grbl.sendercheck.rules import in_order
+    from conform.families.grbl.sendercheck.session import SenderRun
 
     a = GrblAnalysis("", "grbl", "grbl-1.1f", "",
                      [Exchange(i, t, len(t) + 1, 0.0) for i, t in enumerate(sent)], [], {})
@@ -134,7 +134,7 @@ def test_job_in_order_rule(sent, scenario, grade):
 
 
 def test_truth_counts_lines_run_twice_and_lines_never_run():
-    from conform.families.grbl.senderrules import compare
+    from conform.families.grbl.sendercheck.rules import compare
 
     job = ["G90", "G1 X-1 F100 ; cut", "G0X0"]
     t = compare(job, [["G90", 0], ["G1X-1F100", 0], ["G1X-1F100", 0], ["G0X0", 20]])

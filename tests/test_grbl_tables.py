@@ -9,7 +9,7 @@ import pytest
 
 from conform.errors import UserError
 from conform.families import detect_family, family, family_for_variant
-from conform.families.grbl.tables import load_grbl, spec_dir
+from conform.families.grbl.spec.load import load_grbl, spec_dir
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +130,7 @@ def test_an_unknown_or_other_family_variant_names_every_family(tmp_path):
     import sys
 
     from conform.errors import UserError
-    from conform.families.grbl.tables import load_grbl
+    from conform.families.grbl.spec.load import load_grbl
     from conform.families.gve.spec import load_spec
 
     with pytest.raises(UserError) as exc:

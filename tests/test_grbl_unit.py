@@ -7,8 +7,8 @@ import random
 
 import pytest
 
-from conform.families.grbl.tables import load_grbl
-from conform.families.grbl.unit import GrblUnit
+from conform.families.grbl.spec.load import load_grbl
+from conform.families.grbl.unit.model import GrblUnit
 
 G = load_grbl()
 V = G.variant("grbl-1.1f")

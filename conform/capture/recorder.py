@@ -69,7 +69,8 @@ class Recorder:
 
     ``metadata`` goes into an MCAP Metadata record named ``conform.session`` (keys such as
     ``capture_method``, ``host_port``, ``unit_port``, ``baud``, ``variant``, ``clock_source``).
-    ``baud`` (or ``metadata["baud"]``) lets the recorder estimate first-byte times;
+    ``baud`` (or ``metadata["baud"]``) is the line's speed, from which the recorder estimates
+    first-byte times unless ``backdate`` is False;
     ``variant`` (or ``metadata["variant"]``) enables decoded ``/frames`` and ``/exchanges``.
     ``clock`` supplies default timestamps (the emulator passes its own for a virtual clock).
     """
@@ -82,6 +83,7 @@ class Recorder:
         baud: int | None = None,
         variant: str | None = None,
         decode: bool = True,
+        backdate: bool = True,
         decoder: Decoder | None = None,
         flush_interval: float = 0.25,
         chunk_size: int = 64 * 1024,
@@ -101,7 +103,9 @@ class Recorder:
             decoder, why = _make_decoder(variant, baud)
             if why:
                 notes.append(why)
-        self._session = BatchSession(baud=baud, decoder=decoder, name=name)
+        # backdate=False: the bytes were read all at once from a pty and paced afterwards (an
+        # emulator recording itself), so a chunk's first byte is dated when it was read
+        self._session = BatchSession(baud=baud if backdate else None, decoder=decoder, name=name)
         self.decoding = decoder is not None
         if self.part.exists() and not overwrite_part:
             raise RecordingError(

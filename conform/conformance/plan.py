@@ -56,7 +56,7 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, baud: 
         from conform.families import unknown_variant
 
         raise UserError(unknown_variant(variant, fam.name))
-    if allow_motion and max_steps is None:
+    if allow_motion and max_steps is None and fam.needs_travel_bound:
         raise UserError("--allow-motion needs --max-steps N (the bound on every axis move)")
     if max_steps is not None and max_steps <= 0:
         raise UserError("--max-steps must be a positive number")

@@ -1,12 +1,15 @@
 """What every family's ``conform emulate serve`` does around its unit: the option checks, the
 pty or TCP endpoint, the control socket, line faults, the announcement scripts read, and
-serving until SIGINT or SIGTERM. The family's ``serve`` builds the unit and the
-:class:`conform.emulator.serve.Emulator`; this module keeps the rest in one place."""
+serving until SIGINT or SIGTERM, the recording and its metadata. A family's ``serve`` builds
+its unit (a :class:`ServedUnit`) and calls :func:`serve_unit`; the rest is here, once."""
 
 from __future__ import annotations
 
 import signal
 import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import click
@@ -88,3 +91,71 @@ def open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any
         raise UserError(f"cannot create a pty{' at ' + link_path if link_path else ''}: "
                         f"{exc.strerror or exc}") from None
     return endpoint, lambda: PtyEndpoint(link=link_path)
+
+
+@dataclass
+class ServedUnit:
+    """What a family hands :func:`serve_unit`: its unit and what is particular about serving
+    it (a fault injector of its own, control requests, what a reconnect does to the unit,
+    extra session metadata, what it reports and writes when stopped)."""
+
+    unit: Any
+    describe: str = ""                       # after "<variant> on <port>" in the announcement
+    injector: Any = None                     # None: the engine's, from --faults
+    control_handler: Any = None              # the family's control requests (None: refused)
+    wrap_reopen: Callable[[Callable[[], Any]], Callable[[], Any]] | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+    decode: bool = True                      # decode frames while recording (a live decoder)
+    backdate: bool = True                    # recorder dates a chunk's first byte a wire time early
+    end_counts: Callable[[], dict[str, Any]] | None = None   # extra counts at the capture's end
+    finish: Callable[[Callable[[str], None]], None] | None = None   # after stopping
+    stopped_note: Callable[[], str] | None = None   # added to the "stopped (...)" line
+
+
+def serve_unit(family: str, variant: str, build: Callable[[float], ServedUnit], *,
+               baud: int | None = None, tcp_port: int | None = None, faults: str | None = None,
+               seed: int | None = None, control_path: str | None = None,
+               link_path: str | None = None, record_path: str | None = None,
+               answer_delay: float = 0.0) -> None:
+    """``conform emulate serve`` for any family: ``build(t_start)`` makes the unit on the
+    monotonic wall clock; this serves it until SIGINT/SIGTERM. The first line of stdout is the
+    device path; a recording's session metadata is the same vocabulary for every family."""
+    from conform.emulator.serve import Emulator
+
+    check_pacing(baud, answer_delay)
+    t_start = time.monotonic()
+    served = build(t_start)
+    injector = served.injector if served.injector is not None else \
+        fault_injector(faults, seed, t_start)
+    endpoint, reopen = open_endpoint(tcp_port, link_path)
+    control = control_server(control_path, endpoint)
+    recorder = None
+    if record_path:
+        from conform.capture import Recorder
+
+        meta = {"capture_method": "emulator", "family": family, "variant": variant,
+                "baud": baud or "", "unit_port": endpoint.name, "faults": faults or "",
+                "seed": "" if seed is None else seed, **served.metadata}
+        try:
+            recorder = Recorder(record_path, meta, decode=served.decode,
+                                backdate=served.backdate)
+        except UserError:
+            endpoint.close()
+            control.close()
+            raise
+    emulator = Emulator(served.unit, endpoint, baud=baud, injector=injector, recorder=recorder,
+                        control=control, report=report, control_handler=served.control_handler,
+                        reopen=served.wrap_reopen(reopen) if served.wrap_reopen else reopen)
+    announce(endpoint, f"{variant} on {endpoint.name}"
+             + (f" ({served.describe})" if served.describe else "") + f"; control: {control.path}")
+    try:
+        run_until_signal(emulator)
+    finally:
+        control.close()
+        if recorder is not None:
+            recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out,
+                            **(served.end_counts() if served.end_counts else {})})
+        if served.finish is not None:
+            served.finish(report)
+        note = served.stopped_note() if served.stopped_note else ""
+        report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out{note})")

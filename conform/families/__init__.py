@@ -73,6 +73,10 @@ class Family:
     """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
     engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
 
+    needs_travel_bound: bool = False
+    """``--allow-motion`` on a real unit needs ``--max-steps`` (the family's checks size
+    their moves by it)."""
+
     table_files: tuple[str, ...] = ()
     """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
     whose tables a folder holds."""

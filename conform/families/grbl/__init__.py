@@ -1,10 +1,12 @@
 """grbl 1.1f as a protocol family: tables in grbl/spec/tables/, a sans-I/O reference unit, the
 conformance checks generated from the tables, traffic detection and capture analysis.
 
-Modules: ``tables`` (load and validate grbl/spec/tables), ``codec`` (split a byte stream into lines
-and realtime bytes, classify what grbl sends), ``gcode`` (the parser and its modal state),
-``planner`` (motion in virtual time), ``unit`` + ``system`` + ``report`` (the reference unit),
-``serve`` (the emulator on a pty/TCP), ``checks`` (conformance), ``analysis`` (captures).
+Subpackages, as GVE's: ``spec`` (load and validate spec/tables), ``protocol`` (split a byte
+stream into lines and realtime bytes, classify what grbl sends; the g-code parser and its modal
+state), ``unit`` (the reference unit: model, planner, ``$`` commands, the text it sends, input
+pins, faults, control requests), ``conformance`` (checks, characterisation), ``analysis``
+(captures, reference streaming senders, the HTML report), ``sendercheck`` (check-sender's
+scenarios, sessions and rules); ``serve`` (the emulator on a pty/TCP), ``cli`` (spec show).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ class GrblFamily(Family):
     table_files = ("variants", "codes", "settings", "protocol", "status", "examples")
 
     def load_tables(self, root: str | None = None) -> Any:
-        from conform.families.grbl.tables import load_grbl
+        from conform.families.grbl.spec.load import load_grbl
 
         return load_grbl(root)
 
@@ -32,7 +34,7 @@ class GrblFamily(Family):
                             f"line {v.line_max} chars") for v in spec.variants.values()]
 
     def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
-        from conform.families.grbl.unit import GrblUnit
+        from conform.families.grbl.unit.model import GrblUnit
 
         spec = self.load_tables()
         return GrblUnit(spec.variant(variant), spec, t0=t0, **options)
@@ -41,7 +43,7 @@ class GrblFamily(Family):
                allow_motion: bool = False, allow_eeprom: bool = False, **_: Any) -> Any:
         """grbl's checks in the engine's runner (checks.GrblRunner): fresh unit by soft reset,
         halt by feed hold then soft reset."""
-        from conform.families.grbl.checks import GrblRunner
+        from conform.families.grbl.conformance.checks import GrblRunner
 
         if permissions is not None:
             allow_motion, allow_eeprom = permissions.allow_motion, permissions.allow_eeprom
@@ -50,7 +52,7 @@ class GrblFamily(Family):
 
     def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
-        from conform.families.grbl.checks import generate, select
+        from conform.families.grbl.conformance.checks import generate, select
 
         spec = self.load_tables()
         return select(generate(spec, variant), patterns)
@@ -63,19 +65,19 @@ class GrblFamily(Family):
 
     def check_sender_cli(self, *args: Any, **kw: Any) -> int:
         """``conform check-sender --variant grbl-…``: this family's scenarios and rules."""
-        from conform.families.grbl.sendercheck import run_cli
+        from conform.families.grbl.sendercheck.scenarios import run_cli
 
         return run_cli(*args, **kw)
 
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
                      echo: Any = print, **_options: Any) -> None:
-        from conform.families.grbl.characterize import run
+        from conform.families.grbl.conformance.characterize import run
 
         run(target, output, variant, baud, echo=echo)
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:
-        from conform.families.grbl.show import show
+        from conform.families.grbl.cli import show
 
         show(variant, command, console)
 
@@ -86,17 +88,17 @@ class GrblFamily(Family):
                 f"{len(g.commands)} $ commands, {len(g.examples)} examples")
 
     def probe(self, device: str, *, baud: int, timeout: float) -> Any:
-        from conform.families.grbl.probe import probe
+        from conform.families.grbl.conformance.portprobe import probe
 
         return probe(device, baud=baud, timeout=timeout)
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
-        from conform.families.grbl.codec import detect
+        from conform.families.grbl.protocol.codec import detect
 
         return detect(host, unit)
 
     def analyze(self, path: str, **options: Any) -> Any:
-        from conform.families.grbl.analysis import analyze_capture
+        from conform.families.grbl.analysis.analyze import analyze_capture
 
         return analyze_capture(path, **options)
 

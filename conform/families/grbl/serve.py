@@ -8,8 +8,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from conform.errors import UserError
-
 # seconds from power-up to the banner: an Arduino bootloader waits about half a second for an
 # upload before grbl starts (an assumption: grbl's documents give no figure)
 BOOT = 0.5
@@ -28,52 +26,29 @@ def reopen_with_power_cycle(reopen: Callable[[], Any], unit: Any, faults: Any,
     return again
 
 
-def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
-          faults: str | None = None, seed: int | None = None, link_path: str | None = None,
-          record_path: str | None = None, answer_delay: float = 0.0,
-          control_path: str | None = None, **_ignored: Any) -> None:
-    from conform.emulator.launch import announce, check_pacing, control_server, open_endpoint, report, run_until_signal
-    from conform.emulator.serve import Emulator
-    from conform.families.grbl.control import GrblControl
-    from conform.families.grbl.faults import GrblFaults
-    from conform.families.grbl.tables import load_grbl
-    from conform.families.grbl.unit import GrblUnit
+def serve(variant: str, *, faults: str | None = None, seed: int | None = None,
+          answer_delay: float = 0.0, **served: Any) -> None:
+    from conform.emulator.launch import ServedUnit, serve_unit
+    from conform.families.grbl.spec.load import load_grbl
+    from conform.families.grbl.unit.control import GrblControl
+    from conform.families.grbl.unit.faults import GrblFaults
+    from conform.families.grbl.unit.model import GrblUnit
     from conform.link.faults import FaultConfig
 
     spec = load_grbl()
     v = spec.variant(variant)
-    check_pacing(baud, answer_delay)
     config = FaultConfig.parse(faults) if faults else FaultConfig()
-    t_start = time.monotonic()
-    unit = GrblUnit(v, spec, t0=t_start, line_time=max(answer_delay, 0.0005))
-    injector = GrblFaults(config, seed, t_start)
-    endpoint, reopen = open_endpoint(tcp_port, link_path)
-    control = control_server(control_path, endpoint)
-    recorder = None
-    if record_path:
-        from conform.capture import Recorder
 
-        try:  # "line_baud", not "baud": see sendersession.run_sender
-            recorder = Recorder(record_path, {
-                "capture_method": "emulator", "variant": v.id, "family": "grbl",
-                "line_baud": baud or "", "unit_port": endpoint.name, "dialect": "",
-                "faults": faults or "", "seed": "" if seed is None else seed}, decode=False)
-        except UserError:
-            endpoint.close()
-            control.close()
-            raise
+    def build(t_start: float) -> ServedUnit:
+        unit = GrblUnit(v, spec, t0=t_start, line_time=max(answer_delay, 0.0005))
+        injector = GrblFaults(config, seed, t_start)
+        # backdate=False: the emulator reads a pty's bytes at once and paces them itself, so a
+        # host line dated a wire time early would seem sent before the answer it waited for
+        return ServedUnit(
+            unit, describe=f"receive buffer {v.rx_buffer} bytes, planner {v.planner_blocks} blocks",
+            injector=injector, control_handler=GrblControl(injector), decode=False, backdate=False,
+            wrap_reopen=lambda reopen: reopen_with_power_cycle(reopen, unit, injector),
+            end_counts=lambda: {"bytes_lost": unit.lost},
+            stopped_note=lambda: f", {unit.lost} lost to a full receive buffer")
 
-    emulator = Emulator(unit, endpoint, baud=baud, injector=injector, recorder=recorder,
-                        control=control, reopen=reopen_with_power_cycle(reopen, unit, injector),
-                        report=report, control_handler=GrblControl(injector))
-    announce(endpoint, f"{v.id} on {endpoint.name} (receive buffer {v.rx_buffer} bytes, "
-             f"planner {v.planner_blocks} blocks); control: {control.path}")
-    try:
-        run_until_signal(emulator)
-    finally:
-        control.close()
-        if recorder is not None:
-            recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out,
-                            "bytes_lost": unit.lost})
-        report(f"stopped ({emulator.bytes_in} bytes in, {emulator.bytes_out} out, "
-               f"{unit.lost} lost to a full receive buffer)")
+    serve_unit("grbl", v.id, build, faults=faults, seed=seed, answer_delay=answer_delay, **served)

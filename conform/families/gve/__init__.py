@@ -22,6 +22,7 @@ _ANSWER = re.compile(rb"(?:^|\r)[0-9A-F](?:,[^\r]*)?\r")
 class GveFamily(Family):
     name = "gve"
     title = "Gravos GVE64/GVE124 interpolators"
+    needs_travel_bound = True   # checks size their moves within --max-steps pulses
     default_rank = 0   # the units conform was first written for: commands without a variant
     table_files = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
 

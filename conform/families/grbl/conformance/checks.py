@@ -29,8 +29,8 @@ from typing import Any
 from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
 from conform.conformance.runner import Estimate, Runner, RunOptions
 from conform.conformance.target import HarnessError
-from conform.families.grbl.codec import split_unit
-from conform.families.grbl.tables import GrblSpec, Variant, load_grbl
+from conform.families.grbl.protocol.codec import split_unit
+from conform.families.grbl.spec.load import GrblSpec, Variant, load_grbl
 
 STOP = (b"!", b"\x18")
 _SETTING = re.compile(r"^\$(\d+)=(.*)$")

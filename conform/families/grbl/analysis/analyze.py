@@ -20,8 +20,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.families.grbl.codec import split_host, split_unit
-from conform.families.grbl.tables import GrblSpec, load_grbl
+from conform.families.grbl.protocol.codec import split_host, split_unit
+from conform.families.grbl.spec.load import GrblSpec, load_grbl
 
 MAX_LISTED = 50
 DEFAULT_VARIANT = "grbl-1.1f"
@@ -397,7 +397,7 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
 def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     """index.html (:mod:`.htmlreport`), findings.json and summary.md in ``directory``."""
-    from conform.families.grbl.htmlreport import render_html
+    from conform.families.grbl.analysis.htmlreport import render_html
     from conform.report.render import write_files
 
     def summary() -> str:

@@ -3,7 +3,7 @@
 One text line per request, one line back (``ok ...`` or ``error: ...``), over the same unix
 socket as GVE's (:class:`conform.emulator.serve.ControlServer`, ``conform emulate control``)::
 
-    press NAME | release NAME   an input pin (conform.families.grbl.inputs): probe, door,
+    press NAME | release NAME   an input pin (conform.families.grbl.unit.inputs): probe, door,
                                 limit-x/-y/-z, hold, start, reset
     fault lose N                the next N answer lines (ok / error:N) never arrive
     fault garble N              the next N answer lines arrive damaged
@@ -23,8 +23,8 @@ import json
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.grbl.faults import GrblFaults
-from conform.families.grbl.inputs import PINS, set_input
+from conform.families.grbl.unit.faults import GrblFaults
+from conform.families.grbl.unit.inputs import PINS, set_input
 from conform.link.faults import FaultConfig
 
 HELP = ("commands: press NAME | release NAME | fault lose N | fault garble N | "

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from conform.families import Detection
-from conform.families.grbl.tables import GrblSpec, load_grbl
+from conform.families.grbl.spec.load import GrblSpec, load_grbl
 
 
 @dataclass(slots=True)

@@ -1,7 +1,7 @@
 """Judging a grbl sender program: run it against the grbl reference unit on a real pty under
-scenarios (:mod:`.sendersession`), record each session (an MCAP capture ``conform analyze``
+scenarios (:mod:`.session`), record each session (an MCAP capture ``conform analyze``
 reads), keep what the unit really did (ground truth) and grade rules citing their source
-(:mod:`.senderrules`).
+(:mod:`.rules`).
 
     conform check-sender --variant grbl-1.1f [--scenario NAME] [--report DIR] -- COMMAND ...
 
@@ -24,9 +24,9 @@ from typing import Any
 
 from conform.conformance.results import MUST, CheckResult, Grade, TargetRun
 from conform.errors import UserError
-from conform.families.grbl.senderrules import RULES, SHOULD
-from conform.families.grbl.sendersession import Action, Scenario, SenderRun, run_sender
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.sendercheck.rules import RULES, SHOULD
+from conform.families.grbl.sendercheck.session import Action, Scenario, SenderRun, run_sender
+from conform.families.grbl.spec.load import load_grbl
 
 __all__ = ["SCENARIOS", "SenderRun", "Scenario", "check_sender", "grade", "run_cli"]
 
@@ -155,7 +155,7 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    p = argparse.ArgumentParser(prog="python -m conform.families.grbl.sendercheck")
+    p = argparse.ArgumentParser(prog="python -m conform.families.grbl.sendercheck.scenarios")
     p.add_argument("--variant", default="grbl-1.1f")
     p.add_argument("--scenario", action="append", default=[])
     p.add_argument("--report", default=None)

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.grbl.checks import Session
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.conformance.checks import Session
+from conform.families.grbl.spec.load import load_grbl
 
 
 @dataclass

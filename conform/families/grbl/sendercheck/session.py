@@ -24,7 +24,7 @@ from typing import Any
 
 from conform.emulator.control import LocalControl
 from conform.errors import UserError
-from conform.families.grbl.analysis import GrblAnalysis, analyze_capture
+from conform.families.grbl.analysis.analyze import GrblAnalysis, analyze_capture
 
 POLL = 0.02   # how often the runner looks at the program and the scenario's triggers
 
@@ -86,11 +86,11 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
     """Run ``command`` once against the emulator in ``scenario``; the traffic analysed."""
     from conform.capture import Recorder
     from conform.emulator.serve import Emulator
-    from conform.families.grbl.control import GrblControl
-    from conform.families.grbl.faults import GrblFaults
     from conform.families.grbl.serve import reopen_with_power_cycle
-    from conform.families.grbl.tables import load_grbl
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.spec.load import load_grbl
+    from conform.families.grbl.unit.control import GrblControl
+    from conform.families.grbl.unit.faults import GrblFaults
+    from conform.families.grbl.unit.model import GrblUnit
     from conform.link.faults import FaultConfig
     from conform.link.pty import PtyEndpoint
 

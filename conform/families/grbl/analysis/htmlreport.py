@@ -13,7 +13,7 @@ import numpy as np
 from conform.analysis.plots import legend_beside, new_figure, thin_points, to_png
 
 HERE = Path(__file__).resolve().parent
-SHARED = HERE.parent.parent / "report" / "templates"
+SHARED = HERE.parents[2] / "report" / "templates"   # conform/report/templates
 
 
 def _times(a: Any) -> tuple[float, np.ndarray, np.ndarray]:

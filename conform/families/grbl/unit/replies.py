@@ -3,8 +3,8 @@ messages, formatted as gnea/grbl grbl/report.c prints them (CR LF after every li
 
 from __future__ import annotations
 
-from conform.families.grbl.gcode import MM_PER_INCH, Modal
-from conform.families.grbl.tables import GrblSpec, Variant
+from conform.families.grbl.protocol.gcode import MM_PER_INCH, Modal
+from conform.families.grbl.spec.load import GrblSpec, Variant
 
 HELP = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
 MSG = {

@@ -16,7 +16,7 @@ _VERSION = re.compile(rb"Grbl (\d+\.\d+[a-z]?)|\[VER:(\d+\.\d+[a-z]?)\.(\d+)")
 
 
 def probe(device: str, *, baud: int, timeout: float) -> ProbeAnswer:
-    from conform.families.grbl.tables import load_grbl
+    from conform.families.grbl.spec.load import load_grbl
     from conform.link.ports import open_port
 
     try:

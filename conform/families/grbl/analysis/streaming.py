@@ -5,7 +5,7 @@ Three policies as senders use them (grbl's doc/script/stream.py shows the first 
 lines within the receive buffer; ``unbounded`` does not wait at all. ``poll`` adds a '?' every
 so often (realtime, outside the count); ``extra`` inserts lines the sender forgets to count
 (as a polling thread sending ``$G`` does). The result is the timed traffic both ways, ready
-for :func:`conform.families.grbl.analysis.analyze_streams` or a capture Recorder.
+for :func:`conform.families.grbl.analysis.analyze.analyze_streams` or a capture Recorder.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from conform.families.grbl.codec import split_unit
+from conform.families.grbl.protocol.codec import split_unit
 
 
 @dataclass

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from conform.families.grbl import report as rp
+from conform.families.grbl.unit import replies as rp
 
 if TYPE_CHECKING:
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.unit.model import GrblUnit
 
 # control name -> Pn: letter
 PINS = {"probe": "P", "limit-x": "X", "limit-y": "Y", "limit-z": "Z", "door": "D",

@@ -23,10 +23,10 @@ import math
 from collections import deque
 from typing import Any
 
-from conform.families.grbl import report as rp
-from conform.families.grbl.gcode import Block, GcodeError, Modal, parse
-from conform.families.grbl.planner import Move, Planner
-from conform.families.grbl.tables import GrblSpec, Variant, load_grbl
+from conform.families.grbl.protocol.gcode import Block, GcodeError, Modal, parse
+from conform.families.grbl.spec.load import GrblSpec, Variant, load_grbl
+from conform.families.grbl.unit import replies as rp
+from conform.families.grbl.unit.planner import Move, Planner
 
 INF = math.inf
 MOVING = ("Run", "Jog", "Home")
@@ -217,7 +217,7 @@ class GrblUnit:
         elif not text:
             self._answer(t, 0)
         elif text.startswith("$"):
-            from conform.families.grbl.system import system_command
+            from conform.families.grbl.unit.system import system_command
 
             system_command(self, text, t)
         elif self.state in ("Alarm", "Jog"):
@@ -305,7 +305,7 @@ class GrblUnit:
             self._busy = ("dwell", startup)
             return
         if block.kind == "probe":
-            from conform.families.grbl.inputs import probe_blocks_start
+            from conform.families.grbl.unit.inputs import probe_blocks_start
 
             if probe_blocks_start(self, block.probe):   # probe already in its end state
                 self.state = "Alarm"
@@ -614,7 +614,7 @@ class GrblUnit:
         spindle = m.speed * self.ov_spindle / 100.0 if m.spindle in (3, 4) else 0.0
         parts.append(f"FS:{feed:.0f},{spindle:.0f}")
         if self.pins:
-            from conform.families.grbl.inputs import pin_field
+            from conform.families.grbl.unit.inputs import pin_field
 
             parts.append(str(pin_field(self)))
         busy = self.state in ("Run", "Hold", "Jog", "Home", "Door")

@@ -6,7 +6,7 @@ from rich.console import Console
 from rich.table import Table
 
 from conform.errors import UserError
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.spec.load import load_grbl
 
 PARTS = ("settings", "errors", "alarms", "commands", "realtime", "messages")
 

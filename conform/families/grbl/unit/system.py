@@ -6,11 +6,11 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
-from conform.families.grbl import report as rp
-from conform.families.grbl.gcode import GcodeError, parse
+from conform.families.grbl.protocol.gcode import GcodeError, parse
+from conform.families.grbl.unit import replies as rp
 
 if TYPE_CHECKING:
-    from conform.families.grbl.unit import GrblUnit
+    from conform.families.grbl.unit.model import GrblUnit
 
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)")
 IDLE_OR_ALARM = ("Idle", "Alarm")
@@ -169,7 +169,7 @@ def _apply(u: GrblUnit) -> None:
 
 
 def _restore(u: GrblUnit, what: str) -> None:
-    from conform.families.grbl.gcode import Modal
+    from conform.families.grbl.protocol.gcode import Modal
 
     if what in "$*":
         u.settings = {n: s.default for n, s in u.spec.settings.items()}

@@ -1,6 +1,6 @@
 """The rules a grbl sender is graded on, each citing where grbl's documents say it.
 
-A rule is a function of a :class:`.sendersession.SenderRun` returning (grade, expected,
+A rule is a function of a :class:`.session.SenderRun` returning (grade, expected,
 actual). The wire (the analysed capture) shows what the sender did; the ground truth (the
 lines the unit's parser took and how it answered them, bytes its receive ring dropped, when
 it restarted) shows what that did to the machine.

@@ -1,0 +1,1 @@
+"""The grbl conformance checks generated from the tables, and characterisation of a unit."""
