@@ -22,7 +22,8 @@ from conform.cli.params import (
     echo_json,
     json_option,
 )
-from conform.conformance.plan import run_targets
+from conform.cli.progress import progress
+from conform.conformance.plan import list_checks, run_targets
 from conform.conformance.results import Grade
 from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
@@ -79,17 +80,24 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     if mutants and not fam.mutants():
         raise fam.lacks("mutants (--mutants)")
     command = command_line()
-    planned = run_targets(
-        fam, list(targets), variant, baud=baud, profile=profile, patterns=patterns,
-        list_only=list_only, matrix=matrix, mutants=mutants, replay=replay, seed=seed,
-        allow_motion=allow_motion, max_steps=max_steps,
-        allow_eeprom=allow_eeprom, no_machine=no_machine, inputs_control=inputs_control,
-        quiet=quiet, as_json=as_json, echo=click.echo,
-        announce=None if quiet else (lambda text: click.echo(text, err=True)),
-        **split("run", fam.name, family_values))
-    if planned is None:   # --list: the family printed the checks
+    mine = split("run", fam.name, family_values)
+    if list_only:
+        listed = list_checks(fam, targets, variant, profile=profile, patterns=patterns,
+                             matrix=matrix, replay=replay, allow_motion=allow_motion,
+                             max_steps=max_steps, allow_eeprom=allow_eeprom,
+                             no_machine=no_machine, **mine)
+        if as_json:
+            echo_json({"checks": listed})
+        for c in [] if as_json else listed:
+            click.echo(f"{c['id']}\t{c['level']}\t{c['clause']}\t{c['title']}")
         return
-    runs, mutant_report = planned
+    with progress("conform run", quiet=quiet) as bar:
+        runs, mutant_report = run_targets(
+            fam, list(targets), variant, display=bar, baud=baud, profile=profile,
+            patterns=patterns, matrix=matrix, mutants=mutants, replay=replay, seed=seed,
+            allow_motion=allow_motion, max_steps=max_steps, allow_eeprom=allow_eeprom,
+            no_machine=no_machine, inputs_control=inputs_control,
+            announce=None if quiet else (lambda text: click.echo(text, err=True)), **mine)
     aborted = next((r.aborted for r in runs if r.aborted), None)
     results = results_of(runs, command, mutant_report)
     out = Path(report_dir) if report_dir else default_dir()

@@ -147,12 +147,12 @@ class GveFamily(Family):
         return tables_summary(root)
 
     def commands(self) -> Sequence[Any]:
-        from conform.families.gve.commands import commands
+        from conform.families.gve.cli import commands
 
         return commands()
 
     def command_options(self, command: str) -> Sequence[Any]:
-        from conform.families.gve.commands import command_options
+        from conform.families.gve.cli import command_options
 
         return command_options(command)
 

@@ -1,7 +1,9 @@
-"""GVE's side of the commands that serve every family: what ``conform characterize`` probes
-and writes, and what ``conform spec show`` prints for a GVE variant. The commands
-(conform/cli/) reach these through the family registry (``Family.characterize``,
-``Family.show_spec``)."""
+"""GVE's side of the command line: what ``conform characterize`` probes and writes, what
+``conform spec show|diff|questions`` print for GVE variants, the family's own subcommands
+(``send``, the reference sender; ``profile``, the dialect profiles of ``characterize``) and its
+options on the engine's commands (``--dialect`` on ``run``; the A-register, reference switches
+and ground truth on ``emulate serve``). The engine reaches these through the family registry
+(conform.families, conform.cli.family_options)."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ from typing import Any
 import click
 from rich.table import Table
 
+from conform.cli.params import INPUT_FILE
 from conform.cli.progress import progress
 from conform.conformance.target import parse_target
 from conform.errors import UserError
@@ -168,3 +171,31 @@ def questions_table() -> tuple[str, list[str], list[tuple[Any, ...]]]:
     return ("Open questions (A-register)", ["id", "question", "default", "alternatives", "settled"],
             [(q.id, q.question, q.default, ", ".join(q.alternatives), q.settled or "")
              for q in spec.questions.values()])
+
+def commands() -> Sequence[click.Command]:
+    from conform.families.gve.conformance.profile_command import cli as profile
+    from conform.families.gve.sender.command import cli as send
+
+    return (send, profile)
+
+
+def command_options(command: str) -> Sequence[click.Option]:
+    if command == "run":
+        return (click.Option(["--dialect", "dialect_file"], type=INPUT_FILE, default=None,
+                             help="GVE: expect this characterised profile's dialect instead of "
+                                  "the defaults."),)
+    if command == "emulate serve":
+        return (
+            click.Option(["--dialect", "dialect_pairs"], multiple=True, metavar="A<n>=ALT",
+                         help="GVE: choose an open-question alternative (repeatable)."),
+            click.Option(["--profile"], type=INPUT_FILE, default=None,
+                         help="GVE: a TOML file whose [dialect] table chooses alternatives."),
+            click.Option(["--switch", "switch_pairs"], multiple=True, metavar="AXIS=PULSES",
+                         help="GVE: distance from a W's start to that axis's reference switch "
+                              "(default 3000)."),
+            click.Option(["--truth", "truth_path"], default=None, metavar="FILE.json",
+                         help="GVE: on exit, write what the unit accepted and executed (every "
+                              "vector, D/K/R/H/G/J, final position) as JSON: the ground truth "
+                              "beside a recording."),
+        )
+    return ()

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 from conform.errors import UserError
 from conform.families.gve.protocol import CommandParser
-from conform.families.gve.sender.job import Item, parse_item
+from conform.families.gve.sender.items import Item, parse_item
 from conform.families.gve.spec.model import Dialect, Variant
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
