@@ -48,6 +48,46 @@ class Detection:
     why: str
 
 
+@dataclass(frozen=True)
+class FleetColumn:
+    """A column a family adds to a fleet summary (``conform analyze`` of many captures): its
+    analyses' ``fleet_row()`` give the value under ``key``. ``total``: summed per machine and
+    over the fleet; ``rate``: a per-second column, this total over the duration, under that
+    key; ``machines`` / ``sessions``: shown in that table; ``flag``: a session or machine
+    with a non-zero value is marked; ``summary``: its total is said in the command's lines;
+    ``spec``: number format."""
+
+    key: str
+    label: str
+    spec: str = ""
+    total: bool = False
+    rate: str | None = None
+    rate_label: str = ""
+    machines: bool = True
+    sessions: bool = True
+    flag: bool = False
+    summary: bool = False
+
+
+class AnalysisResult(Protocol):
+    """What ``conform analyze`` asks of any family's analysis (``Family.analyze``)."""
+
+    def summary_lines(self) -> list[str]:
+        """What ``conform analyze`` prints: the session in a line, findings and notes."""
+
+    def write_report(self, directory: str) -> dict[str, Path]:
+        """``index.html``, ``summary.md`` and ``findings.json`` in ``directory`` (built on
+        ``conform.analysis.report``'s shared pieces); returns their paths (``html`` ...)."""
+
+    def write_tables(self, directory: str) -> dict[str, Path]:
+        """Its tables as Parquet files in ``directory``; returns their paths."""
+
+    def fleet_row(self) -> dict[str, Any]:
+        """Its row of a fleet summary: the engine's columns (``duration_s``, ``exchanges``,
+        ``exchanges_per_s``, ``findings``, ``rtt_p50_ms``...) and the family's
+        (``Family.fleet_columns``)."""
+
+
 @runtime_checkable
 class Family(Protocol):
     """What a protocol family provides to the engine (docs/architecture.md).
@@ -81,11 +121,10 @@ class Family(Protocol):
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         """Does this traffic look like this family's?"""
 
-    def analyze(self, path: str, **options: Any) -> Any:
-        """Analyse a capture of this family's traffic. A family other than the default one
-        returns a result with ``summary_lines()``, ``write_report(dir)``, ``write_tables(dir)``
-        and ``fleet_row()``: what ``conform analyze`` prints and writes, and its row in a fleet
-        summary (conform.families.capture_hook, conform.analysis.fleet)."""
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
+        """Analyse a capture of this family's traffic: an ``AnalysisResult``, what ``conform
+        analyze`` prints and writes, and its row in a fleet summary
+        (conform.families.capture_hook, conform.analysis.fleet)."""
 
     def serve(self, variant: str, **options: Any) -> None:
         """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
@@ -126,6 +165,9 @@ class Family(Protocol):
 
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
+
+    fleet_columns: Sequence[FleetColumn] = ()
+    """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
 
 SPECS_ENV = "CONFORM_SPECS"
