@@ -40,6 +40,7 @@ BATCH_BYTES = 32 * 1024  # a direction's pending bytes that force a batch out
 
 FRAME_KEYS = NEUTRAL.frame_keys  # the neutral fields; a family's decoder adds its own
 EXCHANGE_KEYS = NEUTRAL.exchange_keys
+BATCH_KEYS = {TOPIC_FRAMES: FRAME_KEYS, TOPIC_EXCHANGES: EXCHANGE_KEYS}  # a batched topic's
 
 
 def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str, Any]:
@@ -203,6 +204,15 @@ class BatchSession(CaptureSession):
 
 def is_raw_batch(payload: dict[str, Any]) -> bool:
     return "reads" in payload
+
+
+def payload_bytes(payload: dict[str, Any]) -> bytes:
+    """The bytes a raw message carries (a format 1 read or a format 2 batch: both keep them
+    as base64 in ``data``); ``ValueError`` if they are not base64."""
+    try:
+        return pybase64.b64decode(payload.get("data", ""), validate=True)
+    except (TypeError, AttributeError, binascii.Error) as exc:
+        raise ValueError(f"bad raw message: {exc}") from None
 
 
 def unbatch_arrays(raw: bytes | dict[str, Any]) -> tuple[bytes, Any, int, Any, Any, Any]:

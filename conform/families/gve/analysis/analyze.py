@@ -22,8 +22,8 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from conform.analysis.rawread import RawCapture, read_raw
-from conform.analysis.stream import RawStream, ReadStats
+from conform.analysis.rawread import RawCapture
+from conform.analysis.stream import RawStream, ReadStats, read_raw
 from conform.analysis.tables import ParquetStream
 from conform.capture.session import escape_bytes
 from conform.errors import UserError
