@@ -2,7 +2,7 @@
 its target, then one JSON object as the last line.
 
 Random and mutated frames over every variant and dialect, checksums on and off, packets,
-over-long lines and numbers (see conform/families/gve/unit/fuzz.py). Target: >= 50 000 frames/s in-process,
+over-long lines and numbers (see conform/families/gve/testing/fuzz.py). Target: >= 50 000 frames/s in-process,
 with 0 exceptions, 0 hangs and 0 malformed answers.
 
     python bench/fuzz_unit.py --frames 10000000 [--seed 1] [--hang 0.5]
@@ -16,7 +16,7 @@ import resource
 import sys
 
 from conform.families.gve.spec import load_spec
-from conform.families.gve.unit.fuzz import Campaign
+from conform.families.gve.testing.fuzz import Campaign
 
 TARGET_RATE = 50_000
 

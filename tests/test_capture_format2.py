@@ -150,10 +150,12 @@ def test_cr_spans_split_lines_like_the_byte_loop(blocks):
 
 
 class _RecordsOnly:
-    """A decoder with only the ``Decoder`` protocol (``feed``/``finish``): no rows."""
+    """A decoder with only the ``Decoder`` protocol (``feed``/``finish``) and the family's
+    fields: no rows."""
 
     def __init__(self) -> None:
         self._d = make_decoder("gve64-v19")
+        self.fields = self._d.fields
 
     def feed(self, *a):  # noqa: ANN002, ANN201
         return self._d.feed(*a)

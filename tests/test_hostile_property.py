@@ -1,5 +1,5 @@
 """The property a host relies on to get a unit back: after any byte sequence, the recovery of
-conform.families.gve.unit.fuzz.recovery_frames (end the line, close a packet, J) and the deaf time after J,
+conform.families.gve.testing.fuzz.recovery_frames (end the line, close a packet, J) and the deaf time after J,
 the unit answers a valid command as the tables say. In-process over every variant and dialect,
 and over a real pty against `conform emulate`."""
 
@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 
 from conform.families.gve.protocol import append_checksum, encode_answer
 from conform.families.gve.spec import load_spec
+from conform.families.gve.testing.fuzz import recovery_frames
 from conform.families.gve.unit import Unit
-from conform.families.gve.unit.fuzz import recovery_frames
 
 SPEC = load_spec()
 LINES = [b"!0*S\r", b"!0%+\r", b"!0%-,CF\r", b"!0J\r", b"!0WX,100,10,0,10\r", b"!0L1000,0,0\r",

@@ -21,8 +21,8 @@ from conform.families.gve.protocol import (
     split_checksum,
     verify,
 )
-from conform.families.gve.protocol.strategies import command_args
 from conform.families.gve.spec import load_spec
+from conform.families.gve.testing.strategies import command_args
 
 SPEC = load_spec()
 DIALECT = SPEC.dialect()

@@ -159,7 +159,7 @@ def test_fast_path_equals_parser(steps, variant):
 # ---------------------------------------------------------------- the fuzz campaign
 
 from conform.families.gve.protocol.grammar import AnswerGrammar  # noqa: E402
-from conform.families.gve.unit.fuzz import Campaign  # noqa: E402
+from conform.families.gve.testing.fuzz import Campaign  # noqa: E402
 
 
 def test_answer_grammar_rejects_what_the_tables_do_not_allow():

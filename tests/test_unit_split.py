@@ -128,7 +128,7 @@ def _scripts(naxes: int, axes: tuple[str, ...]) -> list[list[str]]:
 def _record_session(spec: Any, variant: Any, choices: dict[str, str], rng: random.Random,
                     steps: int, options: dict[str, Any]) -> dict[str, Any]:
     from conform.families.gve.protocol.checksum import append_checksum
-    from conform.families.gve.unit.fuzz import _noise, line_pool, recovery_frames
+    from conform.families.gve.testing.fuzz import _noise, line_pool, recovery_frames
 
     dialect = spec.dialect(choices)
     session = {"variant": variant.id, "dialect": choices, "t0": 0.0, "options": options}
@@ -244,7 +244,7 @@ def _record_session(spec: Any, variant: Any, choices: dict[str, str], rng: rando
 
 def record(path: Path = FIXTURE, seed: int = 13) -> None:
     """Write the transcripts of the unit as it is now (see the module docstring)."""
-    from conform.families.gve.unit.fuzz import dialects
+    from conform.families.gve.testing.fuzz import dialects
 
     spec = load_spec()
     rng = random.Random(seed)

@@ -7,8 +7,9 @@ Every capture is analysed on its own (one task per file) by a pool of local proc
 the workers of an existing Dask distributed scheduler; each task writes its tables into one
 Parquet dataset (``DIR/exchanges/machine=M/session=S.parquet``, hive partitioned, so pandas,
 polars or DuckDB read the whole fleet as one table) and returns a small summary row. The
-rows become the fleet summary (per machine and session: hazards, latency percentiles,
-starvation time, throughput) as HTML, Markdown and JSON.
+rows become the fleet summary (per machine and session: duration, exchanges, throughput,
+latency percentiles, findings, and the columns each family declares, ``Family.fleet_columns``)
+as HTML, Markdown and JSON.
 
 A file that cannot be analysed is a row with its error, not the end of the run. Workers of a
 distributed scheduler must see the files and the output folder at the same paths.
@@ -21,16 +22,26 @@ import os
 import re
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families import default_family, family
+from conform.families import FleetColumn, default_family, families, family
 
 SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "duration_s", "exchanges",
-                "vectors_accepted", "exchanges_per_s", "vectors_per_s", "hazards",
-                "findings", "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms", "rtt_max_ms",
-                "starvations", "starved_s", "standstill_s")
+                "exchanges_per_s", "findings", "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms",
+                "rtt_max_ms")  # every family's; then the families' own (``fleet_columns``)
+
+
+def fleet_columns() -> list[FleetColumn]:
+    """The columns the registered families add to a fleet summary, each key once (the
+    first family's declaration of it)."""
+    out: dict[str, FleetColumn] = {}
+    for fam in families():
+        for col in getattr(fam, "fleet_columns", ()):
+            out.setdefault(col.key, col)
+    return list(out.values())
 
 
 def expand_inputs(items: Iterable[str]) -> list[Path]:
@@ -64,7 +75,8 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
     from conform.analysis import analyze
 
     p = Path(path)
-    row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)
+    row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS) | dict.fromkeys(
+        c.key for c in fleet_columns())
     row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error")
     other = _other_family(p, parquet_dir, options, row)
     if other is not None:
@@ -81,26 +93,13 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> 
     a = _attempt(row, lambda: analyze(p, whatif_replays=False, parquet=sink, **options))
     if a is None:
         return row
-    m = a.metrics
+    row.update(a.fleet_row())
     row["machine"] = machine_of(p, a.raw.metadata)
     if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
         d = Path(parquet_dir) / "exchanges" / f"machine={_safe(row['machine'])}"
         d.mkdir(parents=True, exist_ok=True)
         for path in a.tables.values():
             path.replace(d / path.name)
-    row["state"] = "clean" if a.raw.status.clean else "damaged"
-    rtt = m.get("latency", {}).get("rtt", {})
-    q = m.get("queue") or {}
-    row.update(
-        duration_s=m["duration_s"], exchanges=m["exchanges"],
-        vectors_accepted=m["vectors_accepted"], exchanges_per_s=m["exchanges_per_s"],
-        vectors_per_s=m["vectors_per_s"], hazards=m["hazards"],
-        findings=dict(m.get("finding_counts", {})),
-        rtt_p50_ms=_ms(rtt.get("median")), rtt_p95_ms=_ms(rtt.get("p95")),
-        rtt_p99_ms=_ms(rtt.get("p99")), rtt_max_ms=_ms(rtt.get("max")),
-        starvations=q.get("starvations"), starved_s=q.get("starved_s"),
-        standstill_s=q.get("standstill_s"),
-    )
     return row
 
 
@@ -147,10 +146,6 @@ def _attempt(row: dict[str, Any], run: Callable[[], Any]) -> Any:
     except Exception as exc:  # noqa: BLE001 - reported in the row
         row["error"] = f"{type(exc).__name__}: {exc}"
     return None
-
-
-def _ms(v: Any) -> float | None:
-    return None if v is None else round(float(v) * 1000, 4)
 
 
 Runner = Callable[[list[str], str | None, dict[str, Any]], list[dict[str, Any]]]
@@ -203,22 +198,23 @@ def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Sessions sorted by machine and session, and one aggregate row per machine."""
+    """Sessions sorted by machine and session, one aggregate row per machine and the
+    fleet's totals; ``columns``: the families' columns (``fleet_columns``) as plain dicts."""
+    cols = fleet_columns()
+    totals = [c.key for c in cols if c.total]
     rows = sorted(rows, key=lambda r: (str(r["machine"]), str(r["session"])))
     machines: dict[str, dict[str, Any]] = {}
     for r in rows:
         m = machines.setdefault(r["machine"], {
             "machine": r["machine"], "sessions": 0, "errors": 0, "damaged": 0,
-            "duration_s": 0.0, "exchanges": 0, "vectors_accepted": 0, "hazards": 0,
-            "starvations": 0, "starved_s": 0.0, "standstill_s": 0.0, "rtt_p95_ms_worst": None,
-            "rtt_p99_ms_worst": None})
+            "duration_s": 0.0, "exchanges": 0, **dict.fromkeys(totals, 0),
+            "rtt_p95_ms_worst": None, "rtt_p99_ms_worst": None})
         m["sessions"] += 1
         if r["state"] == "error":
             m["errors"] += 1
             continue
         m["damaged"] += r["state"] == "damaged"
-        for k in ("duration_s", "exchanges", "vectors_accepted", "hazards", "starvations",
-                  "starved_s", "standstill_s"):
+        for k in ("duration_s", "exchanges", *totals):
             m[k] += r.get(k) or 0
         for k in ("rtt_p95_ms", "rtt_p99_ms"):
             v = r.get(k)
@@ -228,12 +224,22 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for m in machines.values():
         d = m["duration_s"]
         m["exchanges_per_s"] = m["exchanges"] / d if d > 0 else None
-        m["vectors_per_s"] = m["vectors_accepted"] / d if d > 0 else None
+        for c in cols:
+            if c.total and c.rate:
+                m[c.rate] = m[c.key] / d if d > 0 else None
     return {"sessions": rows, "machines": list(machines.values()),
             "totals": {"sessions": len(rows), "machines": len(machines),
                        "errors": sum(r["state"] == "error" for r in rows),
-                       "hazards": sum(r.get("hazards") or 0 for r in rows),
-                       "exchanges": sum(r.get("exchanges") or 0 for r in rows)}}
+                       **{k: sum(r.get(k) or 0 for r in rows) for k in totals},
+                       "exchanges": sum(r.get("exchanges") or 0 for r in rows)},
+            "columns": [asdict(c) for c in cols]}
+
+
+def totals_text(counts: dict[str, Any], columns: list[dict[str, Any]]) -> str:
+    """The families' totals of a fleet or a machine as text: ``, 3 hazards, 10 starvations``
+    (their ``summary`` columns), or nothing."""
+    return "".join(f", {counts.get(c['key']) or 0} {c['label']}" for c in columns
+                   if c["total"] and c["summary"])
 
 
 def write_fleet_report(summary: dict[str, Any], out_dir: str | Path) -> dict[str, Path]:

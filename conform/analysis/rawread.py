@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -25,7 +24,7 @@ from typing import Any
 import numpy as np
 import zstandard
 
-from conform.capture.scan import Walk, decompress_chunk, opcode_damaged, walk_records
+from conform.capture.scan import data_records, decompress_chunk
 from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
 
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
@@ -53,10 +52,16 @@ class ReadStatus:
     bad_payloads: int = 0
     bad_times: int = 0  # reads whose time was not a usable number (timed by their neighbour)
     notes: list[str] = field(default_factory=list)
+    valid_bytes: int = 0  # end of the last intact top-level record
 
     @property
     def truncated(self) -> bool:
         return not self.complete
+
+    def record_damage(self, note: str) -> None:
+        """A top-level record skipped (``conform.capture.scan.data_records``)."""
+        self.damaged_chunks += 1
+        self.notes.append(note)
 
     @property
     def clean(self) -> bool:
@@ -286,48 +291,29 @@ def _chunk_data(body: bytes) -> bytes:
 
 def walk_iter(path: Path, status: ReadStatus, col: _Collector, progress: Progress | None
               ) -> Iterator[None]:
-    """Walk the capture's records one at a time: the caller takes ``col.parts`` between
-    records."""
-    walk = Walk()
-    with open(path, "rb") as f:
-        size = status.size = os.fstat(f.fileno()).st_size
-        last_report = 0
+    """Walk the capture's records one at a time (``conform.capture.scan.data_records``): the
+    caller takes ``col.parts`` between records."""
+    status.path = path
+    for pos, op, head, body, in_summary in data_records(status, progress):
+        if in_summary or op == OP_FOOTER:
+            continue
         try:
-            for pos, op, head, body, in_summary in walk_records(f, size, walk):
-                if progress is not None and pos - last_report > 4 * 1024 * 1024:
-                    progress(pos, size)
-                    last_report = pos
-                if in_summary or op == OP_FOOTER:
-                    continue
-                if opcode_damaged(op):
-                    status.damaged_chunks += 1
-                    status.notes.append(f"record with unknown opcode 0x{op:02x} at byte {pos} "
-                                        "skipped")
-                    continue
+            if op == OP_CHUNK:
                 try:
-                    if op == OP_CHUNK:
-                        try:
-                            data = _chunk_data(body)
-                            col.records(data, 0, len(data))
-                            yield
-                        except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
-                            status.damaged_chunks += 1
-                            status.notes.append(f"damaged chunk at byte {pos} skipped: {exc}")
-                    elif op == OP_METADATA:
-                        col.metadata_record(body)
-                    elif op in (OP_CHANNEL, OP_MESSAGE, OP_SCHEMA):
-                        col.records(head + body, 0, 9 + len(body))
-                        yield
-                except (ValueError, struct.error, UnicodeDecodeError) as exc:
-                    status.problem = f"damaged record (opcode 0x{op:02x}) at byte {pos}: {exc}"
-                    return
-        finally:
-            status.complete = walk.complete
-            status.problem = status.problem or walk.problem
-            status.damaged_chunks += len(walk.crc_problems)
-            status.notes.extend(walk.crc_problems)
-    if progress is not None:
-        progress(size, size)
+                    data = _chunk_data(body)
+                    col.records(data, 0, len(data))
+                    yield
+                except (ValueError, struct.error, zstandard.ZstdError, MemoryError) as exc:
+                    status.damaged_chunks += 1
+                    status.notes.append(f"damaged chunk at byte {pos} skipped: {exc}")
+            elif op == OP_METADATA:
+                col.metadata_record(body)
+            elif op in (OP_CHANNEL, OP_MESSAGE, OP_SCHEMA):
+                col.records(head + body, 0, 9 + len(body))
+                yield
+        except (ValueError, struct.error, UnicodeDecodeError) as exc:
+            status.problem = f"damaged record (opcode 0x{op:02x}) at byte {pos}: {exc}"
+            return
 
 
 _B64 = np.full(256, 255, np.uint8)
@@ -619,17 +605,3 @@ def _merge(name: str, parts: list[Direction]) -> Direction:
 
 
 MAX_TIME = 1e11  # seconds since the epoch (the year 5138): later is not a time
-
-
-def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
-    """Read ``path`` (an MCAP capture) as far as it is intact: ``stream.RawStream``'s parts
-    (times made usable as they come, ``TimeSanitizer``) joined into whole directions."""
-    from conform.analysis.stream import RawStream
-
-    rs = RawStream(path, progress)
-    parts: dict[str, list[Direction]] = {"host": [], "unit": []}
-    for part in rs.parts():
-        parts[part.name].append(part)
-    c = rs.capture()
-    return RawCapture(c.status, c.metadata, _merge("host", parts["host"]),
-                      _merge("unit", parts["unit"]), c.link_events, c.topics)

@@ -1,5 +1,13 @@
 """Write an analysis out: ``index.html`` (self-contained), ``summary.md``, ``findings.json``
-and, on request, Parquet tables."""
+and, on request, Parquet tables.
+
+The engine's part of every family's analysis report: the shared template pieces (page head,
+severity badges, the findings table: conform/report/templates/analysis_pieces.html.j2), the
+context every report has (the analysis, its metrics, findings by severity, notes) and the
+writing of the three files. A family's analysis brings its own ``report.html.j2`` and
+``summary.md.j2`` (its sections and plots, built on those pieces) through ``render_report``;
+``write_report`` and ``write_parquet`` ask the analysis itself (``AnalysisResult`` in
+conform.families)."""
 
 from __future__ import annotations
 
@@ -10,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from conform.capture.session import escape_bytes
 from conform.errors import UserError
 
 TEMPLATES = Path(__file__).with_name("templates")
@@ -40,32 +47,33 @@ def findings_document(a: Any) -> dict[str, Any]:
     })
 
 
-def _env() -> Any:
+def _env(*folders: Path) -> Any:
+    """Templates from ``folders`` (a family's) first, then the engine's and the shared
+    pieces."""
     import jinja2
 
     from conform.report.render import TEMPLATES as SHARED  # pieces every analysis report shares
 
-    return jinja2.Environment(loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(TEMPLATES)),
-                                                          jinja2.FileSystemLoader(str(SHARED))]),
+    loaders = [jinja2.FileSystemLoader(str(d)) for d in (*folders, TEMPLATES, SHARED)]
+    return jinja2.Environment(loader=jinja2.ChoiceLoader(loaders),
                               autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
                               trim_blocks=True, lstrip_blocks=True)
 
 
-def _fmt_ms(v: Any) -> str:
+def fmt_ms(v: Any) -> str:
     return "–" if v is None or v != v else f"{v * 1000:.3f}"
 
 
-def _context(a: Any, plots: dict[str, str]) -> dict[str, Any]:
+def base_context(a: Any) -> dict[str, Any]:
+    """What every analysis report's templates get: the analysis ``a``, its metrics ``m``
+    (plain, non-finite kept), ``findings``, their number per severity and per kind, the
+    notes and ``ms`` (seconds as milliseconds)."""
     m = _clean(a.metrics, finite=False)
     by_sev: dict[str, int] = {}
     for f in a.findings:
         by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
-    return {
-        "a": a, "m": m, "plots": plots, "findings": a.findings, "by_sev": by_sev,
-        "counts": m.get("finding_counts", {}), "ms": _fmt_ms,
-        "hazards": m.get("hazards", 0), "notes": a.notes,
-        "status": a.raw.status,
-    }
+    return {"a": a, "m": m, "findings": a.findings, "by_sev": by_sev,
+            "counts": m.get("finding_counts", {}), "ms": fmt_ms, "notes": a.notes}
 
 
 def report_folder(out_dir: str | Path) -> Path:
@@ -78,75 +86,30 @@ def report_folder(out_dir: str | Path) -> Path:
     return d
 
 
-def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
-    from conform.analysis.plots import all_plots
-
+def render_report(out_dir: str | Path, templates: Path, context: dict[str, Any],
+                  document: dict[str, Any]) -> dict[str, Path]:
+    """A family's report: ``index.html`` and ``summary.md`` from its ``templates`` folder
+    (``report.html.j2``, ``summary.md.j2``) with ``context`` (``base_context`` and its own
+    keys), and ``document`` as ``findings.json``."""
     d = report_folder(out_dir)
-    plots = all_plots(a)
-    env = _env()
-    ctx = _context(a, plots)
+    env = _env(templates)
     paths = {"html": d / "index.html", "markdown": d / "summary.md",
              "json": d / "findings.json"}
-    paths["html"].write_text(env.get_template("report.html.j2").render(**ctx), "utf-8")
-    paths["markdown"].write_text(env.get_template("summary.md.j2").render(**ctx), "utf-8")
-    paths["json"].write_text(json.dumps(findings_document(a), indent=1), "utf-8")
+    paths["html"].write_text(env.get_template("report.html.j2").render(**context), "utf-8")
+    paths["markdown"].write_text(env.get_template("summary.md.j2").render(**context), "utf-8")
+    paths["json"].write_text(json.dumps(document, indent=1), "utf-8")
     return paths
+
+
+def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
+    """The report of any family's analysis (its ``write_report``)."""
+    return a.write_report(out_dir)
 
 
 def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None
                   ) -> dict[str, Path]:
-    """The exchange, frame, series and queue-depth tables, streamed in row groups
-    (``conform.analysis.tables``). A streamed analysis kept no tables: it wrote them while
-    it ran (``analyze(…, parquet=DIR)``), and those are the ones returned."""
-    if not a.whole:
-        if a.tables:
-            return dict(a.tables)
-        raise UserError(f"{a.path}: the capture was streamed, not kept: analyse it with "
-                        "--parquet to write its tables")
-    d = Path(out_dir)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
-    from conform.analysis.tables import ROW_GROUP, relative_times, write_frame, write_table
-
-    rows = row_group or ROW_GROUP
-    times = ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last")
-
-    def exchange_rows(part: Any, lo: int, hi: int) -> Any:
-        part = relative_times(part, a.t0, times)
-        bodies = a.host.lines.bodies.slice(lo, hi - lo).to_pylist()
-        part["command"] = [escape_bytes(b) for b in bodies]
-        return part
-
-    out = {"exchanges": write_frame(d / "exchanges.parquet", a.exchanges, rows,
-                                    extra=exchange_rows)}
-    for direction in ("host", "unit"):  # a slice of lines at a time
-        out[f"frames_{direction}"] = write_table(
-            d / f"frames_{direction}.parquet", len(a.host if direction == "host" else a.unit),
-            lambda lo, hi, w=direction: a.frames(w, lo, hi), frame_categories(a, direction),
-            rows)
-    out["series"] = write_frame(d / "series.parquet", a.series, rows)
-    if a.queue is not None:
-        import pandas as pd
-
-        q = a.queue
-        out["queue_depth"] = write_frame(d / "queue_depth.parquet",
-                                         pd.DataFrame({"t": q.depth_t - a.t0, "depth": q.depth}), rows)
-    return out
-
-
-def frame_categories(a: Any, direction: str) -> dict[str, list[Any] | None]:
-    """The category lists of a frames table, from the decoded columns (no table built)."""
-    from conform.analysis.tables import categories_of
-
-    d = a.host if direction == "host" else a.unit
-    cols = {"direction": np.array([direction], object), "kind": d.kind, "name": d.name,
-            "checksum_status": a.checksum_names, "detail": d.detail}
-    if direction == "host":
-        cols["packet_role"] = a.exchanges["packet_role"].to_numpy()
-    cats: dict[str, list[Any] | None] = {k: categories_of(v) for k, v in cols.items()}
-    cats["text"] = None
-    return cats
-
-
+    """The tables of any family's analysis (its ``write_tables``; ``row_group``: rows per
+    Parquet row group, for a family that takes it)."""
+    if row_group is None:
+        return a.write_tables(out_dir)
+    return a.write_tables(out_dir, row_group=row_group)

@@ -7,7 +7,7 @@ Family-agnostic machinery of the streaming analysis:
   chunks is decoded (``rawread.BATCH_BYTES`` of decompressed records, or ``reads_per_part``
   reads when smaller parts are asked for). Read times are made sane on the way
   (:class:`TimeSanitizer`, with the last good time and the running maximum carried from
-  one part to the next); ``rawread.read_raw`` joins the parts into whole directions.
+  one part to the next); ``read_raw`` joins the parts into whole directions.
 * :class:`LineBuffer` holds one direction's bytes from the first line not yet consumed to
   the last byte received, with the reads that cover them (a read cut by the start of the
   buffer keeps its full length and a negative start, so the times of its bytes are
@@ -33,6 +33,7 @@ from conform.analysis.rawread import (
     RawCapture,
     ReadStatus,
     _Collector,
+    _merge,
     walk_iter,
 )
 from conform.capture.scan import check_magic
@@ -267,3 +268,15 @@ class ReadStats:
 
     def gap(self) -> tuple[str, float, int] | None:
         return (self.name, self.gap_t, self.gaps) if self.gaps and self.reads > 1 else None
+
+
+def read_raw(path: str | os.PathLike[str], progress: Progress | None = None) -> RawCapture:
+    """Read ``path`` (an MCAP capture) as far as it is intact: ``RawStream``'s parts
+    (times made usable as they come, ``TimeSanitizer``) joined into whole directions."""
+    rs = RawStream(path, progress)
+    parts: dict[str, list[Direction]] = {"host": [], "unit": []}
+    for part in rs.parts():
+        parts[part.name].append(part)
+    c = rs.capture()
+    return RawCapture(c.status, c.metadata, _merge("host", parts["host"]),
+                      _merge("unit", parts["unit"]), c.link_events, c.topics)

@@ -97,8 +97,8 @@ def relative_times(part: pd.DataFrame, t0: float, cols: tuple[str, ...]) -> pd.D
     return part
 
 
-CODED = {"name", "kind", "status", "answer_kind", "packet_role", "direction",
-         "checksum_status", "detail"}  # text columns written dictionary-encoded
+CODED = frozenset({"name", "kind", "status", "answer_kind", "direction", "checksum_status",
+                   "detail"})  # text columns written dictionary-encoded (and a family's)
 TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
          "frames_host": ("t_first", "t_last"), "frames_unit": ("t_first", "t_last"),
          "queue_depth": ("t",)}
@@ -120,7 +120,7 @@ def escaped(bodies: pa.BinaryArray) -> pa.Array:
     return pc.replace_with_mask(text, pa.array(~plain), fixed)
 
 
-def _arrow(df: pd.DataFrame) -> pa.Table:
+def _arrow(df: pd.DataFrame, coded: frozenset[str] = CODED) -> pa.Table:
     """Text columns as dictionary-encoded strings (names, kinds, statuses) or strings; the
     same schema for every part of a table, whatever values a part holds."""
     cols = {}
@@ -133,7 +133,7 @@ def _arrow(df: pd.DataFrame) -> pa.Table:
                 arr = pa.array(v.to_numpy(), pa.string(), from_pandas=True)
             except (pa.ArrowTypeError, pa.ArrowInvalid):  # anything else, as its text
                 arr = pa.array(v.astype("string").to_numpy(na_value=None), pa.string())
-            cols[c] = arr.dictionary_encode() if c in CODED else arr
+            cols[c] = arr.dictionary_encode() if c in coded else arr
         else:
             cols[c] = pa.array(v.to_numpy())
     return pa.table(cols)
@@ -151,7 +151,8 @@ class ParquetStream:
                  ) -> None:
         """``only``: the tables to write (all by default); ``files``: a path per table
         instead of ``DIR/NAME.parquet``; ``const``: columns of one value put first in the
-        exchange table (a fleet's ``session``), and a ``t0`` column if it names one."""
+        exchange table (a fleet's ``session``), and a ``t0`` column if it names one.
+        ``coded``: the text columns written dictionary-encoded (a family adds its own)."""
         from conform.errors import UserError
 
         self.only, self.files, self.const = only, files or {}, dict(const or {})
@@ -162,6 +163,7 @@ class ParquetStream:
             raise UserError(f"{self.dir}: cannot create the folder: {exc.strerror}") from None
         self.writers: dict[str, pq.ParquetWriter] = {}
         self.t0: float | None = None
+        self.coded = CODED
 
     def path(self, name: str) -> Path:
         return self.files.get(name, self.dir / f"{name}.parquet")
@@ -175,7 +177,7 @@ class ParquetStream:
         if name == "exchanges" and self.const:
             for k, v in reversed(self.const.items()):
                 df.insert(0, k, self.t0 if k == "t0" else v)
-        t = _arrow(df)
+        t = _arrow(df, self.coded)
         w = self.writers.get(name)
         if w is None:
             path = self.path(name)
@@ -184,9 +186,11 @@ class ParquetStream:
         w.write_table(t.cast(w.schema), row_group_size=max(len(df), 1))
 
     def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int,
-              frames_frame: Callable[..., pd.DataFrame]) -> None:
+              frames_frame: Callable[..., pd.DataFrame],
+              host_columns: dict[str, Any] | None = None) -> None:
         """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``);
-        ``frames_frame(lines, t0, base=, arrow_text=)`` is the family's frames table."""
+        ``frames_frame(lines, t0, base=, arrow_text=)`` is the family's frames table, and
+        ``host_columns`` the columns it adds to the host lines' one."""
         if self.t0 is None:
             t = np.concatenate([host.t_first, unit.t_first])
             t = t[np.isfinite(t)]
@@ -200,8 +204,8 @@ class ParquetStream:
         part["command"] = text
         self._put("exchanges", part)
         fh = frames_frame(host, 0.0, base=row0, arrow_text=True)
-        fh["packet"] = ex["packet"].to_numpy()
-        fh["packet_role"] = ex["packet_role"].to_numpy()
+        for k, v in (host_columns or {}).items():
+            fh[k] = v
         self._put("frames_host", fh)
         if len(unit):
             self._put("frames_unit", frames_frame(unit, 0.0, base=unit_base, arrow_text=True))

@@ -26,16 +26,21 @@ from typing import Any
 import numpy as np
 import pybase64  # SIMD base64: a recorder and a shift's analysis move megabytes of it
 
-from conform.capture.schemas import DIRECTION_TOPIC, DIRECTIONS, TOPIC_EXCHANGES, TOPIC_FRAMES
+from conform.capture.schemas import (
+    DIRECTION_TOPIC,
+    DIRECTIONS,
+    NEUTRAL,
+    TOPIC_EXCHANGES,
+    TOPIC_FRAMES,
+    CaptureFields,
+)
 from conform.capture.session import CaptureSession, Decoder, Record, to_ns
 
 BATCH_BYTES = 32 * 1024  # a direction's pending bytes that force a batch out
 
-FRAME_KEYS = ("direction", "kind", "text", "offset", "length", "t_first", "t_last", "address",
-              "name", "args", "code", "inta", "fields", "checksum", "checksum_status",
-              "checksum_mode", "packet", "packet_role", "error")
-EXCHANGE_KEYS = ("status", "command", "name", "answer", "code", "inta", "t_command", "t_answer",
-                 "latency", "command_offset", "answer_offset", "packet", "packet_commands")
+FRAME_KEYS = NEUTRAL.frame_keys  # the neutral fields; a family's decoder adds its own
+EXCHANGE_KEYS = NEUTRAL.exchange_keys
+BATCH_KEYS = {TOPIC_FRAMES: FRAME_KEYS, TOPIC_EXCHANGES: EXCHANGE_KEYS}  # a batched topic's
 
 
 def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str, Any]:
@@ -49,11 +54,14 @@ def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str
     return out
 
 
-def rows(payload: dict[str, Any], keys: tuple[str, ...]) -> list[dict[str, Any]]:
-    """The items of a batch; ``ValueError`` if its columns do not hold together."""
+def rows(payload: dict[str, Any], keys: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """The items of a batch: the fields ``keys`` (None where a batch lacks one) and every
+    other column it carries (a family's fields: the batch names them, so no family is
+    needed to read it); ``ValueError`` if its columns do not hold together."""
     n = payload.get("count")
     if not isinstance(n, int) or isinstance(n, bool) or n < 0:
         raise ValueError("batch without a count")
+    keys = tuple(keys) + tuple(k for k in payload if k != "count" and k not in keys)
     cols = []
     for k in keys:
         col = payload.get(k, [None] * n)
@@ -106,17 +114,19 @@ class _Pending:
 class BatchSession(CaptureSession):
     """``CaptureSession`` writing format 2: ``chunk`` buffers, ``flush`` emits the batches.
 
-    Frames and exchanges are collected as rows (tuples in ``FRAME_KEYS`` /
-    ``EXCHANGE_KEYS`` order): from a decoder that collects them itself (``feed_rows`` /
-    ``take_rows`` / ``finish_rows``, the GVE family's), or taken from the records of any
-    other ``Decoder``.
+    Frames and exchanges are collected as rows (tuples in the order of the decoder's
+    ``fields``: ``CaptureFields.frame_keys`` / ``exchange_keys``, the neutral fields then the
+    family's): from a decoder that collects them itself (``feed_rows`` / ``take_rows`` /
+    ``finish_rows``), or taken from the records of any other ``Decoder``.
     """
-
-    _GET = {TOPIC_FRAMES: itemgetter(*FRAME_KEYS), TOPIC_EXCHANGES: itemgetter(*EXCHANGE_KEYS)}
 
     def __init__(self, *, baud: int | None = None, decoder: Decoder | None = None,
                  name: str = "conform", batch_bytes: int = BATCH_BYTES) -> None:
         super().__init__(baud=baud, decoder=decoder, name=name)
+        self.fields: CaptureFields = getattr(decoder, "fields", None) or NEUTRAL
+        self._keys = {TOPIC_FRAMES: self.fields.frame_keys,
+                      TOPIC_EXCHANGES: self.fields.exchange_keys}
+        self._get = {t: itemgetter(*k) for t, k in self._keys.items()}
         self.batch_bytes = batch_bytes
         self._pending = {d: _Pending() for d in DIRECTIONS}
         self._rows: dict[str, list[tuple[Any, ...]]] = {TOPIC_FRAMES: [], TOPIC_EXCHANGES: []}
@@ -153,10 +163,9 @@ class BatchSession(CaptureSession):
         if self._t_rows is None:
             self._t_rows = rec.log_time / 1e9
         try:
-            row = self._GET[rec.topic](rec.payload)
+            row = self._get[rec.topic](rec.payload)
         except KeyError:  # a decoder that leaves fields out
-            keys = FRAME_KEYS if rec.topic == TOPIC_FRAMES else EXCHANGE_KEYS
-            row = tuple(rec.payload.get(k) for k in keys)
+            row = tuple(rec.payload.get(k) for k in self._keys[rec.topic])
         self._rows[rec.topic].append(row)
 
     def flush(self) -> list[Record]:
@@ -177,9 +186,10 @@ class BatchSession(CaptureSession):
             self._t_rows = None
         t = to_ns(t_rows or 0.0)
         if frames:
-            out.append(Record(TOPIC_FRAMES, t, row_columns(frames, FRAME_KEYS)))
+            out.append(Record(TOPIC_FRAMES, t, row_columns(frames, self._keys[TOPIC_FRAMES])))
         if exchanges:
-            out.append(Record(TOPIC_EXCHANGES, t, row_columns(exchanges, EXCHANGE_KEYS)))
+            out.append(Record(TOPIC_EXCHANGES, t,
+                              row_columns(exchanges, self._keys[TOPIC_EXCHANGES])))
         return out
 
     def finish(self, t: float) -> list[Record]:
@@ -194,6 +204,15 @@ class BatchSession(CaptureSession):
 
 def is_raw_batch(payload: dict[str, Any]) -> bool:
     return "reads" in payload
+
+
+def payload_bytes(payload: dict[str, Any]) -> bytes:
+    """The bytes a raw message carries (a format 1 read or a format 2 batch: both keep them
+    as base64 in ``data``); ``ValueError`` if they are not base64."""
+    try:
+        return pybase64.b64decode(payload.get("data", ""), validate=True)
+    except (TypeError, AttributeError, binascii.Error) as exc:
+        raise ValueError(f"bad raw message: {exc}") from None
 
 
 def unbatch_arrays(raw: bytes | dict[str, Any]) -> tuple[bytes, Any, int, Any, Any, Any]:

@@ -14,8 +14,6 @@ missing. Only a file that is not an MCAP at all raises ``UserError``::
 
 from __future__ import annotations
 
-import base64
-import binascii
 import json
 import os
 from collections.abc import Iterable, Iterator
@@ -23,17 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcap.records import Channel, Message, Metadata
+from mcap.records import Channel, Message
 
-from conform.capture.batch import (
-    EXCHANGE_KEYS,
-    FRAME_KEYS,
-    is_batch,
-    is_raw_batch,
-    rows,
-    unbatch_raw,
-)
-from conform.capture.scan import ScanStatus, check_magic, iter_records
+from conform.capture.batch import BATCH_KEYS, is_batch, is_raw_batch, payload_bytes, rows, unbatch_raw
+from conform.capture.scan import ScanStatus, check_magic, iter_messages
 from conform.capture.schemas import (
     DIRECTION_TOPIC,
     TOPIC_EXCHANGES,
@@ -41,7 +32,6 @@ from conform.capture.schemas import (
     TOPIC_LINK,
     TOPIC_LOG,
 )
-from conform.capture.sink import default_layout
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -67,22 +57,11 @@ class Capture:
     # -- low level -------------------------------------------------------------------------
     def _pass(self, topics: set[str] | None) -> Iterator[tuple[Channel, Message]]:
         status = ScanStatus(self.path)
-        channels: dict[int, Channel] = {}
-        metadata: dict[str, dict[str, str]] = {}
-        fallback = default_layout()[1]
-        for rec in iter_records(status):
-            if isinstance(rec, Message):
-                channel = channels.get(rec.channel_id)
-                if channel is None and status.library.startswith("conform"):
-                    channel = fallback.get(rec.channel_id)  # its first chunk was lost
-                if channel is not None and (topics is None or channel.topic in topics):
-                    yield channel, rec
-            elif isinstance(rec, Channel):
-                channels.setdefault(rec.id, rec)
-            elif isinstance(rec, Metadata):
-                metadata[rec.name] = dict(rec.metadata)
+        for channel, msg in iter_messages(status):
+            if channel is not None and (topics is None or channel.topic in topics):
+                yield channel, msg
         self._status = status
-        self._metadata = metadata
+        self._metadata = status.metadata
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[CaptureMessage]:
         """JSON messages on ``topics`` (all if ``None``), in file order."""
@@ -152,8 +131,8 @@ class Capture:
                 continue
             payload = dict(m.payload)
             try:
-                payload["bytes"] = base64.b64decode(payload.get("data", ""), validate=True)
-            except (binascii.Error, ValueError, TypeError):
+                payload["bytes"] = payload_bytes(payload)
+            except ValueError:
                 self.bad_messages += 1
                 continue
             payload["log_time"] = m.log_time
@@ -165,13 +144,13 @@ class Capture:
         for m in self.messages([topic]):
             yield {**m.payload, "log_time": m.log_time}
 
-    def _batched(self, topic: str, keys: tuple[str, ...]) -> Iterator[dict[str, Any]]:
+    def _batched(self, topic: str) -> Iterator[dict[str, Any]]:
         for m in self.messages([topic]):
             if not is_batch(m.payload):  # format 1: one message per item
                 yield {**m.payload, "log_time": m.log_time}
                 continue
             try:
-                items = rows(m.payload, keys)
+                items = rows(m.payload, BATCH_KEYS[topic])
             except ValueError:
                 self.bad_messages += 1
                 continue
@@ -179,12 +158,13 @@ class Capture:
                 yield {**item, "log_time": m.log_time}
 
     def frames(self) -> Iterator[dict[str, Any]]:
-        """Decoded lines (``conform.Frame`` dicts), unpacked from format 2 batches."""
-        return self._batched(TOPIC_FRAMES, FRAME_KEYS)
+        """Decoded lines (``conform.Frame`` dicts with the fields of the family that decoded
+        them), unpacked from format 2 batches."""
+        return self._batched(TOPIC_FRAMES)
 
     def exchanges(self) -> Iterator[dict[str, Any]]:
         """Exchanges (``conform.Exchange`` dicts), unpacked from format 2 batches."""
-        return self._batched(TOPIC_EXCHANGES, EXCHANGE_KEYS)
+        return self._batched(TOPIC_EXCHANGES)
 
     def link_events(self) -> Iterator[dict[str, Any]]:
         return self._topic(TOPIC_LINK)

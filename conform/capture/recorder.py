@@ -117,7 +117,8 @@ class Recorder:
             self._file = open(self.part, "wb")  # noqa: SIM115 - closed in close()
         except OSError as exc:
             raise RecordingError(f"{self.part}: cannot create: {exc.strerror}") from None
-        self._sink = McapSink(self._file, chunk_size=chunk_size)
+        self._sink = McapSink(self._file, chunk_size=chunk_size,
+                              topics=self._session.fields.channels())
         t0 = self.clock()
         meta.setdefault("clock_source", CLOCK_SOURCE if clock is None else "caller's clock")
         meta.setdefault("tool", "conform")

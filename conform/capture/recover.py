@@ -8,7 +8,6 @@ lost. The damaged file is left untouched.
 
 from __future__ import annotations
 
-import base64
 import binascii
 import json
 import os
@@ -20,15 +19,14 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from conform import __version__
-from conform.capture.batch import EXCHANGE_KEYS, FRAME_KEYS, is_batch, is_raw_batch, rows, unbatch_raw
+from conform.capture.batch import BATCH_KEYS, is_batch, is_raw_batch, payload_bytes, rows, unbatch_raw
 from conform.capture.recorder import PART_SUFFIX
-from conform.capture.scan import ScanStatus, iter_records
+from conform.capture.scan import ScanStatus, iter_messages, iter_records
 from conform.capture.schemas import DIRECTION_TOPIC, TOPIC_EXCHANGES, TOPIC_FRAMES, TOPIC_LINK
 from conform.capture.sink import default_layout
 from conform.errors import UserError
 
 _RAW_TOPICS = {topic: d for d, topic in DIRECTION_TOPIC.items()}
-_BATCH_KEYS = {TOPIC_FRAMES: FRAME_KEYS, TOPIC_EXCHANGES: EXCHANGE_KEYS}
 _CHECKED = {TOPIC_FRAMES, TOPIC_EXCHANGES, TOPIC_LINK}
 
 
@@ -77,42 +75,29 @@ def capture_info(path: str | os.PathLike[str]) -> CaptureInfo:
     """One pass over the file: duration, bytes each way, messages per channel, state."""
     src = resolve_source(path)
     info = CaptureInfo(src, ScanStatus(src))
-    channels: dict[int, str] = {}
     expected = dict.fromkeys(DIRECTION_TOPIC, 0)
-    fallback = {cid: ch.topic for cid, ch in default_layout()[1].items()}
-    for rec in iter_records(info.status):
-        if isinstance(rec, Message):
-            topic = channels.get(rec.channel_id)
-            if topic is None and info.status.library.startswith("conform"):
-                topic = fallback.get(rec.channel_id)
-            topic = topic or f"<channel {rec.channel_id}>"
-            info.messages[topic] += 1
-            t = rec.log_time
-            info.first_ns = t if info.first_ns is None else min(info.first_ns, t)
-            info.last_ns = t if info.last_ns is None else max(info.last_ns, t)
-            direction = _RAW_TOPICS.get(topic)
-            if direction is not None:
-                span = _raw_span(rec.data)
-                if span is None:
-                    info.bad_messages += 1
-                    continue
-                offset, length, reads = span
-                info.bytes[direction] += length
-                info.reads[direction] += reads
-                if offset != expected[direction]:
-                    info.gaps[direction] += 1
-                expected[direction] = offset + length
-            elif topic in _CHECKED and not _derived_ok(topic, rec.data):
+    for channel, rec in iter_messages(info.status):
+        topic = channel.topic if channel is not None else f"<channel {rec.channel_id}>"
+        info.messages[topic] += 1
+        t = rec.log_time
+        info.first_ns = t if info.first_ns is None else min(info.first_ns, t)
+        info.last_ns = t if info.last_ns is None else max(info.last_ns, t)
+        direction = _RAW_TOPICS.get(topic)
+        if direction is not None:
+            span = _raw_span(rec.data)
+            if span is None:
                 info.bad_messages += 1
-        elif isinstance(rec, Schema) and rec.encoding == "jsonschema":
-            try:
-                json.loads(rec.data)
-            except (ValueError, RecursionError):
-                info.bad_schemas += 1
-        elif isinstance(rec, Channel):
-            channels.setdefault(rec.id, rec.topic)
-        elif isinstance(rec, Metadata):
-            info.metadata[rec.name] = dict(rec.metadata)
+                continue
+            offset, length, reads = span
+            info.bytes[direction] += length
+            info.reads[direction] += reads
+            if offset != expected[direction]:
+                info.gaps[direction] += 1
+            expected[direction] = offset + length
+        elif topic in _CHECKED and not _derived_ok(topic, rec.data):
+            info.bad_messages += 1
+    info.metadata = info.status.metadata
+    info.bad_schemas = info.status.bad_schemas
     return info
 
 
@@ -126,7 +111,7 @@ def _raw_span(data: bytes) -> tuple[int, int, int] | None:
             reads = unbatch_raw(payload, 0)
             return int(payload["offset"]), sum(r["length"] for r in reads), len(reads)
         offset, length = int(payload["offset"]), int(payload["length"])
-        if len(base64.b64decode(payload["data"], validate=True)) != length:
+        if len(payload_bytes(payload)) != length:
             return None
     except (ValueError, KeyError, TypeError, RecursionError, OverflowError, binascii.Error):
         return None
@@ -144,9 +129,9 @@ def _derived_ok(topic: str, data: bytes) -> bool:
         return False
     if not isinstance(payload, dict):
         return False
-    if topic in _BATCH_KEYS and is_batch(payload):
+    if topic in BATCH_KEYS and is_batch(payload):
         try:
-            rows(payload, _BATCH_KEYS[topic])
+            rows(payload, BATCH_KEYS[topic])
         except ValueError:
             return False
     return True

@@ -11,13 +11,14 @@ is an error (``UserError``), because there is nothing to salvage.
 from __future__ import annotations
 
 import io
+import json
 import os
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Protocol
 
 import zstandard
 from mcap.data_stream import ReadDataStream
@@ -30,6 +31,7 @@ from conform.errors import UserError
 MAGIC = b"\x89MCAP0\r\n"
 MAX_RECORD = 256 * 1024 * 1024  # larger records are treated as damage, not allocated
 MAX_CHUNK_UNCOMPRESSED = 256 * 1024 * 1024
+PROGRESS_BYTES = 4 * 1024 * 1024  # data_records tells its progress this often
 
 Item = Header | Schema | Channel | Message | Metadata
 
@@ -48,11 +50,18 @@ class ScanStatus:
     library: str = ""
     profile: str = ""
     notes: list[str] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)  # by name (iter_messages)
+    bad_schemas: int = 0  # JSON schemas that are not JSON (iter_messages)
 
     @property
     def clean(self) -> bool:
         return self.complete and self.problem is None and not self.damaged_chunks \
             and not self.damaged_records
+
+    def record_damage(self, note: str) -> None:
+        """A top-level record skipped (``data_records``)."""
+        self.damaged_records += 1
+        self.notes.append(note)
 
     @property
     def truncated(self) -> bool:
@@ -249,53 +258,112 @@ def walk_records(f: BinaryIO, size: int, walk: Walk) -> Iterator[tuple[int, int,
         walk.end = pos
 
 
+class WalkStatus(Protocol):
+    """What ``data_records`` fills in (``ScanStatus`` here, the analysis's ``ReadStatus``)."""
+
+    path: Path
+    size: int
+    complete: bool
+    problem: str | None
+    valid_bytes: int
+    notes: list[str]
+
+    def record_damage(self, note: str) -> None: ...
+
+
+def data_records(status: WalkStatus, progress: Callable[[int, int], None] | None = None
+                 ) -> Iterator[tuple[int, int, bytes, bytes, bool]]:
+    """The one way conform reads a capture file: its top-level records in file order as
+    (position, opcode, header, body, in summary), records of unknown opcode skipped as
+    damage. ``status`` says how the walk ended (complete, why it stopped, how far the file
+    was intact, CRC mismatches, bytes after the end) once the caller is done with it, whether
+    it went to the end or stopped at a record it found damaged. ``progress(bytes, total)``
+    is told every 4 MiB. ``iter_records`` parses them; the analysis's fast reader
+    (conform.analysis.rawread) takes the bodies as they are."""
+    path = check_magic(status.path)
+    walk = Walk()
+    with open(path, "rb") as f:
+        size = status.size = os.fstat(f.fileno()).st_size
+        last_report = 0
+        try:
+            for pos, opcode, head, body, in_summary in walk_records(f, size, walk):
+                if progress is not None and pos - last_report > PROGRESS_BYTES:
+                    progress(pos, size)
+                    last_report = pos
+                if opcode_damaged(opcode):
+                    status.record_damage(f"record with unknown opcode 0x{opcode:02x} at byte "
+                                         f"{pos} skipped ({len(body)} bytes)")
+                    continue
+                yield pos, opcode, head, body, in_summary
+        finally:
+            status.valid_bytes = walk.end
+            status.complete = walk.complete
+            status.problem = status.problem or walk.problem
+            for note in walk.crc_problems:
+                status.record_damage(note)
+            if walk.trailing:
+                status.notes.append(f"{walk.trailing} bytes after the end")
+    if progress is not None:
+        progress(size, size)
+
+
 def iter_records(status: ScanStatus) -> Iterator[Item]:
     """Header, schemas, channels, messages and metadata in file order (chunks opened).
 
     Stops quietly at the first damaged top-level record or at the end of the data;
     ``status`` says which, and how far the file was intact.
     """
-    path = check_magic(status.path)
-    walk = Walk()
-    with open(path, "rb") as f:
-        size = status.size = os.fstat(f.fileno()).st_size
+    for pos, opcode, _head, body, in_summary in data_records(status):
         try:
-            for pos, opcode, _head, body, in_summary in walk_records(f, size, walk):
-                if opcode_damaged(opcode):
-                    status.damaged_records += 1
-                    status.notes.append(f"record with unknown opcode 0x{opcode:02x} at byte "
-                                        f"{pos} skipped ({len(body)} bytes)")
-                    continue
-                try:
-                    rec = _parse(opcode, body)
-                except _PARSE_ERRORS as exc:
-                    status.damaged_records += 1
-                    status.problem = f"damaged record (opcode 0x{opcode:02x}) at byte {pos}: " \
-                        f"{_short(exc)}"
-                    return
-                if in_summary:
-                    continue
-                if isinstance(rec, Header):
-                    status.library, status.profile = rec.library, rec.profile
-                    yield rec
-                elif isinstance(rec, Chunk):
-                    try:
-                        inner = _chunk_records(rec)
-                    except (*_PARSE_ERRORS, zstandard.ZstdError, MemoryError) as exc:
-                        status.damaged_chunks += 1
-                        status.notes.append(f"damaged chunk at byte {pos} skipped: {_short(exc)}")
-                        continue
-                    yield from inner  # type: ignore[misc]
-                elif isinstance(rec, (Schema, Channel, Message, Metadata)):
-                    yield rec
-        finally:
-            status.valid_bytes = walk.end
-            status.complete = walk.complete
-            status.problem = status.problem or walk.problem
-            status.damaged_records += len(walk.crc_problems)
-            status.notes.extend(walk.crc_problems)
-            if walk.trailing:
-                status.notes.append(f"{walk.trailing} bytes after the end")
+            rec = _parse(opcode, body)
+        except _PARSE_ERRORS as exc:
+            status.damaged_records += 1
+            status.problem = f"damaged record (opcode 0x{opcode:02x}) at byte {pos}: " \
+                f"{_short(exc)}"
+            return
+        if in_summary:
+            continue
+        if isinstance(rec, Header):
+            status.library, status.profile = rec.library, rec.profile
+            yield rec
+        elif isinstance(rec, Chunk):
+            try:
+                inner = _chunk_records(rec)
+            except (*_PARSE_ERRORS, zstandard.ZstdError, MemoryError) as exc:
+                status.damaged_chunks += 1
+                status.notes.append(f"damaged chunk at byte {pos} skipped: {_short(exc)}")
+                continue
+            yield from inner  # type: ignore[misc]
+        elif isinstance(rec, (Schema, Channel, Message, Metadata)):
+            yield rec
+
+
+def iter_messages(status: ScanStatus) -> Iterator[tuple[Channel | None, Message]]:
+    """Every message with its channel, in file order (``iter_records``): the channel the file
+    declared for it, else, in a file conform wrote whose first chunk (where they live) was
+    lost, the one ``McapSink`` gives that id, else None. The metadata records go to
+    ``status.metadata`` and JSON schemas that are not JSON are counted as they pass."""
+    from conform.capture.sink import default_layout
+
+    channels: dict[int, Channel] = {}
+    fallback: dict[int, Channel] | None = None
+    for rec in iter_records(status):
+        if isinstance(rec, Message):
+            channel = channels.get(rec.channel_id)
+            if channel is None and status.library.startswith("conform"):
+                if fallback is None:
+                    fallback = default_layout()[1]
+                channel = fallback.get(rec.channel_id)
+            yield channel, rec
+        elif isinstance(rec, Channel):
+            channels.setdefault(rec.id, rec)
+        elif isinstance(rec, Metadata):
+            status.metadata[rec.name] = dict(rec.metadata)
+        elif isinstance(rec, Schema) and rec.encoding == "jsonschema":
+            try:
+                json.loads(rec.data)
+            except (ValueError, RecursionError):
+                status.bad_schemas += 1
 
 
 def _short(exc: BaseException) -> str:

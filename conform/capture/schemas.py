@@ -8,6 +8,7 @@ the ``mcap`` CLI show each one without plugins. ``/log`` uses Foxglove's publish
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from typing import Any
 
 FORMAT_VERSION = "2"  # 1: one message per read and per line; 2: batches
@@ -61,19 +62,6 @@ FRAME: dict[str, Any] = {
         "length": {"type": "integer", "description": "bytes including the terminator"},
         "t_first": _TIME | {"description": "estimated time of the line's first byte"},
         "t_last": _TIME | {"description": "time the read holding its terminator returned"},
-        "address": {"type": ["integer", "null"]},
-        "name": {"type": ["string", "null"], "description": "command mnemonic"},
-        "args": {"type": "array", "description": "command parameters as parsed"},
-        "code": {"type": ["integer", "null"], "description": "answer error code (bits 2..0)"},
-        "inta": {"type": ["boolean", "null"], "description": "answer INTA bit (bit 3)"},
-        "fields": {"type": "array", "items": {"type": "string"}},
-        "checksum": {"type": ["string", "null"], "description": "checksum as sent, hex"},
-        "checksum_status": {"type": "string", "enum": ["none", "ok", "bad", "missing"]},
-        "checksum_mode": {"type": "boolean", "description": "checksums were on for this line"},
-        "packet": {"type": ["integer", "null"], "description": "packet number (*S..*E)"},
-        "packet_role": {"type": ["string", "null"],
-                        "enum": ["start", "member", "end", "answer", None]},
-        "error": {"type": ["string", "null"], "description": "why a line was rejected/garbled"},
     },
     "required": ["direction", "kind", "text", "offset", "length", "t_first", "t_last"],
 }
@@ -86,21 +74,64 @@ EXCHANGE: dict[str, Any] = {
         "status": {"type": "string",
                    "enum": ["answered", "unanswered", "unsolicited"]},
         "command": {"type": ["string", "null"], "description": "command line, escaped"},
-        "name": {"type": ["string", "null"]},
         "answer": {"type": ["string", "null"], "description": "answer line, escaped"},
-        "code": {"type": ["integer", "null"]},
-        "inta": {"type": ["boolean", "null"]},
         "t_command": _NULLABLE_TIME | {"description": "when the command's terminator arrived"},
         "t_answer": _NULLABLE_TIME | {"description": "estimated first byte of the answer"},
         "latency": {"type": ["number", "null"], "description": "t_answer - t_command, s"},
         "command_offset": {"type": ["integer", "null"]},
         "answer_offset": {"type": ["integer", "null"]},
-        "packet": {"type": ["integer", "null"]},
-        "packet_commands": {"type": ["integer", "null"],
-                            "description": "commands inside the packet this answer closes"},
     },
     "required": ["status", "command", "answer", "latency"],
 }
+
+
+@dataclass(frozen=True)
+class CaptureFields:
+    """The decoded fields a family adds to every frame and exchange it records.
+
+    The engine records the bytes and the neutral part of a frame (``FRAME``: where a line is,
+    when, which way, what kind) and of an exchange (``EXCHANGE``: a command, its answer and
+    their times); what a line means in one protocol is the family's, declared here as JSON
+    schema properties in row order (a family's live decoder gives ``fields``; its rows hold
+    the neutral fields, then these). A capture's frame and exchange batches carry a column
+    per field, so reading one needs no family (``batch.rows``).
+    """
+
+    frame: tuple[tuple[str, dict[str, Any]], ...] = ()
+    exchange: tuple[tuple[str, dict[str, Any]], ...] = ()
+
+    @property
+    def frame_keys(self) -> tuple[str, ...]:
+        return tuple(FRAME["properties"]) + tuple(k for k, _ in self.frame)
+
+    @property
+    def exchange_keys(self) -> tuple[str, ...]:
+        return tuple(EXCHANGE["properties"]) + tuple(k for k, _ in self.exchange)
+
+    def frame_schema(self) -> dict[str, Any]:
+        return _with(FRAME, self.frame)
+
+    def exchange_schema(self) -> dict[str, Any]:
+        return _with(EXCHANGE, self.exchange)
+
+    def channels(self) -> dict[str, tuple[str, dict[str, Any]]]:
+        """topic -> (schema name, schema) of a format 2 capture with these fields."""
+        if not (self.frame or self.exchange):
+            return CHANNELS
+        return _layout(("conform.RawBatch", RAW_BATCH),
+                       ("conform.FrameBatch", _batch_of("conform.FrameBatch", self.frame_schema())),
+                       ("conform.ExchangeBatch",
+                        _batch_of("conform.ExchangeBatch", self.exchange_schema())))
+
+
+def _with(item: dict[str, Any], extra: tuple[tuple[str, dict[str, Any]], ...]) -> dict[str, Any]:
+    clash = [k for k, _ in extra if k in item["properties"]]
+    if clash:
+        raise ValueError(f"{item['title']}: a family field may not replace {clash[0]!r}")
+    return item | {"properties": item["properties"] | dict(extra)}
+
+
+NEUTRAL = CaptureFields()  # a capture recorded without a family's decoder
 
 LINK_EVENT: dict[str, Any] = {
     "title": "conform.LinkEvent",
@@ -193,8 +224,10 @@ def _layout(raw: tuple[str, dict[str, Any]], frames: tuple[str, dict[str, Any]],
             TOPIC_LOG: ("foxglove.Log", FOXGLOVE_LOG)}
 
 
-# topic -> (schema name, schema). Format 1 (one message per read and per line) is still
-# read, no longer written; format 2 batches (the same topics and the same channel ids).
+# topic -> (schema name, schema) of the neutral fields (a family's: ``CaptureFields.channels``).
+# Format 1 (one message per read and per line) is still read, no longer written; its frames
+# and exchanges carry the fields of the family that recorded them besides these. Format 2
+# batches (the same topics and the same channel ids).
 CHANNELS_V1 = _layout(("conform.RawChunk", RAW_CHUNK), ("conform.Frame", FRAME),
                       ("conform.Exchange", EXCHANGE))
 CHANNELS = _layout(("conform.RawBatch", RAW_BATCH), ("conform.FrameBatch", FRAME_BATCH),

@@ -36,7 +36,11 @@ class Record:
 
 
 class Decoder(Protocol):
-    """What ``CaptureSession`` needs from a frame decoder (a family's ``live_decoder``)."""
+    """What ``CaptureSession`` needs from a frame decoder (a family's ``live_decoder``).
+
+    A decoder may also have ``fields``: the ``conform.capture.schemas.CaptureFields`` its
+    frames and exchanges carry besides the neutral ones (recorded as columns of their own);
+    without it only the neutral fields are recorded."""
 
     def feed(
         self, direction: str, data: bytes, offset: int, t_read: float, t_first: float

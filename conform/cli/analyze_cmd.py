@@ -100,20 +100,9 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
             paths["report"] = str(write_report(a, report_dir)["html"])
         if parquet_dir:
             paths["parquet"] = parquet_dir
-    m = a.metrics
-    echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
-         f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
-         f"baud {int(m['baud']['used'])}")
+    for line in a.summary_lines():
+        echo(line)
     damage = a.raw.status.describe()
-    if damage:
-        echo(f"capture damaged: {damage}; analysed what is intact")
-    for note in a.notes:
-        echo(f"note: {note}")
-    counts = m.get("finding_counts", {})
-    echo("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) if counts else "none"))
-    for f in a.findings:
-        if f.severity in ("hazard", "error"):
-            echo(f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}")
     if "report" in paths:
         echo(f"report: {paths['report']}")
     if parquet_dir:
@@ -141,17 +130,17 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
 def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
            variant: str | None, baud: float | None, dialect: str | None, jobs: int | None,
            scheduler: str | None, echo, as_json: bool) -> None:  # noqa: ANN001
-    from conform.analysis.fleet import analyze_fleet, write_fleet_report
+    from conform.analysis.fleet import analyze_fleet, totals_text, write_fleet_report
 
     options = {"variant": variant, "baud": baud, "dialect": dialect}
     s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
                       scheduler=scheduler)
     t = s["totals"]
     echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
-         f"exchanges, {t['hazards']} hazards, {t['errors']} not analysed")
+         f"exchanges{totals_text(t, s['columns'])}, {t['errors']} not analysed")
     for m in s["machines"]:
-        echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges, "
-             f"{m['hazards']} hazards, {m['starvations']} starvations"
+        echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges"
+             + totals_text(m, s["columns"])
              + (f", {m['damaged']} damaged" if m["damaged"] else "")
              + (f", {m['errors']} not analysed" if m["errors"] else ""))
     for r in s["sessions"]:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from conform.errors import UserError
 
@@ -47,6 +47,46 @@ class Detection:
     family: str
     score: float
     why: str
+
+
+@dataclass(frozen=True)
+class FleetColumn:
+    """A column a family adds to a fleet summary (``conform analyze`` of many captures): its
+    analyses' ``fleet_row()`` give the value under ``key``. ``total``: summed per machine and
+    over the fleet; ``rate``: a per-second column, this total over the duration, under that
+    key; ``machines`` / ``sessions``: shown in that table; ``flag``: a session or machine
+    with a non-zero value is marked; ``summary``: its total is said in the command's lines;
+    ``spec``: number format."""
+
+    key: str
+    label: str
+    spec: str = ""
+    total: bool = False
+    rate: str | None = None
+    rate_label: str = ""
+    machines: bool = True
+    sessions: bool = True
+    flag: bool = False
+    summary: bool = False
+
+
+class AnalysisResult(Protocol):
+    """What ``conform analyze`` asks of any family's analysis (``Family.analyze``)."""
+
+    def summary_lines(self) -> list[str]:
+        """What ``conform analyze`` prints: the session in a line, findings and notes."""
+
+    def write_report(self, directory: str) -> dict[str, Path]:
+        """``index.html``, ``summary.md`` and ``findings.json`` in ``directory`` (built on
+        ``conform.analysis.report``'s shared pieces); returns their paths (``html`` ...)."""
+
+    def write_tables(self, directory: str) -> dict[str, Path]:
+        """Its tables as Parquet files in ``directory``; returns their paths."""
+
+    def fleet_row(self) -> dict[str, Any]:
+        """Its row of a fleet summary: the engine's columns (``duration_s``, ``exchanges``,
+        ``exchanges_per_s``, ``findings``, ``rtt_p50_ms``...) and the family's
+        (``Family.fleet_columns``)."""
 
 
 class Family:
@@ -250,10 +290,14 @@ class Family:
         None: the capture then holds the raw bytes only (decoded when analysed)."""
         return None
 
-    def analyze(self, path: str, **options: Any) -> Any:
-        """Analyse a capture of this family's traffic: a result with ``summary_lines()``,
-        ``write_report(dir)``, ``write_tables(dir)`` and ``fleet_row()``."""
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
+        """Analyse a capture of this family's traffic: what ``conform analyze`` prints and
+        writes, and its row in a fleet summary (conform.families.capture_hook,
+        conform.analysis.fleet)."""
         raise self.lacks("capture analysis")
+
+    fleet_columns: Sequence[FleetColumn] = ()
+    """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
     # -- the command line ------------------------------------------------------------------------
     def commands(self) -> Sequence[Any]:
@@ -283,6 +327,9 @@ class ProbeAnswer:
     variant: str | None   # the unit's variant when this family's unit answered
     answer: str | None    # what it answered, as text
     how: str              # how the variant was decided, or why not
+
+    fleet_columns: Sequence[FleetColumn] = ()
+    """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
 
 SPECS_ENV = "CONFORM_SPECS"

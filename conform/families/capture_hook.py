@@ -4,8 +4,6 @@ run that family's analysis. GVE captures return ``False`` untouched, for the GVE
 
 from __future__ import annotations
 
-import base64
-import binascii
 import json
 from typing import Any
 
@@ -18,37 +16,30 @@ PEEK_BYTES = 65536
 
 def peek_capture(path: str, limit: int = PEEK_BYTES) -> tuple[bytes, bytes, dict[str, Any]]:
     """The first ``limit`` bytes of each direction and the session metadata of a capture."""
-    from mcap.records import Channel, Message, Metadata
-
-    from conform.capture.scan import ScanStatus, iter_records
+    from conform.capture.batch import payload_bytes
+    from conform.capture.scan import ScanStatus, iter_messages
     from conform.capture.schemas import DIRECTION_TOPIC
 
     topic_dir = {t: d for d, t in DIRECTION_TOPIC.items()}
-    channels: dict[int, str] = {}
     data = {"host": bytearray(), "unit": bytearray()}
-    meta: dict[str, Any] = {}
+    status = ScanStatus(path)
     seen = 0
-    for rec in iter_records(ScanStatus(path)):
-        if isinstance(rec, Channel):
-            channels.setdefault(rec.id, rec.topic)
-        elif isinstance(rec, Metadata) and rec.name == "conform.session":
-            meta = dict(rec.metadata)
-            if meta.get("variant"):
-                break          # the capture says what it is: no need to look at the bytes
-        elif isinstance(rec, Message):
-            seen += 1
-            if seen > 4 * limit // 16:
-                break          # enough messages looked at; one direction is simply quiet
-            d = topic_dir.get(channels.get(rec.channel_id, ""))
-            if d is None or len(data[d]) >= limit:
-                if all(len(b) >= limit for b in data.values()):
-                    break
-                continue
-            try:
-                payload = json.loads(rec.data)
-                data[d] += base64.b64decode(payload.get("data", ""), validate=True)
-            except (ValueError, TypeError, AttributeError, binascii.Error, RecursionError):
-                continue
+    for channel, rec in iter_messages(status):
+        if status.metadata.get("conform.session", {}).get("variant"):
+            break          # the capture says what it is: no need to look at the bytes
+        seen += 1
+        if seen > 4 * limit // 16:
+            break          # enough messages looked at; one direction is simply quiet
+        d = topic_dir.get(channel.topic) if channel is not None else None
+        if d is None or len(data[d]) >= limit:
+            if all(len(b) >= limit for b in data.values()):
+                break
+            continue
+        try:
+            data[d] += payload_bytes(json.loads(rec.data))
+        except (ValueError, AttributeError, RecursionError):
+            continue
+    meta = dict(status.metadata.get("conform.session", {}))
     return bytes(data["host"][:limit]), bytes(data["unit"][:limit]), meta
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from conform.families import Detection, Family, VariantInfo
+from conform.families import Detection, Family, FleetColumn, VariantInfo
 
 
 class GrblFamily(Family):
@@ -61,6 +61,14 @@ class GrblFamily(Family):
         return None   # recorded raw; lines are paired when the capture is analysed
 
     pytest_plugin = None
+    # a fleet summary's grbl columns (GrblAnalysis.fleet_row): motion lines answered ok,
+    # hazards and planner starvations
+    fleet_columns = (
+        FleetColumn("vectors_accepted", "motion lines", total=True, rate="vectors_per_s",
+                    rate_label="motion lines/s", machines=False, sessions=False),
+        FleetColumn("hazards", "hazards", total=True, flag=True, summary=True),
+        FleetColumn("starvations", "starvations", total=True, summary=True),
+    )
     check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
 
     def check_sender_cli(self, *args: Any, **kw: Any) -> int:

@@ -11,7 +11,7 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
-from conform.families import Detection, Family, VariantInfo
+from conform.families import Detection, Family, FleetColumn, VariantInfo
 
 # a GVE command line: '!', an address digit, a mnemonic (GVE64 §13.5); answers: a hex status
 # code, maybe with comma-separated fields, ended by CR (GVE64 §13.7)
@@ -109,6 +109,17 @@ class GveFamily(Family):
         return make_decoder(variant, baud=baud)
 
     pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
+
+    # a fleet summary's GVE columns: vectors the unit accepted, hazards (findings of that
+    # severity) and the replayed queue's starvations and standstill (analysis/output.py)
+    fleet_columns = (
+        FleetColumn("vectors_accepted", "vectors accepted", total=True, rate="vectors_per_s",
+                    rate_label="vectors/s", machines=False, sessions=False),
+        FleetColumn("hazards", "hazards", total=True, flag=True, summary=True),
+        FleetColumn("starvations", "starvations", total=True, summary=True),
+        FleetColumn("starved_s", "starved s", ".3f", total=True, machines=False),
+        FleetColumn("standstill_s", "standstill s", ".3f", total=True, sessions=False),
+    )
 
     def characterize(self, target: str, output: str, variant: str | None, **options: Any
                      ) -> None:

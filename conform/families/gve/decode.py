@@ -27,9 +27,9 @@ import re
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from conform.capture.batch import EXCHANGE_KEYS, FRAME_KEYS
 from conform.capture.schemas import TOPIC_EXCHANGES, TOPIC_FRAMES
 from conform.capture.session import Record, escape_bytes, to_ns
+from conform.families.gve.capture_fields import CAPTURE_FIELDS, EXCHANGE_KEYS, FRAME_KEYS
 from conform.families.gve.protocol import Answer, Command, CommandParser, Rejection, parse_answer
 from conform.families.gve.protocol.checksum import split_checksum, verify
 from conform.families.gve.spec import Dialect, Variant, load_spec
@@ -268,6 +268,8 @@ class FrameDecoder:
     as records or dicts.
     """
 
+    fields = CAPTURE_FIELDS  # the capture columns of its rows, after the neutral ones
+
     def __init__(self, variant: Variant, dialect: Dialect | None = None) -> None:
         spec = load_spec()
         self.dialect = dialect if dialect is not None else spec.dialect()
@@ -370,8 +372,8 @@ class FrameDecoder:
         o = self.owed
         assert o is not None
         self.owed = None
-        self._exchange(("unanswered", o.text, o.name, None, None, None, o.t_last, None, None,
-                        o.offset, None, o.packet, o.packet_commands), o.t_last)
+        self._exchange(("unanswered", o.text, None, o.t_last, None, None, o.offset, None,
+                        o.name, None, None, o.packet, o.packet_commands), o.t_last)
 
     # -- host side -------------------------------------------------------------------------
     def _parse_command(self, raw: bytes) -> Command | Rejection:
@@ -528,11 +530,11 @@ class FrameDecoder:
                      _EMPTY, u.code, u.inta, u.fields, u.checksum, u.status, with_sum, packet,
                      role, u.error), t_last)
         if o is None:
-            self._exchange(("unsolicited", None, None, u.text, u.code, u.inta, None, t_first,
-                            None, None, offset, None, None), t_last)
+            self._exchange(("unsolicited", None, u.text, None, t_first, None, None, offset,
+                            None, u.code, u.inta, None, None), t_last)
         else:
-            self._exchange(("answered", o.text, o.name, u.text, u.code, u.inta, o.t_last,
-                            t_first, t_first - o.t_last, o.offset, offset, o.packet,
+            self._exchange(("answered", o.text, u.text, o.t_last, t_first, t_first - o.t_last,
+                            o.offset, offset, o.name, u.code, u.inta, o.packet,
                             o.packet_commands), t_last)
 
 

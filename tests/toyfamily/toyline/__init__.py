@@ -182,7 +182,7 @@ class ToyFamily(Family):
         return Detection(self.name, score, f"{known} of {len(words)} host lines are toy commands")
 
     def analyze(self, path: str, **options: Any) -> ToyAnalysis:
-        from conform.analysis.rawread import read_raw
+        from conform.analysis.stream import read_raw
 
         raw = read_raw(path)
         host = raw.host.data.tobytes()

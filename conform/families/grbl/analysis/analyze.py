@@ -363,7 +363,7 @@ def _starvation(exchanges: list[Exchange], reports: list[tuple[float, str]], blo
 def analyze_capture(path: str, *, variant: str | None = None, detected: str = "",
                     **_ignored: Any) -> GrblAnalysis:
     """Analyse a capture file of grbl traffic."""
-    from conform.analysis.rawread import read_raw
+    from conform.analysis.stream import read_raw
 
     return analyze_raw(read_raw(path), path, variant=variant, detected=detected)
 

@@ -22,9 +22,8 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from conform.analysis.plots import PlotData
-from conform.analysis.rawread import RawCapture, read_raw
-from conform.analysis.stream import RawStream, ReadStats
+from conform.analysis.rawread import RawCapture
+from conform.analysis.stream import RawStream, ReadStats, read_raw
 from conform.analysis.tables import ParquetStream
 from conform.capture.session import escape_bytes
 from conform.errors import UserError
@@ -42,6 +41,7 @@ from conform.families.gve.analysis.findings import (
     recovery_analysis,
 )
 from conform.families.gve.analysis.metrics import Metrics
+from conform.families.gve.analysis.plots import PlotData
 from conform.families.gve.analysis.positions import PositionCheck
 from conform.families.gve.analysis.queue import QueueReplay, StreamReplay, supply_consumption, whatif
 
@@ -97,8 +97,8 @@ class Analysis:
         sl = slice(lo, len(d) if hi is None else hi)
         df = frames_frame(d, self.t0, sl)
         if direction == "host":
-            df["packet"] = self.exchanges["packet"].to_numpy()[sl]
-            df["packet_role"] = self.exchanges["packet_role"].to_numpy()[sl]
+            for k in PACKET_COLUMNS:
+                df[k] = self.exchanges[k].to_numpy()[sl]
         return df
 
     def chunks(self, direction: str) -> pd.DataFrame:
@@ -125,6 +125,34 @@ class Analysis:
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
+
+    # what the engine asks of any family's analysis (conform.families.AnalysisResult)
+
+    def summary_lines(self) -> list[str]:
+        from conform.families.gve.analysis.output import summary_lines
+
+        return summary_lines(self)
+
+    def plots(self) -> dict[str, str]:
+        from conform.families.gve.analysis.plots import gve_plots
+
+        return gve_plots(self)
+
+    def write_report(self, directory: str | os.PathLike[str]) -> dict[str, Any]:
+        from conform.families.gve.analysis.output import write_report
+
+        return write_report(self, directory)
+
+    def write_tables(self, directory: str | os.PathLike[str], row_group: int | None = None
+                     ) -> dict[str, Any]:
+        from conform.families.gve.analysis.output import write_tables
+
+        return write_tables(self, directory, row_group)
+
+    def fleet_row(self) -> dict[str, Any]:
+        from conform.families.gve.analysis.output import fleet_row
+
+        return fleet_row(self)
 
 
 def frames_frame(d: fr.DecodedLines, t0: float, sl: slice = slice(None), base: int = 0,
@@ -167,6 +195,8 @@ def _dialect_from(spec: Any, text: str) -> Any:
     return spec.dialect(choices)
 
 
+PACKET_COLUMNS = ("packet", "packet_role")  # a host line's packet, in its frames table
+CODED = frozenset({"packet_role"})  # its text columns written dictionary-encoded in Parquet
 KEEP_ROWS = 200_000  # command lines up to which the whole tables are kept (``Analysis``)
 FORCE_ROWS = 262_144  # rows waiting behind an undecided vector before it is judged anyway
 
@@ -273,7 +303,8 @@ class _Session:
         u_lo, u_hi = (int(ou[0]), int(ou[-1]) + 1) if len(ou) else (0, 0)
         hsub, usub = th.take(own_lo, own_hi), tu.take(u_lo, u_hi)
         if self.parquet is not None:
-            self.parquet.write(rows, hsub, usub, self.unit_tail_g + u_lo, frames_frame)
+            self.parquet.write(rows, hsub, usub, self.unit_tail_g + u_lo, frames_frame,
+                               {k: rows[k].to_numpy() for k in PACKET_COLUMNS})
         self.replay.feed(ex, acc, th.result, own_lo, own_hi, self.tail_g)
         self.metrics.feed_rows(rows, acc_own)
         self.metrics.feed_lines(hsub)
@@ -522,9 +553,11 @@ def _sink(parquet: Any, old: ParquetStream | None = None) -> ParquetStream | Non
         for w in old.writers.values():
             w.close()
         old.writers, old.t0 = {}, None
-    if parquet is None or isinstance(parquet, ParquetStream):
-        return parquet
-    return ParquetStream(parquet)
+    sink = parquet if parquet is None or isinstance(parquet, ParquetStream) \
+        else ParquetStream(parquet)
+    if sink is not None:
+        sink.coded |= CODED
+    return sink
 
 
 def _events(rep: QueueReplay) -> Any:

@@ -910,8 +910,8 @@ class StreamReplay:
 
     def stop_keeping(self) -> None:
         """From now on only summaries: what was kept goes to the sink and the plot series."""
-        from conform.analysis.plots import PathSample
         from conform.analysis.summaries import Extremes
+        from conform.families.gve.analysis.plots import PathSample
 
         self.keep = False
         self.depth_x = Extremes()
