@@ -62,6 +62,7 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     from conform.sendercheck.grade import check, default_family, family_for
     from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
     from conform.sendercheck.report import write_reports
+    from conform.stops import shield
 
     if "list" in scenarios:
         shapes = family_for(variant) if variant else default_family()
@@ -79,11 +80,14 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     results = check(list(command), variant=variant, names=list(scenarios) or None,
                     directory=directory, timeout=timeout, seed=seed, job_lines=job_lines,
                     progress=say)
-    write_reports(results, directory)
+    with shield():   # the report of what finished, even while a signal stops us
+        write_reports(results, directory)
     if as_json:
         click.echo(json.dumps(results.to_json(), indent=1, default=str))
     else:
         counts = ", ".join(f"{g} {n}" for g, n in sorted(results.counts().items()))
         click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: {counts}")
+        if results.interrupted:
+            click.echo(f"INCOMPLETE: {results.interrupted}")
         click.echo(f"report: {directory / 'index.html'}")
-    sys.exit(results.exit_code)
+    sys.exit(results.exit_code)   # an interruption's status (128 + N) replaces it (cli.main)

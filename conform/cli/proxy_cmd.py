@@ -12,6 +12,7 @@ from conform.capture.live import ProxyCapture, run_until_signal
 from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
 from conform.cli.progress import progress, recording
 from conform.errors import LinkError
+from conform.stops import STOP_SIGNALS
 
 
 @click.command(name="proxy")
@@ -52,7 +53,7 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
                          reconnect=reconnect, link=link)
     # a sender may start on the pty and stop us before run_until_signal is reached: from the
     # moment the path is out, SIGINT/SIGTERM end the recording cleanly
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         signal.signal(sig, lambda _signum, _frame: proxy.stop())
     with progress("conform proxy", quiet=quiet) as bar:
         recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")

@@ -26,6 +26,7 @@ from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
 from conform.errors import UserError
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
+from conform.stops import shield
 
 
 @click.command(name="run")
@@ -93,9 +94,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     aborted = next((r.aborted for r in runs if r.aborted), None)
     results = results_of(runs, command, mutant_report)
     out = Path(report_dir) if report_dir else default_dir()
-    write_reports(results, out)
-    if not report_dir:
-        link_latest(out)
+    with shield():   # a second signal must not cut the report of an interrupted run short
+        write_reports(results, out)
+        if not report_dir:
+            link_latest(out)
     code = 2 if aborted is not None else 1 if results.failed() else 0
     if as_json:
         echo_json(results.to_json() | {"report": str(out), "exit": code})

@@ -233,18 +233,19 @@ def _stream(items: list, var: object, port: object, target: str, checksums: bool
 
     from conform.families.gve.sender.core import Sender
     from conform.families.gve.sender.links import halt_and_delete, run_serial
+    from conform.stops import interrupted_by
 
     sender = Sender(items, var, policy=policy, checksums=checksums, packet=packet,  # type: ignore[arg-type]
                     timeout=timeout / 1000.0)
     progress = Progress(sender)
     try:
         run_serial(sender, port, latency=latency / 1000.0, on_progress=progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP (conform.stops)
         answers = halt_and_delete(sender, port)
         port.close()
         shown = ", ".join(a.decode("ascii", "replace").strip() or "(none)" for a in answers)
-        raise UserError(f"interrupted: sent H and D to leave the unit halted (answers: {shown})",
-                        exit_code=130) from None
+        raise UserError(f"interrupted ({interrupted_by(exc)}): sent H and D to leave the unit "
+                        f"halted (answers: {shown})", exit_code=130) from None
     except (serial.SerialException, OSError) as exc:
         raise LinkError(f"{target}: {exc}") from None
     if progress.shown:

@@ -22,6 +22,7 @@ td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
 <h1>check-sender: {{ r.command }}</h1>
 <p>variant {{ r.variant }} ({{ r.family }}), {{ "%.1f"|format(r.duration) }} s, exit status
 {{ r.exit_code }}; {% for g, n in counts.items() %}{{ g }} {{ n }}{% if not loop.last %}, {% endif %}{% endfor %}</p>
+{% if r.interrupted %}<p class="abort"><b>INCOMPLETE:</b> {{ r.interrupted }}</p>{% endif %}
 <h2>Rules × scenarios</h2><table><tr><th>rule</th><th>level</th><th>clause</th>
 {% for s in r.scenarios %}<th>{{ s.name }}</th>{% endfor %}</tr>
 {% for rule, cells in matrix %}<tr><td>{{ rule.rule }}<br><small>{{ rule.title }}</small></td>
@@ -61,6 +62,7 @@ def render_html(r: CheckResults) -> str:
 def render_markdown(r: CheckResults) -> str:
     out = ["# check-sender summary", "", f"`{' '.join(r.command)}`", "",
            f"variant {r.variant}, {r.duration:.1f} s, exit status {r.exit_code}", "",
+           *([f"**INCOMPLETE**: {r.interrupted}", ""] if r.interrupted else []),
            "| rule | level | clause | " + " | ".join(s.name for s in r.scenarios) + " |",
            "|---|---|---|" + "---|" * len(r.scenarios)]
     for _v, cells in _matrix(r):
