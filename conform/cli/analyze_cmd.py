@@ -15,7 +15,7 @@ from conform.cli.params import (
     json_option,
 )
 from conform.cli.progress import progress as show_progress
-from conform.errors import UserError
+from conform.errors import UserError, writable_folder
 
 
 @click.command(name="analyze")
@@ -66,6 +66,10 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
 
+    if report_dir:   # before the analysis: a folder that cannot be written is one line now
+        writable_folder(report_dir, "--report")
+    if parquet_dir:
+        writable_folder(parquet_dir, "--parquet")
     if len(files) > 1 or os.path.isdir(files[0]):
         with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
             bar.task(f"analysing {len(files)} inputs" if len(files) > 1 else

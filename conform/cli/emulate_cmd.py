@@ -12,6 +12,7 @@ import sys
 
 import click
 
+from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import BAUD, INPUT_FILE, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
 from conform.errors import UserError
 
@@ -71,10 +72,12 @@ def cli() -> None:
 @click.option("--truth", "truth_path", default=None, metavar="FILE.json",
               help="On exit, write what the unit accepted and executed (every vector, D/K/R/"
                    "H/G/J, final position) as JSON: the ground truth beside a recording.")
+@force_option("the --record file")
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pairs: tuple[str, ...],
               profile: str | None, faults: str | None, seed: int | None,
               control_path: str | None, link_path: str | None, record_path: str | None,
-              switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None) -> None:
+              switch_pairs: tuple[str, ...], answer_delay: float, truth_path: str | None,
+              force: bool) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
 
     \b
@@ -84,6 +87,7 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, dialect_pair
     """
     from conform.families import DEFAULT_FAMILY, family_for_variant
 
+    fresh_output(record_path, force, "--record")
     fam = family_for_variant(variant)
     if fam.name != DEFAULT_FAMILY and (dialect_pairs or profile or switch_pairs or truth_path):
         raise UserError("--dialect, --profile, --switch and --truth apply to GVE units only")

@@ -24,7 +24,7 @@ from conform.cli.params import (
 from conform.conformance.results import Grade
 from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
-from conform.errors import UserError
+from conform.errors import UserError, writable_folder
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 from conform.stops import shield
 
@@ -77,6 +77,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     """
     from conform.families import DEFAULT_FAMILY
 
+    if report_dir:   # before the run: a folder that cannot be written is one line now
+        writable_folder(report_dir, "--report")
     fam = _family_of(targets, variant)
     if fam.name != DEFAULT_FAMILY and (mutants or matrix or replay or dialect_file):
         raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")

@@ -7,6 +7,7 @@ import time
 
 import click
 
+from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import (
     BAUD,
     INPUT_FILE,
@@ -120,10 +121,11 @@ def _finish(sender: object) -> None:
               help="G-code: skip words outside the subset and what cannot be read.")
 @click.option("--allow-motion", is_flag=True,
               help="Required to send motion to anything but an emulator.")
+@force_option("the --record file")
 def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, packet: int,
         policy: str, latency: float, timeout: float, noise: float, seed: int,
         corrupt_command: str, corrupt_answer: str, record: str | None, steps_per_mm: str,
-        feed: float, accel: float, lenient: bool, allow_motion: bool) -> None:
+        feed: float, accel: float, lenient: bool, allow_motion: bool, force: bool) -> None:
     """Stream JOB (one command per line, or .nc/.gcode) and report what happened.
 
     \b
@@ -134,6 +136,7 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
     from conform.families.gve.sender.job import load_job
     from conform.families.gve.spec import load_spec
 
+    fresh_output(record, force, "--record")
     spec = load_spec()
     emu = target.startswith("emu:")
     vid = (target[4:] if emu else None) or variant or "gve64-v19"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from conform.errors import UserError, read_user_text
+from conform.errors import UserError, read_user_text, writable_folder
 
 MAX_TIMEOUT_S = 86400
 
@@ -40,5 +40,5 @@ def report_folder(report_dir: str | None) -> Path:
     from conform.report.render import default_dir
 
     if report_dir:
-        return Path(report_dir)
-    return default_dir().with_name("check-sender-" + default_dir().name)
+        return writable_folder(report_dir, "--report")
+    return writable_folder(default_dir().with_name("check-sender-" + default_dir().name))
