@@ -66,7 +66,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
         inputs_control: str | None, quiet: bool, as_json: bool) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
-    usage or link error (or a run that stopped early).
+    usage or link error, a check that could not be run (ERROR) or a run that stopped early.
 
     \b
     Examples:
@@ -100,7 +100,9 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         write_reports(results, out)
         if not report_dir:
             link_latest(out)
-    code = 2 if aborted is not None else 1 if results.failed() else 0
+    # a FAIL is about the unit (1); an ERROR says a check could not be run at all (2)
+    code = (2 if aborted is not None else 1 if results.failed() else
+            2 if results.errored() else 0)
     if as_json:
         echo_json(results.to_json() | {"report": str(out), "exit": code})
     _print_summary(results, out, err=as_json)
@@ -131,6 +133,8 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
         for c in r.checks:
             if c.grade is Grade.FAIL:
                 echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+            elif c.grade is Grade.ERROR:
+                echo(f"  ERROR {c.id}: {c.detail.splitlines()[0] if c.detail else 'no detail'}")
         if r.aborted:
             echo(f"  INCOMPLETE: {r.aborted}")
     if results.mutants:

@@ -3,6 +3,7 @@ family judges the sender: one-line errors naming the option or file."""
 
 from __future__ import annotations
 
+import shlex
 import shutil
 from pathlib import Path
 
@@ -18,11 +19,16 @@ def require_program(command: list[str]) -> None:
                         "(`{port}` in ARGS becomes the device path)")
     if shutil.which(command[0]) is None:
         raise UserError(f"{command[0]}: no such program (not found or not executable)")
+    if not any("{port}" in arg or "CONFORM_PORT" in arg for arg in command):
+        raise UserError(f"no {{port}} in `{shlex.join(command)}`: write {{port}} where the "
+                        "program takes the device path (a program that reads $CONFORM_PORT "
+                        "itself: -- env CONFORM_PORT={port} PROGRAM ...)")
 
 
 def check_timeout(timeout: float | None) -> None:
     if timeout is not None and not 0 < timeout <= MAX_TIMEOUT_S:
-        raise UserError(f"--timeout {timeout:g}: must be between 0 and {MAX_TIMEOUT_S} seconds")
+        raise UserError(f"--timeout {timeout:g}: seconds, more than 0 and at most "
+                        f"{MAX_TIMEOUT_S}")
 
 
 def read_job(job_file: str | None) -> list[str] | None:
