@@ -51,22 +51,15 @@ def test_run_1_when_a_check_fails(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_run_2_when_a_check_could_not_be_run(tmp_path):
+def test_run_2_when_a_check_could_not_be_run(tmp_path, emulate):
     """--inputs-control naming no socket: the checks needing inputs are ERRORs, not passes."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", "gve64-v19",
-                            "--baud", "115200"], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True, env=env)
-    try:
-        pty = emu.stdout.readline().strip()
-        run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", pty,
-                              "--inputs-control", str(tmp_path / "no.sock"), "--check",
-                              "*/SR/interrupt", "--no-machine", "--allow-motion", "--max-steps",
-                              "2000", "-q", "--report", str(tmp_path / "r")],
-                             capture_output=True, text=True, env=env, timeout=120)
-    finally:
-        emu.terminate()
-        emu.wait(10)
+    _, pty = emulate("serve", "gve64-v19", "--baud", "115200")
+    run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", pty,
+                          "--inputs-control", str(tmp_path / "no.sock"), "--check",
+                          "*/SR/interrupt", "--no-machine", "--allow-motion", "--max-steps",
+                          "2000", "-q", "--report", str(tmp_path / "r")],
+                         capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(REPO)})
     assert run.returncode == 2, run.stderr
     assert re.search(r"ERROR \S+/SR/interrupt: HarnessError: --inputs-control", run.stdout)
     assert (tmp_path / "r" / "results.json").exists()
@@ -159,21 +152,13 @@ def test_capture_recover_0_after_a_salvage_1_when_nothing_is_left(tmp_path, caps
 
 # -- emulate control, spec, profile, report, ports ------------------------------------------------
 
-def test_emulate_control_0_ok_1_refused(tmp_path, capsys):
+def test_emulate_control_0_ok_1_refused(tmp_path, capsys, emulate):
     sock = str(tmp_path / "emu.sock")
-    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", "gve64-v19",
-                            "--control", sock], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True,
-                           env={**os.environ, "PYTHONPATH": str(REPO)})
-    try:
-        assert emu.stdout.readline().startswith("/dev/")
-        code, out, _ = _code(["emulate", "control", sock, "press", "stop"], capsys)
-        assert code == 0 and out.startswith("ok")
-        code, out, _ = _code(["emulate", "control", sock, "press", "no-such-input"], capsys)
-        assert code == 1 and out.startswith("error")
-    finally:
-        emu.terminate()
-        emu.wait(10)
+    emulate("serve", "gve64-v19", "--control", sock)
+    code, out, _ = _code(["emulate", "control", sock, "press", "stop"], capsys)
+    assert code == 0 and out.startswith("ok")
+    code, out, _ = _code(["emulate", "control", sock, "press", "no-such-input"], capsys)
+    assert code == 1 and out.startswith("error")
 
 
 def test_spec_check_0_valid_2_for_a_bad_row(tmp_path, capsys):

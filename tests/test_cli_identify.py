@@ -32,22 +32,15 @@ def test_identify_sees_through_what_a_previous_session_left(left):
 
 
 @pytest.mark.slow
-def test_run_identifies_a_unit_left_with_checksums_on(tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", "gve124",
-                            "--baud", "115200"], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True, env=env)
-    try:
-        pty = emu.stdout.readline().strip()
-        with serial.Serial(pty, 115200, timeout=0.5) as port:   # a session that ended badly
-            port.write(b"!0%+\r")
-            assert port.read_until(b"\r") == b"0,5C\r"
-        run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", pty,
-                              "--check", "*/V/valid", "--no-machine", "--json", "-q"],
-                             capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
-    finally:
-        emu.terminate()
-        emu.wait(10)
+def test_run_identifies_a_unit_left_with_checksums_on(tmp_path, emulate):
+    _, pty = emulate("serve", "gve124", "--baud", "115200")
+    with serial.Serial(pty, 115200, timeout=0.5) as port:   # a session that ended badly
+        port.write(b"!0%+\r")
+        assert port.read_until(b"\r") == b"0,5C\r"
+    run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", pty, "--check",
+                          "*/V/valid", "--no-machine", "--json", "-q"], capture_output=True,
+                         text=True, cwd=tmp_path, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(REPO)})
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
     assert doc["runs"][0]["variant"] == "gve124"
