@@ -71,6 +71,9 @@ def test_run_2_when_a_check_could_not_be_run(tmp_path, emulate):
     (["--", "true"], "no {port} in `true`"),
     (["--timeout", "0", "--", "true", "{port}"], "--timeout 0: seconds, more than 0 and at most"),
     (["--variant", "grbl-1.1f", "--", "true"], "no {port} in `true`"),
+    (["--job", JOB, "--", "true", "{port}"], "is it a job of another family?"),   # g-code
+    (["--variant", "grbl-1.1f", "--job", str(REPO / "captures" / "jobs" / "raster.txt"), "--",
+      "true", "{port}"], "no line of it is a move a grbl unit executes"),     # GVE vectors
 ])
 def test_check_sender_2_for_a_usage_mistake(args, says, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)

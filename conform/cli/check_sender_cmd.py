@@ -60,7 +60,13 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     import json
 
     from conform.sendercheck.grade import check, default_family, family_for
-    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
+    from conform.sendercheck.options import (
+        check_timeout,
+        job_of_family,
+        read_job,
+        report_folder,
+        require_program,
+    )
     from conform.sendercheck.report import write_reports
     from conform.stops import shield
 
@@ -72,6 +78,8 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     require_program(list(command))
     check_timeout(timeout)
     job_lines = read_job(job_file)
+    shapes = family_for(variant) if variant else default_family()
+    job_of_family(job_lines, job_file, len(shapes.vectors(job_lines or [])), shapes.name)
     directory = report_folder(report_dir)
 
     def say(msg: str) -> None:

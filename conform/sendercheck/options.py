@@ -31,6 +31,16 @@ def check_timeout(timeout: float | None) -> None:
                         f"{MAX_TIMEOUT_S}")
 
 
+def job_of_family(lines: list[str] | None, job_file: str | None, moves: int, family: str
+                  ) -> None:
+    """A ``--job`` in which the family finds nothing its unit would execute (``moves`` 0) is
+    another family's (a g-code file for a vector unit, or the reverse): a usage error, not a
+    sender that fails every rule."""
+    if lines is not None and not moves:
+        raise UserError(f"--job {job_file}: no line of it is a move a {family} unit executes; "
+                        "is it a job of another family?")
+
+
 def read_job(job_file: str | None) -> list[str] | None:
     """The non-blank lines of ``--job`` (None without one)."""
     if job_file is None:

@@ -133,7 +133,13 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
 
     from conform.conformance.suite import results_of
     from conform.report.render import write_reports
-    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
+    from conform.sendercheck.options import (
+        check_timeout,
+        job_of_family,
+        read_job,
+        report_folder,
+        require_program,
+    )
     from conform.stops import shield
 
     names = [n for x in scenarios for n in x.split(",") if n]
@@ -145,6 +151,7 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
     check_timeout(timeout)
     load_grbl().variant(variant)
     job = read_job(job_file)
+    job_of_family(job, job_file, sum(map(_moves, job or [])), "grbl")
     out = report_folder(report_dir)
     run = check_sender(command, variant=variant, scenarios=names or None, job=job,
                        timeout=timeout, directory=out, seed=seed, progress=progress)
@@ -162,6 +169,16 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
             echo(f"INCOMPLETE: {run.aborted}")
         echo(f"report: {out / 'index.html'}")
     return 1 if results.failed() else 0
+
+
+def _moves(line: str) -> bool:
+    """A line of g-code with a motion, axis or machine word (what a grbl job is made of)."""
+    from conform.families.grbl.gcode import GcodeError, strip_line, words
+
+    try:
+        return any(w[0] in "GMXYZ" for w in words(strip_line(line.encode("latin-1"))[0]))
+    except (GcodeError, UnicodeEncodeError):
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:
