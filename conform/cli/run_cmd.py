@@ -98,7 +98,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     out = Path(report_dir) if report_dir else default_dir()
     with shield():   # a second signal must not cut the report of an interrupted run short
         write_reports(results, out)
-        if not report_dir:
+        if not report_dir and not replay:   # a one-check replay leaves the last run's report
             link_latest(out)
     # a FAIL is about the unit (1); an ERROR says a check could not be run at all (2)
     code = (2 if aborted is not None else 1 if results.failed() else

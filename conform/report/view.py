@@ -107,14 +107,40 @@ def by_section(checks: list[CheckResult]) -> list[Section]:
                   key=lambda s: (manuals[_clause_key(s.clause)[0]], _clause_key(s.clause)))
 
 
-def replay_command(c: CheckResult) -> str:
-    """The command that re-runs one check on the same target (with its seed if it has one)."""
+# the options of the run a replay must keep, or on a real unit the check only SKIPs (no
+# --allow-motion), runs at another speed (--baud) or cannot drive the inputs it needs
+REPLAY_FLAGS = ("--allow-motion", "--allow-eeprom")
+REPLAY_VALUES = ("--max-steps", "--inputs-control", "--baud", "--dialect")
+
+
+def replay_command(c: CheckResult, command: str = "") -> str:
+    """The command that re-runs one check on the same target (with its seed if it has one),
+    with the options of the run (``command``, as typed) that the check depends on."""
     token = c.replay or c.id
     if c.seed is not None and "@" not in token:
         token = f"{token}@{c.seed}"
     target = c.target or f"emu:{c.variant}"
     return (f"conform run --target {shlex.quote(target)} --variant {shlex.quote(c.variant)} "
-            f"--replay {shlex.quote(token)}")
+            f"--replay {shlex.quote(token)}" + "".join(f" {shlex.quote(a)}"
+                                                       for a in _kept_options(command)))
+
+
+def _kept_options(command: str) -> list[str]:
+    """The :data:`REPLAY_FLAGS` and :data:`REPLAY_VALUES` given in ``command``."""
+    try:
+        argv = shlex.split(command)
+    except ValueError:
+        return []
+    kept: list[str] = []
+    for i, arg in enumerate(argv):
+        name, eq, _ = arg.partition("=")
+        if arg in REPLAY_FLAGS:
+            kept.append(arg)
+        elif name in REPLAY_VALUES and eq:
+            kept.append(arg)
+        elif arg in REPLAY_VALUES and i + 1 < len(argv):
+            kept += [arg, argv[i + 1]]
+    return kept
 
 
 _HOW = (

@@ -57,4 +57,4 @@ def report_folder(report_dir: str | None) -> Path:
 
     if report_dir:
         return writable_folder(report_dir, "--report")
-    return writable_folder(default_dir().with_name("check-sender-" + default_dir().name))
+    return writable_folder(default_dir(prefix="check-sender-"))
