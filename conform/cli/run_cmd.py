@@ -125,13 +125,23 @@ def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
+    from conform.report.view import causes
+
     echo = partial(click.echo, err=err)
+    grouped = causes(results)
     for r in results.runs:
         counts = r.counts()
         shown = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
         echo(f"{r.target} ({r.variant}, {r.profile}): {shown} in {r.duration:.1f} s")
+        for note in r.notes:
+            if note.startswith("hint: "):
+                echo(f"  {note}")
+        told = set()
+        for cause in (g for g in grouped if g.checks[0].target == r.target):
+            echo(f"  FAIL ×{len(cause.checks)} {cause.sentence()}")
+            told.update(id(c) for c in cause.checks)
         for c in r.checks:
-            if c.grade is Grade.FAIL:
+            if c.grade is Grade.FAIL and id(c) not in told:
                 echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
             elif c.grade is Grade.ERROR:
                 echo(f"  ERROR {c.id}: {c.detail.splitlines()[0] if c.detail else 'no detail'}")

@@ -82,7 +82,7 @@ def render_html(results: RunResults) -> str:
         return [(key, next(c.level for c in row if c), row)
                 for key, row in _rows(results, section.checks)]
 
-    env.globals.update(anchor=anchor, log_lines=view.log_lines,
+    env.globals.update(anchor=anchor, log_lines=view.log_lines, differing=view.differing,
                        replay=lambda c: view.replay_command(c, results.command),
                        rows_of=rows_of)
     columns, section_rows = view.section_matrix(results)
@@ -95,6 +95,7 @@ def render_html(results: RunResults) -> str:
         problems=problems, n_problems=sum(len(s.checks) for s in problems),
         deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
         columns=columns, section_rows=section_rows, n_checks=len(results.checks),
+        causes=view.causes(results),
         grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
     )
 
@@ -156,6 +157,10 @@ def render_markdown(results: RunResults) -> str:
     out += [f"## Failures ({sum(len(s.checks) for s in problems)})", ""]
     if not problems:
         out.append("No FAIL and no ERROR.")
+    for cause in view.causes(results):
+        out.append(f"- **Likely one cause:** {cause.sentence()}")
+    if problems:
+        out.append("")
     for s in problems:
         out += [f"### {s.clause} ({', '.join(s.commands)})", ""]
         for c in s.checks:

@@ -271,6 +271,65 @@ def problems(results: RunResults) -> list[Section]:
     return by_section(chosen)
 
 
+@dataclass
+class Cause:
+    """FAILs with one root cause: the unit gave the same wrong answer code to many checks
+    (``VL, VK, VN, XM answered 3 where 0 was expected``: commands this unit does not know, not
+    thirty separate faults)."""
+
+    actual: str
+    expected: list[str] = field(default_factory=list)
+    checks: list[CheckResult] = field(default_factory=list)
+
+    @property
+    def commands(self) -> list[str]:
+        return Section("", self.checks).commands
+
+    def sentence(self) -> str:
+        n = len(self.checks)
+        wanted = " or ".join(self.expected)
+        return (f"{', '.join(self.commands)} answered {self.actual} where {wanted} was "
+                f"expected: one cause, {n} checks")
+
+
+CAUSE_MIN = 3   # this many FAILs with the same wrong answer code are shown as one cause
+
+
+def answer_code(text: str) -> str:
+    """The code of an exchange's answer: ``!0VL1000 → 3,5F`` → ``3``."""
+    answer = str(text).rsplit("→", 1)[-1].strip()
+    return answer.split(",", 1)[0].strip()
+
+
+def causes(results: RunResults) -> list[Cause]:
+    """FAILs grouped by the answer code the unit gave where another was expected, per target,
+    largest first; only groups of :data:`CAUSE_MIN` or more."""
+    groups: dict[tuple[str, str], Cause] = {}
+    for c in results.checks:
+        if c.grade is not Grade.FAIL or not c.actual:
+            continue
+        exp, act = answer_code(c.expected), answer_code(c.actual)
+        if exp and act and exp != act:
+            g = groups.setdefault((c.target, act), Cause(act))
+            g.checks.append(c)
+            if exp not in g.expected:
+                g.expected.append(exp)
+    return sorted((g for g in groups.values() if len(g.checks) >= CAUSE_MIN),
+                  key=lambda g: -len(g.checks))
+
+
+def differing(expected: str, actual: str) -> tuple[str, str, str, str]:
+    """(common start, expected's middle, actual's middle, common end): what to highlight."""
+    a, b = str(expected), str(actual)
+    i = 0
+    while i < min(len(a), len(b)) and a[i] == b[i]:
+        i += 1
+    j = 0
+    while j < min(len(a), len(b)) - i and a[len(a) - 1 - j] == b[len(b) - 1 - j]:
+        j += 1
+    return a[:i], a[i:len(a) - j], b[i:len(b) - j], a[len(a) - j:]
+
+
 def deviations(results: RunResults) -> list[Section]:
     return by_section([c for c in results.checks if c.grade is Grade.DEVIATION])
 

@@ -84,6 +84,8 @@ def run_targets(targets: list[str], variant: str | None, *, baud: int = 115200,
                 if vid is None:
                     vid, how = identify(target, spec)
                     notes.append(f"variant: {how}")
+                else:
+                    notes += _other_variant(target, spec, vid, implied)
                 checks = suite(spec, vid, patterns=patterns, guard=guard,
                                machine=not no_machine, profile=profile)
                 if exact is not None:  # ids hold glob characters (?, *S): match exactly
@@ -118,6 +120,20 @@ def run_targets(targets: list[str], variant: str | None, *, baud: int = 115200,
                 spec, variants, profile=profile, seed=seed,
                 progress=lambda s: task.update(advance=1, step=s))
     return runs, mutant_report
+
+
+def _other_variant(target, spec, vid: str, implied: str | None) -> list[str]:  # noqa: ANN001
+    """A hint, said first, when the unit is another variant than the one asked for: then most
+    FAILs are the variants' differences, not faults of the unit."""
+    if implied is not None:
+        found, how = implied, f"the target is {target.name}"
+    else:
+        found, how = identify(target, spec)
+        if "assumed" in how:   # no firmware string the tables know: nothing to say
+            return []
+    if found == vid:
+        return []
+    return [f"hint: {how}, not {vid}: try --variant {found}"]
 
 
 def _step(task, checks):  # noqa: ANN001, ANN202 - a progress Task, the checks in run order
