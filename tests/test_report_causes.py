@@ -58,3 +58,37 @@ def test_the_differing_bytes_are_marked():
     assert differing("0,IP64MPG v19 10.9.2010", "0,IP64MPG v10") == (
         "0,IP64MPG v1", "9 10.9.201", "", "0")
     assert differing("same", "same") == ("same", "", "", "")
+
+
+def test_a_passing_emulator_run_says_what_it_proves(tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["run", "--check", "*/V/valid", "--no-machine", "-q", "--report",
+              str(tmp_path / "r")])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert "checks the reference model against the tables it was built from" in out
+    assert "says nothing about a real unit" in out
+    html = (tmp_path / "r" / "index.html").read_text()
+    assert 'id="scope"' in html[:html.index('id="failures"')]
+
+
+@pytest.mark.slow
+def test_check_sender_names_its_verdict_and_every_rule_short_of_pass(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    hang = str(repo / "tests" / "senders" / "hang.py")
+    p = subprocess.run([sys.executable, "-m", "conform", "check-sender", "--scenario", "clean",
+                        "--timeout", "2", "--report", str(tmp_path / "r"), "--",
+                        sys.executable, hang, "{port}", "{job}"], capture_output=True,
+                       text=True, timeout=120, cwd=tmp_path)
+    assert p.returncode == 1, p.stderr
+    assert "  WARN clean/queue-fed (SHOULD" in p.stdout    # was only "WARN 1" in the counts
+    assert "  FAIL clean/terminates (MUST" in p.stdout
+    html = (tmp_path / "r" / "index.html").read_text()
+    title = html[html.index("<title>") + 7:html.index("</title>")]
+    assert title.startswith("check-sender FAIL: ") and "[" not in title   # not a Python list
+    assert '<span class="FAIL badge">FAIL</span>' in html
+    assert (tmp_path / "r" / "summary.md").read_text().startswith("# check-sender summary: FAIL")

@@ -94,6 +94,10 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
         click.echo(json.dumps(results.to_json(), indent=1, default=str))
     else:
         counts = ", ".join(f"{g} {n}" for g, n in sorted(results.counts().items()))
+        for v in results.verdicts:   # every verdict short of PASS, named
+            if v.grade in ("FAIL", "ERROR", "WARN"):
+                click.echo(f"  {v.grade} {v.scenario}/{v.rule} ({v.level}, {v.clause}): "
+                           f"{v.detail}")
         click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: {counts}")
         if results.interrupted:
             click.echo(f"INCOMPLETE: {results.interrupted}")

@@ -125,7 +125,7 @@ def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
-    from conform.report.view import causes
+    from conform.report.view import causes, headline
 
     echo = partial(click.echo, err=err)
     grouped = causes(results)
@@ -155,4 +155,7 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
                 echo(f"  SURVIVED {m['name']} ({m['fault']})")
     for line in not_verified_lines(results):
         echo(line)
+    scope = headline(results).scope
+    if scope:
+        echo(scope)
     echo(f"report: {out / 'index.html'}")

@@ -132,6 +132,8 @@ def render_markdown(results: RunResults) -> str:
     if results.command:
         out += [f"`{results.command}`", ""]
     out += [f"**{head.text}**", ""]
+    if head.scope:
+        out += [head.scope, ""]
     out += [f"> **Incomplete run.** {why}" for why in head.incomplete]
     if head.incomplete:
         out.append("")

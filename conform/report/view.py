@@ -198,6 +198,13 @@ class Headline:
     verdict: str  # FAIL | ERROR | PASS | INCOMPLETE
     text: str
     incomplete: list[str]
+    scope: str = ""   # what the verdict proves, when that is less than it seems
+
+
+EMULATED_SCOPE = (
+    "Every target was an emulator (emu:): this run checks the reference model against the "
+    "tables it was built from — the checks and the model agree. It says nothing about a real "
+    "unit; for that, run the same checks with --target on its serial port.")
 
 
 def headline(results: RunResults) -> Headline:
@@ -215,7 +222,10 @@ def headline(results: RunResults) -> Headline:
         verdict = "ERROR"
     else:
         verdict = "PASS"
-    return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete)
+    scope = EMULATED_SCOPE if results.runs and all(r.emulated for r in results.runs) else ""
+    if any(r.target.count(":") > 1 for r in results.runs):
+        scope = ""   # emu:VARIANT:MUTANT, a deviant unit: the run is about the checks' power
+    return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete, scope)
 
 
 @dataclass
