@@ -180,11 +180,15 @@ def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | No
     s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
                       scheduler=scheduler)
     t = s["totals"]
-    echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
-         f"exchanges, {t['hazards']} hazards, {t['errors']} not analysed")
+    from conform.analysis.fleet import count
+
+    echo(f"{count(t['sessions'], 'capture')} on {count(t['machines'], 'machine')}: "
+         f"{count(t['exchanges'], 'exchange')}, {count(t['hazards'], 'hazard')}, "
+         f"{t['errors']} not analysed")
     for m in s["machines"]:
-        echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges, "
-             f"{m['hazards']} hazards, {m['starvations']} starvations"
+        echo(f"  {m['machine']}: {count(m['sessions'], 'session')}, "
+             f"{count(m['exchanges'], 'exchange')}, {count(m['hazards'], 'hazard')}, "
+             f"{count(m['starvations'], 'starvation')}"
              + (f", {m['damaged']} damaged" if m["damaged"] else "")
              + (f", {m['errors']} not analysed" if m["errors"] else ""))
     for r in s["sessions"]:
