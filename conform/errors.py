@@ -1,5 +1,7 @@
 """User-facing errors: one line, a non-zero exit, never a traceback."""
 
+import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -62,3 +64,22 @@ def load_user_file(path: str | Path, parse: Callable[[str], Any], *, max_bytes: 
 
 class LinkError(UserError):
     """The serial link or endpoint could not be opened or failed."""
+
+
+def writable_folder(path: str | os.PathLike[str], option: str = "--report") -> Path:
+    """The folder ``path`` the user named for output, created if needed and checked writable
+    before any work is done: a folder that cannot be written is one ``UserError`` line."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise UserError(f"{option} {p}: a file is in the way (expected a folder)") from None
+    except OSError as exc:
+        raise UserError(f"{option} {p}: cannot create the folder: {exc.strerror or exc}"
+                        ) from None
+    try:   # a file made and removed: permissions, a read-only or special file system alike
+        with tempfile.TemporaryFile(dir=p):
+            pass
+    except OSError as exc:
+        raise UserError(f"{option} {p}: cannot write there: {exc.strerror or exc}") from None
+    return p

@@ -124,3 +124,15 @@ def test_a_fleet_holds_grbl_and_unknown_captures_too(tmp_path):
     assert len(pd.read_parquet(tmp_path / "pq" / "exchanges")) > 0   # the GVE dataset as before
     paths = write_fleet_report(s, tmp_path / "rep")
     assert "| router-1 | shift | grbl | clean |" in paths["markdown"].read_text()
+
+
+def test_one_machine_is_said_in_the_singular(tmp_path, capsys):
+    good = Path(__file__).resolve().parent.parent / "captures" / "good-rs232.mcap"
+    with pytest.raises(SystemExit):
+        main(["analyze", str(good), str(good), "--report", str(tmp_path / "fleet"), "--jobs", "1"])
+    out = capsys.readouterr().out
+    assert "2 captures on 1 machine:" in out and "1 machines" not in out
+    html = (tmp_path / "fleet" / "index.html").read_text()
+    assert "2 sessions on 1 machine</h1>" in html
+    assert (tmp_path / "fleet" / "summary.md").read_text().startswith(
+        "# Fleet analysis: 2 sessions on 1 machine\n")

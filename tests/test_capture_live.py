@@ -49,7 +49,7 @@ def wait_for(predicate, timeout: float = 5.0) -> None:
         time.sleep(0.02)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
 def test_proxy_forwards_records_and_finishes_on_signal(tmp_path, sig):
     out = tmp_path / "proxy.mcap"
     with PtyEndpoint() as unit:

@@ -101,3 +101,39 @@ def test_the_vocabulary_check_can_fail(tmp_path):
     probe = tmp_path / "probe.py"
     probe.write_text('"""Talks of GVE in a docstring, which is allowed."""\nX = "!0?"\ngrbl_port = 1\n')
     assert len(_vocabulary(probe, "probe.py")) == 2
+
+
+def test_a_plugin_bug_is_one_line_not_a_traceback(tmp_path):
+    """A family plugin that raises where the engine calls it: one line naming the error and
+    where, exit 70; CONFORM_DEBUG=1 gives the traceback."""
+    import os
+    import subprocess
+    import sys
+
+    pkg = tmp_path / "brokenfam"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(
+        "from conform.families import Family, VariantInfo\n"
+        "class Broken(Family):\n"
+        "    name = 'broken'\n"
+        "    def variants(self):\n"
+        "        return [VariantInfo('broken-1', 'broken', 't', 'f', '-', '-')]\n"
+        "    def plan_checks(self, variant, **kw):\n"
+        "        raise ZeroDivisionError('a plugin bug')\n"
+        "FAMILY = Broken()\n")
+    info = tmp_path / "brokenfam-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: brokenfam\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[conform.families]\nbroken = brokenfam:FAMILY\n")
+    env = {k: v for k, v in os.environ.items() if k != "CONFORM_DEBUG"}
+    env["PYTHONPATH"] = str(tmp_path)
+    args = [sys.executable, "-m", "conform", "run", "--target", "emu:broken-1", "--list"]
+    p = subprocess.run(args, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    assert p.returncode == 70, p.stderr
+    assert "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "ZeroDivisionError: a plugin bug" in lines[0]
+    assert "brokenfam/__init__.py:" in lines[0]
+    p = subprocess.run(args, capture_output=True, text=True, env=env | {"CONFORM_DEBUG": "1"},
+                       cwd=tmp_path, timeout=120)
+    assert "Traceback" in p.stderr

@@ -251,10 +251,15 @@ def write_fleet_report(summary: dict[str, Any], out_dir: str | Path) -> dict[str
     env = _env()
     paths = {"json": d / "fleet.json", "markdown": d / "summary.md", "html": d / "index.html"}
     paths["json"].write_text(json.dumps(doc, indent=1), "utf-8")
-    ctx = {"s": doc, "fmt": _fmt}
+    ctx = {"s": doc, "fmt": _fmt, "count": count}
     paths["markdown"].write_text(env.get_template("fleet.md.j2").render(**ctx), "utf-8")
     paths["html"].write_text(env.get_template("fleet.html.j2").render(**ctx), "utf-8")
     return paths
+
+
+def count(n: int, noun: str) -> str:
+    """``1 machine``, ``2 machines``: a count and its noun, in the right number."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _fmt(v: Any, spec: str = ".2f") -> str:

@@ -24,6 +24,7 @@ from conform.link.forward import Forwarder, Tap
 from conform.link.peerwatch import PeerWatch
 from conform.link.ports import open_port
 from conform.link.pty import PtyEndpoint
+from conform.stops import STOP_SIGNALS
 
 
 class _Live:
@@ -209,7 +210,8 @@ class SniffCapture(_Live):
 
 
 def run_until_signal(live: _Live) -> str | None:
-    """Run until SIGINT/SIGTERM or a port lost for good; close cleanly; return the failure."""
+    """Run until SIGINT/SIGTERM/SIGHUP or a port lost for good; close cleanly; return the
+    failure."""
     import signal
 
     previous = {}
@@ -217,7 +219,7 @@ def run_until_signal(live: _Live) -> str | None:
     def stop(signum: int, frame: object) -> None:
         live.stop()
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         previous[sig] = signal.signal(sig, stop)
     try:
         while not live.wait(0.2):

@@ -15,7 +15,9 @@ from conform.cli.params import (
     json_option,
 )
 from conform.cli.progress import progress as show_progress
-from conform.errors import UserError
+from conform.errors import UserError, writable_folder
+
+FAIL_ON = ("never", "warning", "error", "hazard")   # the findings' severities, mildest first
 
 
 @click.command(name="analyze")
@@ -42,12 +44,16 @@ from conform.errors import UserError
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Several captures: run on this Dask distributed scheduler "
                    "(e.g. tcp://host:8786) instead of local processes.")
+@click.option("--fail-on", type=click.Choice(FAIL_ON), default="never", show_default=True,
+              help="Exit 1 when a finding of this severity or a worse one is found (warning < "
+                   "error < hazard); by default findings do not change the exit status, only a "
+                   "damaged capture does.")
 @json_option("findings.json's document (several captures: the fleet summary), plus the paths "
              "written")
 def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
         progress: bool | None, time_range: str | None, jobs: int | None,
-        scheduler: str | None, as_json: bool) -> None:
+        scheduler: str | None, fail_on: str, as_json: bool) -> None:
     """Analyse a capture: findings with manual clauses, latency split, throughput, queue.
 
     Several files or a folder: each capture analysed in parallel, one Parquet dataset and a
@@ -66,17 +72,30 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
 
+    if report_dir:   # before the analysis: a folder that cannot be written is one line now
+        writable_folder(report_dir, "--report")
+    if parquet_dir:
+        writable_folder(parquet_dir, "--parquet")
     if len(files) > 1 or os.path.isdir(files[0]):
         with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
             bar.task(f"analysing {len(files)} inputs" if len(files) > 1 else
                      f"analysing the captures in {files[0]}")
+            if fail_on not in ("never", "hazard"):
+                raise UserError(f"--fail-on {fail_on}: several captures are judged by their "
+                                "hazards only (--fail-on hazard)")
             _fleet(files, report_dir, parquet_dir, variant, baud, dialect, jobs, scheduler,
-                   echo, as_json)
+                   echo, as_json, fail_on)
         return
     file = files[0]
-    from conform.families.capture_hook import analyze_other_family
+    from conform.families.capture_hook import analyze_other_family, not_this_family
 
-    if analyze_other_family(file, variant, report_dir, parquet_dir):  # grbl or unknown traffic
+    wrong = not_this_family(file, variant) if variant else None
+    if wrong:
+        raise UserError(f"{file}: {wrong}")
+
+    other = analyze_other_family(file, variant, report_dir, parquet_dir)
+    if other:  # another family's traffic, or unknown traffic
+        _fail(getattr(other, "findings", []), fail_on)
         return
     window = _time_range(time_range)
 
@@ -111,6 +130,19 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         echo_json(findings_document(a) | paths)
     if damage:
         raise SystemExit(1)
+    _fail(a.findings, fail_on)
+
+
+def _fail(findings: list, fail_on: str) -> None:
+    """Exit 1 when a finding is at least as severe as ``--fail-on`` (said on stderr)."""
+    if fail_on == "never":
+        return
+    rank = FAIL_ON.index(fail_on)
+    worse = [f for f in findings if f.severity in FAIL_ON and FAIL_ON.index(f.severity) >= rank]
+    if worse:
+        click.echo(f"conform analyze: {len(worse)} finding(s) of severity {fail_on} or worse "
+                   "(--fail-on)", err=True)
+        raise SystemExit(1)
 
 
 def _time_range(text: str | None) -> tuple[float, float] | None:
@@ -129,18 +161,20 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
 
 def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
            variant: str | None, baud: float | None, dialect: str | None, jobs: int | None,
-           scheduler: str | None, echo, as_json: bool) -> None:  # noqa: ANN001
-    from conform.analysis.fleet import analyze_fleet, totals_text, write_fleet_report
+           scheduler: str | None, echo, as_json: bool,  # noqa: ANN001
+           fail_on: str = "never") -> None:
+    from conform.analysis.fleet import analyze_fleet, count, totals_text, write_fleet_report
 
     options = {"variant": variant, "baud": baud, "dialect": dialect}
     s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
                       scheduler=scheduler)
     t = s["totals"]
-    echo(f"{t['sessions']} captures on {t['machines']} machines: {t['exchanges']} "
-         f"exchanges{totals_text(t, s['columns'])}, {t['errors']} not analysed")
+    echo(f"{count(t['sessions'], 'capture')} on {count(t['machines'], 'machine')}: "
+         f"{count(t['exchanges'], 'exchange')}{totals_text(t, s['columns'])}, "
+         f"{t['errors']} not analysed")
     for m in s["machines"]:
-        echo(f"  {m['machine']}: {m['sessions']} sessions, {m['exchanges']} exchanges"
-             + totals_text(m, s["columns"])
+        echo(f"  {m['machine']}: {count(m['sessions'], 'session')}, "
+             f"{count(m['exchanges'], 'exchange')}" + totals_text(m, s["columns"])
              + (f", {m['damaged']} damaged" if m["damaged"] else "")
              + (f", {m['errors']} not analysed" if m["errors"] else ""))
     for r in s["sessions"]:
@@ -157,3 +191,6 @@ def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | No
         echo_json(s | paths)
     if any(r["state"] != "clean" for r in s["sessions"]):
         raise SystemExit(1)  # some captures damaged or not analysed: listed above
+    if fail_on == "hazard" and t.get("hazards"):
+        click.echo(f"conform analyze: {t['hazards']} hazard(s) (--fail-on)", err=True)
+        raise SystemExit(1)

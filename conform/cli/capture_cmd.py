@@ -76,4 +76,6 @@ def recover_cmd(file: str, output: str | None, force: bool) -> None:
         click.echo(f"lost: {s.problem or 'damaged records'} ({lost} bytes after the intact "
                    f"part, {s.damaged_chunks} damaged chunks and {s.damaged_records} damaged "
                    "records skipped)")
-        raise SystemExit(1)  # salvaged, but the source was not whole
+        if not res.messages:   # nothing to salvage: the command did not do its job
+            raise SystemExit(1)
+    # a salvage that wrote a complete file succeeded (exit 0); what was lost is said above

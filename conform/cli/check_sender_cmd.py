@@ -62,8 +62,15 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     import json
 
     from conform.sendercheck.grade import check, default_family, family_for
-    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
+    from conform.sendercheck.options import (
+        check_timeout,
+        job_of_family,
+        read_job,
+        report_folder,
+        require_program,
+    )
     from conform.sendercheck.report import write_reports
+    from conform.stops import shield
 
     if "list" in scenarios:
         shapes = family_for(variant) if variant else default_family()
@@ -73,6 +80,8 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     require_program(list(command))
     check_timeout(timeout)
     job_lines = read_job(job_file)
+    shapes = family_for(variant) if variant else default_family()
+    job_of_family(job_lines, job_file, len(shapes.vectors(job_lines or [])), shapes.name)
     directory = report_folder(report_dir)
 
     def say(msg: str) -> None:
@@ -81,11 +90,18 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     results = check(list(command), variant=variant, names=list(scenarios) or None,
                     directory=directory, timeout=timeout, seed=seed, job_lines=job_lines,
                     progress=say)
-    write_reports(results, directory)
+    with shield():   # the report of what finished, even while a signal stops us
+        write_reports(results, directory)
     if as_json:
         click.echo(json.dumps(results.to_json(), indent=1, default=str))
     else:
         counts = ", ".join(f"{g} {n}" for g, n in sorted(results.counts().items()))
+        for v in results.verdicts:   # every verdict short of PASS, named
+            if v.grade in ("FAIL", "ERROR", "WARN"):
+                click.echo(f"  {v.grade} {v.scenario}/{v.rule} ({v.level}, {v.clause}): "
+                           f"{v.detail}")
         click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: {counts}")
+        if results.interrupted:
+            click.echo(f"INCOMPLETE: {results.interrupted}")
         click.echo(f"report: {directory / 'index.html'}")
-    sys.exit(results.exit_code)
+    sys.exit(results.exit_code)   # an interruption's status (128 + N) replaces it (cli.main)

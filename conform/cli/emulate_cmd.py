@@ -14,6 +14,7 @@ from typing import Any
 import click
 
 from conform.cli.family_options import family_options, split
+from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import BAUD, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
 from conform.errors import UserError
 
@@ -65,9 +66,11 @@ def cli() -> None:
               help="Record the session as an MCAP capture.")
 @click.option("--answer-delay", type=NON_NEGATIVE, default=0.0, show_default=True,
               help="Processing time of the unit before each answer, seconds.")
+@force_option("the --record file")
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str | None,
               seed: int | None, control_path: str | None, link_path: str | None,
-              record_path: str | None, answer_delay: float, **family_values: Any) -> None:
+              record_path: str | None, answer_delay: float, force: bool,
+              **family_values: Any) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
 
     \b
@@ -77,6 +80,7 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str 
     """
     from conform.families import family_for_variant
 
+    fresh_output(record_path, force, "--record")
     fam = family_for_variant(variant)
     fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
               link_path=link_path, record_path=record_path, answer_delay=answer_delay,

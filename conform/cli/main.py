@@ -8,7 +8,9 @@ group never takes the others down silently: it is reported as one line.
 from __future__ import annotations
 
 import importlib
+import os
 import sys
+import traceback
 
 import click
 
@@ -38,8 +40,9 @@ def cli() -> None:
     """Conformance, emulation, capture and analysis for serial motion controllers.
 
     Exit status: 0 done, 1 something failed (a FAIL, a failed send, a damaged capture), 2 a
-    usage or input mistake, a link that cannot be opened, or a run that stopped early; 130
-    interrupted.
+    usage or input mistake, a link that cannot be opened, or a run that stopped early; 128 + N
+    stopped by signal N (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), after halting the unit and
+    writing the report.
 
     \b
     Examples:
@@ -79,18 +82,40 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> None:
+    from conform.stops import Stopped, exit_status, stop_signals
+
     args = sys.argv[1:] if argv is None else list(argv)
-    try:  # obj["argv"]: the command line as given, for the reports' "how to run it again"
-        cli.main(args=args, prog_name="conform", standalone_mode=False, obj={"argv": args})
-    except click.exceptions.Abort:
-        click.echo("conform: aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        click.echo(f"conform: {exc.format_message()}", err=True)
-        sys.exit(exc.exit_code)
-    except UserError as exc:
-        click.echo(f"conform: {exc}", err=True)
-        sys.exit(exc.exit_code)
-    except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
-    sys.exit(0)
+    with stop_signals():   # SIGINT, SIGTERM, SIGHUP: the same safe stop in every command
+        try:  # obj["argv"]: the command line as given, for the reports' "how to run it again"
+            cli.main(args=args, prog_name="conform", standalone_mode=False, obj={"argv": args})
+            code = 0
+        except click.exceptions.Abort as exc:   # click's wrapper of a KeyboardInterrupt
+            cause = exc.__cause__
+            how = cause.name if isinstance(cause, Stopped) else "Ctrl-C"
+            click.echo(f"conform: interrupted ({how})", err=True)
+            code = 130
+        except Stopped as exc:   # raised outside click's invoke (cannot happen often)
+            click.echo(f"conform: interrupted ({exc.name})", err=True)
+            code = exc.exit_code
+        except click.ClickException as exc:
+            click.echo(f"conform: {exc.format_message()}", err=True)
+            code = exc.exit_code
+        except UserError as exc:
+            click.echo(f"conform: {exc}", err=True)
+            code = exc.exit_code
+        except click.exceptions.Exit as exc:
+            code = exc.exit_code
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 0 if exc.code is None else 1
+            if not isinstance(exc.code, int | None):
+                click.echo(str(exc.code), err=True)
+        except Exception as exc:   # a bug (conform's or a family plugin's): one line, not a traceback
+            if os.environ.get("CONFORM_DEBUG"):
+                raise
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            click.echo(f"conform: internal error: {type(exc).__name__}: {exc} (at "
+                       f"{'/'.join(where.filename.split(os.sep)[-2:])}:{where.lineno}; CONFORM_DEBUG=1 shows "
+                       "the traceback)", err=True)
+            code = 70
+        code = exit_status(code)
+    sys.exit(code)

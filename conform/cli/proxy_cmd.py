@@ -9,9 +9,11 @@ import sys
 import click
 
 from conform.capture.live import ProxyCapture, run_until_signal
+from conform.cli.outputs import force_option, free_link, fresh_output
 from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
 from conform.cli.progress import progress, recording
 from conform.errors import LinkError
+from conform.stops import STOP_SIGNALS
 
 
 @click.command(name="proxy")
@@ -30,8 +32,9 @@ from conform.errors import LinkError
 @click.option("--link", default=None, type=OUTPUT_FILE,
               help="Also make this symlink to the sender's pty (a stable name).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@force_option("the -o file")
 def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: bool,
-        reconnect: bool, link: str | None, quiet: bool) -> None:
+        reconnect: bool, link: str | None, quiet: bool, force: bool) -> None:
     """Create a pty for the sender, forward it to the unit and record until SIGINT/SIGTERM.
 
     The first line on stdout is the pty's device path; stderr shows the bytes recorded.
@@ -40,6 +43,8 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
     Example:
       conform proxy --unit /dev/ttyUSB0 --baud 115200 -o session.mcap
     """
+    fresh_output(output, force, "-o")
+    free_link(link)
     # the recorder's writer thread must not hold the GIL for long while a pump thread waits
     # to forward bytes: a short switch interval bounds that wait (latency added at p99)
     sys.setswitchinterval(0.0002)
@@ -52,7 +57,7 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
                          reconnect=reconnect, link=link)
     # a sender may start on the pty and stop us before run_until_signal is reached: from the
     # moment the path is out, SIGINT/SIGTERM end the recording cleanly
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         signal.signal(sig, lambda _signum, _frame: proxy.stop())
     with progress("conform proxy", quiet=quiet) as bar:
         recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")

@@ -27,8 +27,9 @@ from conform.conformance.plan import list_checks, run_targets
 from conform.conformance.results import Grade
 from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
-from conform.errors import UserError
+from conform.errors import UserError, writable_folder
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
+from conform.stops import shield
 
 
 @family_options("run")
@@ -67,7 +68,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
         inputs_control: str | None, quiet: bool, as_json: bool, **family_values: Any) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
-    usage or link error (or a run that stopped early).
+    usage or link error, a check that could not be run (ERROR) or a run that stopped early.
 
     \b
     Examples:
@@ -76,6 +77,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
       conform run --target /dev/ttyUSB0 --allow-motion --max-steps 2000
       xdg-open reports/latest/index.html            # the last run's report
     """
+    if report_dir:   # before the run: a folder that cannot be written is one line now
+        writable_folder(report_dir, "--report")
     fam = _family_of(targets, variant)
     if mutants and not fam.mutants():
         raise fam.lacks("mutants (--mutants)")
@@ -101,10 +104,13 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     aborted = next((r.aborted for r in runs if r.aborted), None)
     results = results_of(runs, command, mutant_report)
     out = Path(report_dir) if report_dir else default_dir()
-    write_reports(results, out)
-    if not report_dir:
-        link_latest(out)
-    code = 2 if aborted is not None else 1 if results.failed() else 0
+    with shield():   # a second signal must not cut the report of an interrupted run short
+        write_reports(results, out)
+        if not report_dir and not replay:   # a one-check replay leaves the last run's report
+            link_latest(out)
+    # a FAIL is about the unit (1); an ERROR says a check could not be run at all (2)
+    code = (2 if aborted is not None else 1 if results.failed() else
+            2 if results.errored() else 0)
     if as_json:
         echo_json(results.to_json() | {"report": str(out), "exit": code})
     _print_summary(results, out, err=as_json)
@@ -127,14 +133,26 @@ def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
+    from conform.report.view import causes, headline
+
     echo = partial(click.echo, err=err)
+    grouped = causes(results)
     for r in results.runs:
         counts = r.counts()
         shown = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
         echo(f"{r.target} ({r.variant}, {r.profile}): {shown} in {r.duration:.1f} s")
+        for note in r.notes:
+            if note.startswith("hint: "):
+                echo(f"  {note}")
+        told = set()
+        for cause in (g for g in grouped if g.checks[0].target == r.target):
+            echo(f"  FAIL ×{len(cause.checks)} {cause.sentence()}")
+            told.update(id(c) for c in cause.checks)
         for c in r.checks:
-            if c.grade is Grade.FAIL:
+            if c.grade is Grade.FAIL and id(c) not in told:
                 echo(f"  FAIL {c.id} [{c.clause}] expected {c.expected} / got {c.actual}")
+            elif c.grade is Grade.ERROR:
+                echo(f"  ERROR {c.id}: {c.detail.splitlines()[0] if c.detail else 'no detail'}")
         if r.aborted:
             echo(f"  INCOMPLETE: {r.aborted}")
     if results.mutants:
@@ -145,4 +163,7 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
                 echo(f"  SURVIVED {m['name']} ({m['fault']})")
     for line in not_verified_lines(results):
         echo(line)
+    scope = headline(results).scope
+    if scope:
+        echo(scope)
     echo(f"report: {out / 'index.html'}")

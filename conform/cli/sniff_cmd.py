@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
 from conform.capture.live import SniffCapture, run_until_signal
+from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
 from conform.cli.progress import progress, recording
-from conform.errors import LinkError
+from conform.errors import LinkError, UserError
 
 
 @click.command(name="sniff")
@@ -24,14 +27,19 @@ from conform.errors import LinkError
 @click.option("--reconnect", is_flag=True,
               help="If an adapter vanishes, wait for it to come back and go on.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@force_option("the -o file")
 def cli(host_port: str, unit_port: str, output: str, baud: int, variant: str | None,
-        no_decode: bool, reconnect: bool, quiet: bool) -> None:
+        no_decode: bool, reconnect: bool, quiet: bool, force: bool) -> None:
     """Record both directions of a live link without sending a byte, until SIGINT/SIGTERM.
 
     \b
     Example:
       conform sniff --host-port /dev/ttyUSB1 --unit-port /dev/ttyUSB2 -o session.mcap
     """
+    if os.path.realpath(host_port) == os.path.realpath(unit_port):
+        raise UserError(f"--host-port and --unit-port are both {host_port}: the tap needs one "
+                        "receive-only adapter per direction")
+    fresh_output(output, force, "-o")
     tap = SniffCapture(host_port, unit_port, output, baud=baud, variant=variant,
                        decode=not no_decode, reconnect=reconnect)
     click.echo(f"conform sniff: recording {host_port} + {unit_port} to {output}", err=True)

@@ -117,6 +117,8 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
             if vid is None:
                 vid, how = fam.identify(target)
                 notes.append(f"variant: {how}")
+            else:
+                notes += _other_variant(fam, target, vid, implied)
             checks = fam.plan_checks(vid, permissions=perms, profile=profile, patterns=patterns,
                                      machine=not no_machine, **family_values)
             if plan.exact is not None:  # ids hold glob characters (?, *S): match exactly
@@ -146,6 +148,20 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
         mutant_report = fam.run_mutants(variants, profile=profile, seed=plan.seed,
                                         progress=lambda s: task.update(advance=1, step=s))
     return runs, mutant_report
+
+
+def _other_variant(fam: Any, target: Any, vid: str, implied: str | None) -> list[str]:
+    """A hint, said first, when the unit is another variant than the one asked for: then most
+    FAILs are the variants' differences, not faults of the unit."""
+    if implied is not None:
+        found, how = implied, f"the target is {target.name}"
+    else:
+        found, how = fam.identify(target)
+        if "assumed" in how:   # no answer the tables know: nothing to say
+            return []
+    if found == vid:
+        return []
+    return [f"hint: {how}, not {vid}: try --variant {found}"]
 
 
 def _step(task: Any, checks: Sequence[Any]) -> Progress:

@@ -141,6 +141,10 @@ class RunResults:
     def failed(self) -> bool:
         return any(c.grade is Grade.FAIL for c in self.checks)
 
+    def errored(self) -> bool:
+        """Some check could not be run (the harness or the link failed): not a pass."""
+        return any(c.grade is Grade.ERROR for c in self.checks)
+
     def to_json(self) -> dict[str, Any]:
         return {
             "format": "conform-results/1",

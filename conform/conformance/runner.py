@@ -2,7 +2,8 @@
 
 The runner owns the order of things and the safety net: a harness or link failure is an ERROR
 (and, on a real unit, followed by the family's halt); consecutive link failures end the run;
-Ctrl-C halts the unit and the results say what was sent; on a link the estimate is announced
+Ctrl-C, SIGTERM and SIGHUP (one exception, :mod:`conform.stops`) halt the unit and the
+results say what was sent; on a link the estimate is announced
 before the run and the ETA while it runs. What a check is and how it is graded, which state the
 unit is kept in and how it is halted belong to the family: a subclass of :class:`Runner`
 (``Family.runner``) provides ``run_check``, ``halt`` and optionally ``estimate``,
@@ -21,6 +22,7 @@ from typing import Any
 
 from conform.conformance.results import CheckResult, Grade, TargetRun
 from conform.conformance.target import Target
+from conform.stops import interrupted_by
 
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
@@ -137,9 +139,10 @@ class Runner(ABC):
                     run.aborted = (f"link lost after {len(run.checks)} checks "
                                    f"({result.detail.split(';')[0]}); the run stopped")
                     break
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP (conform.stops)
             what = self.halt()
-            run.aborted = f"interrupted (Ctrl-C) after {len(run.checks)} checks; {what}"
+            run.aborted = (f"interrupted ({interrupted_by(exc)}) after {len(run.checks)} "
+                           f"checks; {what}")
             raise RunAborted(run) from None
         except Exception as exc:  # noqa: BLE001 - the report of what was done must survive
             tb = traceback.format_exception_only(type(exc), exc)[-1].strip()

@@ -15,6 +15,7 @@ from typing import Any
 import click
 
 from conform.errors import UserError
+from conform.stops import STOP_SIGNALS
 
 
 def check_pacing(baud: int | None, answer_delay: float) -> None:
@@ -62,11 +63,11 @@ def announce(endpoint: Any, what: str) -> None:
 
 
 def run_until_signal(emulator: Any) -> None:
-    """Serve until SIGINT or SIGTERM, then put the previous handlers back."""
+    """Serve until SIGINT, SIGTERM or SIGHUP, then put the previous handlers back."""
     def on_signal(signum: int, _frame: Any) -> None:
         emulator.stop()
 
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    old = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
         emulator.run()
     finally:

@@ -14,8 +14,10 @@ from conform.families import Detection, divert, family, family_names
 PEEK_BYTES = 65536
 
 
-def peek_capture(path: str, limit: int = PEEK_BYTES) -> tuple[bytes, bytes, dict[str, Any]]:
-    """The first ``limit`` bytes of each direction and the session metadata of a capture."""
+def peek_capture(path: str, limit: int = PEEK_BYTES, *, bytes_too: bool = False
+                 ) -> tuple[bytes, bytes, dict[str, Any]]:
+    """The first ``limit`` bytes of each direction and the session metadata of a capture
+    (only the metadata when it names a variant, unless ``bytes_too``)."""
     from conform.capture.batch import payload_bytes
     from conform.capture.scan import ScanStatus, iter_messages
     from conform.capture.schemas import DIRECTION_TOPIC
@@ -25,7 +27,7 @@ def peek_capture(path: str, limit: int = PEEK_BYTES) -> tuple[bytes, bytes, dict
     status = ScanStatus(path)
     seen = 0
     for channel, rec in iter_messages(status):
-        if status.metadata.get("conform.session", {}).get("variant"):
+        if status.metadata.get("conform.session", {}).get("variant") and not bytes_too:
             break          # the capture says what it is: no need to look at the bytes
         seen += 1
         if seen > 4 * limit // 16:
@@ -41,6 +43,30 @@ def peek_capture(path: str, limit: int = PEEK_BYTES) -> tuple[bytes, bytes, dict
             continue
     meta = dict(status.metadata.get("conform.session", {}))
     return bytes(data["host"][:limit]), bytes(data["unit"][:limit]), meta
+
+
+def not_this_family(path: str, variant: str) -> str | None:
+    """Why ``--variant`` cannot be right for this capture (it names, or its bytes are, another
+    family's traffic), or None. An analysis of one family's traffic as another's would
+    report bogus findings (overflows, unanswered lines) instead of saying so."""
+    from conform.families import detect_family, family_for_variant
+
+    wanted = family_for_variant(variant).name
+    try:
+        host, unit, meta = peek_capture(path, bytes_too=True)
+    except Exception:  # noqa: BLE001 - not ours to report: the analyser says what is wrong
+        return None
+    seen = detect_family(host, unit, {})   # the bytes first: a capture may name a wrong one
+    if seen.family not in ("unknown", wanted):
+        return (f"this is not {wanted} traffic: {seen.why} ({seen.family}); leave out "
+                f"--variant or give one of {seen.family}'s")
+    declared = str(meta.get("variant", "") or "")
+    if seen.family == "unknown" and declared and declared != variant:
+        named = family_for_variant(declared).name
+        if named != wanted:
+            return (f"this is not {wanted} traffic: the capture names variant {declared} "
+                    f"({named}); leave out --variant or give one of {named}'s")
+    return None
 
 
 def detect_capture(path: str, variant: str | None) -> Detection | None:
@@ -60,8 +86,9 @@ def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[
 
 
 def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
-                         parquet_dir: str | None = None) -> bool:
-    """Analyse ``path`` with its family if it is not GVE traffic; False leaves it to GVE."""
+                         parquet_dir: str | None = None) -> Any:
+    """Analyse ``path`` with its family if it is not GVE traffic: that family's analysis (True
+    for traffic of no family); False leaves it to GVE."""
     d = detect_capture(path, variant)
     if d is None:
         return False
@@ -81,4 +108,4 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     if parquet_dir:
         a.write_tables(parquet_dir)
         click.echo(f"tables: {parquet_dir}")
-    return True
+    return a

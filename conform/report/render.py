@@ -22,8 +22,15 @@ from conform.report.view import column_name
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 
-def default_dir(root: str | Path = "reports") -> Path:
-    return Path(root) / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+def default_dir(root: str | Path = "reports", prefix: str = "") -> Path:
+    """``reports/<prefix><UTC timestamp>``, numbered (``-2``, ``-3`` …) when a run of the same
+    second already has it: one run's report never replaces another's."""
+    base = Path(root) / (prefix + datetime.now(UTC).strftime("%Y%m%d-%H%M%S"))
+    out, n = base, 1
+    while out.exists():
+        n += 1
+        out = base.with_name(f"{base.name}-{n}")
+    return out
 
 
 def link_latest(directory: str | Path, name: str = "latest") -> Path | None:
@@ -75,7 +82,8 @@ def render_html(results: RunResults) -> str:
         return [(key, next(c.level for c in row if c), row)
                 for key, row in _rows(results, section.checks)]
 
-    env.globals.update(anchor=anchor, log_lines=view.log_lines, replay=view.replay_command,
+    env.globals.update(anchor=anchor, log_lines=view.log_lines, differing=view.differing,
+                       replay=lambda c: view.replay_command(c, results.command),
                        rows_of=rows_of)
     columns, section_rows = view.section_matrix(results)
     problems = view.problems(results)
@@ -87,6 +95,7 @@ def render_html(results: RunResults) -> str:
         problems=problems, n_problems=sum(len(s.checks) for s in problems),
         deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
         columns=columns, section_rows=section_rows, n_checks=len(results.checks),
+        causes=view.causes(results),
         grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
     )
 
@@ -100,14 +109,14 @@ def not_verified_lines(results: RunResults) -> list[str]:
     return out
 
 
-def _md_check(c: CheckResult, log_limit: int = 24) -> list[str]:
+def _md_check(c: CheckResult, log_limit: int = 24, command: str = "") -> list[str]:
     out = [f"- **{c.grade.value}** `{c.id}` ({c.level}"
            + (f"; open question {c.question}" if c.question else "") + f") — {c.title}"]
     if c.expected or c.actual:
         out += [f"  - expected: `{c.expected}`", f"  - actual: `{c.actual}`"]
     if c.detail:
         out.append(f"  - {c.detail}")
-    out.append(f"  - replay: `{view.replay_command(c)}`")
+    out.append(f"  - replay: `{view.replay_command(c, command)}`")
     if c.log:
         lines = view.log_lines(c, log_limit)
         cut = len(c.log) - len(lines)
@@ -123,6 +132,8 @@ def render_markdown(results: RunResults) -> str:
     if results.command:
         out += [f"`{results.command}`", ""]
     out += [f"**{head.text}**", ""]
+    if head.scope:
+        out += [head.scope, ""]
     out += [f"> **Incomplete run.** {why}" for why in head.incomplete]
     if head.incomplete:
         out.append("")
@@ -148,10 +159,14 @@ def render_markdown(results: RunResults) -> str:
     out += [f"## Failures ({sum(len(s.checks) for s in problems)})", ""]
     if not problems:
         out.append("No FAIL and no ERROR.")
+    for cause in view.causes(results):
+        out.append(f"- **Likely one cause:** {cause.sentence()}")
+    if problems:
+        out.append("")
     for s in problems:
         out += [f"### {s.clause} ({', '.join(s.commands)})", ""]
         for c in s.checks:
-            out += _md_check(c)
+            out += _md_check(c, command=results.command)
         out.append("")
     deviations = view.deviations(results)
     if deviations:
@@ -160,7 +175,7 @@ def render_markdown(results: RunResults) -> str:
         for s in deviations:
             out += [f"### {s.clause}", ""]
             for c in s.checks:
-                out += _md_check(c, log_limit=0) if not c.log else _md_check(c)
+                out += _md_check(c, log_limit=0 if not c.log else 24, command=results.command)
             out.append("")
     columns, rows = view.section_matrix(results)
     out += ["", "## Manual sections × variants", "",
@@ -190,7 +205,7 @@ def render_junit(results: RunResults) -> str:
             case = ET.SubElement(suite, "testcase", classname=view.junit_classname(c),
                                  name=c.id, time=f"{c.duration:.4f}")
             message = f"{c.clause}: expected {c.expected!s}; actual {c.actual!s}. {c.detail}"
-            body = "\n".join([f"replay: {view.replay_command(c)}", *c.sequence,
+            body = "\n".join([f"replay: {view.replay_command(c, results.command)}", *c.sequence,
                               *(f"{t} {d} {x}" for t, d, x in view.log_lines(c))])
             if c.grade is Grade.FAIL:
                 ET.SubElement(case, "failure", message=message, type="FAIL").text = body

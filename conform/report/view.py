@@ -107,14 +107,40 @@ def by_section(checks: list[CheckResult]) -> list[Section]:
                   key=lambda s: (manuals[_clause_key(s.clause)[0]], _clause_key(s.clause)))
 
 
-def replay_command(c: CheckResult) -> str:
-    """The command that re-runs one check on the same target (with its seed if it has one)."""
+# the options of the run a replay must keep, or on a real unit the check only SKIPs (no
+# --allow-motion), runs at another speed (--baud) or cannot drive the inputs it needs
+REPLAY_FLAGS = ("--allow-motion", "--allow-eeprom")
+REPLAY_VALUES = ("--max-steps", "--inputs-control", "--baud", "--dialect")
+
+
+def replay_command(c: CheckResult, command: str = "") -> str:
+    """The command that re-runs one check on the same target (with its seed if it has one),
+    with the options of the run (``command``, as typed) that the check depends on."""
     token = c.replay or c.id
     if c.seed is not None and "@" not in token:
         token = f"{token}@{c.seed}"
     target = c.target or f"emu:{c.variant}"
     return (f"conform run --target {shlex.quote(target)} --variant {shlex.quote(c.variant)} "
-            f"--replay {shlex.quote(token)}")
+            f"--replay {shlex.quote(token)}" + "".join(f" {shlex.quote(a)}"
+                                                       for a in _kept_options(command)))
+
+
+def _kept_options(command: str) -> list[str]:
+    """The :data:`REPLAY_FLAGS` and :data:`REPLAY_VALUES` given in ``command``."""
+    try:
+        argv = shlex.split(command)
+    except ValueError:
+        return []
+    kept: list[str] = []
+    for i, arg in enumerate(argv):
+        name, eq, _ = arg.partition("=")
+        if arg in REPLAY_FLAGS:
+            kept.append(arg)
+        elif name in REPLAY_VALUES and eq:
+            kept.append(arg)
+        elif arg in REPLAY_VALUES and i + 1 < len(argv):
+            kept += [arg, argv[i + 1]]
+    return kept
 
 
 _HOW = (
@@ -172,6 +198,13 @@ class Headline:
     verdict: str  # FAIL | ERROR | PASS | INCOMPLETE
     text: str
     incomplete: list[str]
+    scope: str = ""   # what the verdict proves, when that is less than it seems
+
+
+EMULATED_SCOPE = (
+    "Every target was an emulator (emu:): this run checks the reference model against the "
+    "tables it was built from — the checks and the model agree. It says nothing about a real "
+    "unit; for that, run the same checks with --target on its serial port.")
 
 
 def headline(results: RunResults) -> Headline:
@@ -189,7 +222,10 @@ def headline(results: RunResults) -> Headline:
         verdict = "ERROR"
     else:
         verdict = "PASS"
-    return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete)
+    scope = EMULATED_SCOPE if results.runs and all(r.emulated for r in results.runs) else ""
+    if any(r.target.count(":") > 1 for r in results.runs):
+        scope = ""   # emu:VARIANT:MUTANT, a deviant unit: the run is about the checks' power
+    return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete, scope)
 
 
 @dataclass
@@ -243,6 +279,65 @@ def problems(results: RunResults) -> list[Section]:
     chosen.sort(key=lambda c: (PROBLEMS.index(c.grade), c.level != MUST,
                                order.get((c.target, c.variant), 0), c.id))
     return by_section(chosen)
+
+
+@dataclass
+class Cause:
+    """FAILs with one root cause: the unit gave the same wrong answer code to many checks
+    (``VL, VK, VN, XM answered 3 where 0 was expected``: commands this unit does not know, not
+    thirty separate faults)."""
+
+    actual: str
+    expected: list[str] = field(default_factory=list)
+    checks: list[CheckResult] = field(default_factory=list)
+
+    @property
+    def commands(self) -> list[str]:
+        return Section("", self.checks).commands
+
+    def sentence(self) -> str:
+        n = len(self.checks)
+        wanted = " or ".join(self.expected)
+        return (f"{', '.join(self.commands)} answered {self.actual} where {wanted} was "
+                f"expected: one cause, {n} checks")
+
+
+CAUSE_MIN = 3   # this many FAILs with the same wrong answer code are shown as one cause
+
+
+def answer_code(text: str) -> str:
+    """The code of an exchange's answer: ``!0VL1000 → 3,5F`` → ``3``."""
+    answer = str(text).rsplit("→", 1)[-1].strip()
+    return answer.split(",", 1)[0].strip()
+
+
+def causes(results: RunResults) -> list[Cause]:
+    """FAILs grouped by the answer code the unit gave where another was expected, per target,
+    largest first; only groups of :data:`CAUSE_MIN` or more."""
+    groups: dict[tuple[str, str], Cause] = {}
+    for c in results.checks:
+        if c.grade is not Grade.FAIL or not c.actual:
+            continue
+        exp, act = answer_code(c.expected), answer_code(c.actual)
+        if exp and act and exp != act:
+            g = groups.setdefault((c.target, act), Cause(act))
+            g.checks.append(c)
+            if exp not in g.expected:
+                g.expected.append(exp)
+    return sorted((g for g in groups.values() if len(g.checks) >= CAUSE_MIN),
+                  key=lambda g: -len(g.checks))
+
+
+def differing(expected: str, actual: str) -> tuple[str, str, str, str]:
+    """(common start, expected's middle, actual's middle, common end): what to highlight."""
+    a, b = str(expected), str(actual)
+    i = 0
+    while i < min(len(a), len(b)) and a[i] == b[i]:
+        i += 1
+    j = 0
+    while j < min(len(a), len(b)) - i and a[len(a) - 1 - j] == b[len(b) - 1 - j]:
+        j += 1
+    return a[:i], a[i:len(a) - j], b[i:len(b) - j], a[len(a) - j:]
 
 
 def deviations(results: RunResults) -> list[Section]:

@@ -20,6 +20,7 @@ from conform.families import family_for_variant
 from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
 from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
+from conform.stops import interrupted_by
 
 
 def default_family() -> Family:
@@ -67,6 +68,7 @@ class CheckResults:
     family: str
     scenarios: list[ScenarioResult]
     duration: float = 0.0
+    interrupted: str | None = None   # why the scenarios stopped early (a signal), and what is missing
 
     @property
     def verdicts(self) -> list[Verdict]:
@@ -95,6 +97,7 @@ class CheckResults:
         return {"command": shlex.join(self.command), "variant": self.variant,
                 "family": self.family, "duration_s": round(self.duration, 3),
                 "exit_code": self.exit_code, "counts": self.counts(),
+                "interrupted": self.interrupted,
                 "scenarios": [s.to_json() for s in self.scenarios],
                 "verdicts": [v.to_json() for v in self.verdicts],
                 "findings": self.findings}
@@ -141,12 +144,19 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
                         f"{', '.join(family.scenarios)}")
     say = progress or (lambda _m: None)
     start = time.monotonic()
-    results = []
+    results: list[ScenarioResult] = []
+    interrupted = None
     for name in chosen:
         scn = family.scenarios[name]
         say(f"{name}: {scn.title} ...")
-        s = run_session(family, scn, var, dialect, command, directory / name,
-                        timeout=timeout, seed=seed, job_lines=job_lines)
+        try:
+            s = run_session(family, scn, var, dialect, command, directory / name,
+                            timeout=timeout, seed=seed, job_lines=job_lines)
+        except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP: report what finished
+            interrupted = (f"interrupted ({interrupted_by(exc)}) during {name}; not run: "
+                           f"{', '.join(chosen[len(results):])}")
+            say(interrupted)
+            break
         verdicts = grade_session(family, s)
         results.append(ScenarioResult(name, scn.title, verdicts, s, session_findings(s)))
         bad = [v.rule for v in verdicts if v.grade in (FAIL, ERROR)]
@@ -154,4 +164,4 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
             + (" (timed out)" if s.hung else "")
             + (f"; failed: {', '.join(bad)}" if bad else "; no failure"))
     return CheckResults(list(command), var.id, family.name, results,
-                        time.monotonic() - start)
+                        time.monotonic() - start, interrupted)

@@ -3,10 +3,11 @@ family judges the sender: one-line errors naming the option or file."""
 
 from __future__ import annotations
 
+import shlex
 import shutil
 from pathlib import Path
 
-from conform.errors import UserError, read_user_text
+from conform.errors import UserError, read_user_text, writable_folder
 
 MAX_TIMEOUT_S = 86400
 
@@ -18,11 +19,26 @@ def require_program(command: list[str]) -> None:
                         "(`{port}` in ARGS becomes the device path)")
     if shutil.which(command[0]) is None:
         raise UserError(f"{command[0]}: no such program (not found or not executable)")
+    if not any("{port}" in arg or "CONFORM_PORT" in arg for arg in command):
+        raise UserError(f"no {{port}} in `{shlex.join(command)}`: write {{port}} where the "
+                        "program takes the device path (a program that reads $CONFORM_PORT "
+                        "itself: -- env CONFORM_PORT={port} PROGRAM ...)")
 
 
 def check_timeout(timeout: float | None) -> None:
     if timeout is not None and not 0 < timeout <= MAX_TIMEOUT_S:
-        raise UserError(f"--timeout {timeout:g}: must be between 0 and {MAX_TIMEOUT_S} seconds")
+        raise UserError(f"--timeout {timeout:g}: seconds, more than 0 and at most "
+                        f"{MAX_TIMEOUT_S}")
+
+
+def job_of_family(lines: list[str] | None, job_file: str | None, moves: int, family: str
+                  ) -> None:
+    """A ``--job`` in which the family finds nothing its unit would execute (``moves`` 0) is
+    another family's (a g-code file for a vector unit, or the reverse): a usage error, not a
+    sender that fails every rule."""
+    if lines is not None and not moves:
+        raise UserError(f"--job {job_file}: no line of it is a move a {family} unit executes; "
+                        "is it a job of another family?")
 
 
 def read_job(job_file: str | None) -> list[str] | None:
@@ -40,5 +56,5 @@ def report_folder(report_dir: str | None) -> Path:
     from conform.report.render import default_dir
 
     if report_dir:
-        return Path(report_dir)
-    return default_dir().with_name("check-sender-" + default_dir().name)
+        return writable_folder(report_dir, "--report")
+    return writable_folder(default_dir(prefix="check-sender-"))

@@ -5,6 +5,7 @@ with its kind, severity, clause and scenario)."""
 from __future__ import annotations
 
 import json
+import shlex
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -14,14 +15,17 @@ from conform.report.render import write_files
 from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN
 from conform.sendercheck.grade import CheckResults
 
-_HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender</title>
+_HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender {{ verdict }}: {{ command }}</title>
 <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}
 td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
 .FAIL{background:#f8c8c8}.WARN{background:#fbe7b0}.PASS{background:#d4f0d4}
-.ERROR{background:#e0c0f0}.NOT-APPLICABLE{color:#999}</style></head><body>
-<h1>check-sender: {{ r.command }}</h1>
+.ERROR{background:#e0c0f0}.NOT-APPLICABLE{color:#999}.INCOMPLETE{background:#ffe5e5}
+.badge{padding:0 .4em;border-radius:3px}</style></head><body>
+<h1>check-sender <span class="{{ verdict }} badge">{{ verdict }}</span></h1>
+<p><code>{{ command }}</code></p>
 <p>variant {{ r.variant }} ({{ r.family }}), {{ "%.1f"|format(r.duration) }} s, exit status
 {{ r.exit_code }}; {% for g, n in counts.items() %}{{ g }} {{ n }}{% if not loop.last %}, {% endif %}{% endfor %}</p>
+{% if r.interrupted %}<p class="abort"><b>INCOMPLETE:</b> {{ r.interrupted }}</p>{% endif %}
 <h2>Rules × scenarios</h2><table><tr><th>rule</th><th>level</th><th>clause</th>
 {% for s in r.scenarios %}<th>{{ s.name }}</th>{% endfor %}</tr>
 {% for rule, cells in matrix %}<tr><td>{{ rule.rule }}<br><small>{{ rule.title }}</small></td>
@@ -55,12 +59,21 @@ def render_html(r: CheckResults) -> str:
     env = jinja2.Environment(autoescape=True)
     counts = {g: r.counts().get(g, 0) for g in GRADES}
     return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r),
-                                         shown=(FAIL, ERROR, WARN, "PASS"))
+                                         shown=(FAIL, ERROR, WARN, "PASS"), verdict=verdict(r),
+                                         command=shlex.join(r.command))
+
+
+def verdict(r: CheckResults) -> str:
+    """The run in one word: INCOMPLETE (interrupted), FAIL (a MUST rule), ERROR, else PASS."""
+    if r.interrupted:
+        return "INCOMPLETE"
+    return {1: FAIL, 2: ERROR}.get(r.exit_code, "PASS")
 
 
 def render_markdown(r: CheckResults) -> str:
-    out = ["# check-sender summary", "", f"`{' '.join(r.command)}`", "",
+    out = [f"# check-sender summary: {verdict(r)}", "", f"`{shlex.join(r.command)}`", "",
            f"variant {r.variant}, {r.duration:.1f} s, exit status {r.exit_code}", "",
+           *([f"**INCOMPLETE**: {r.interrupted}", ""] if r.interrupted else []),
            "| rule | level | clause | " + " | ".join(s.name for s in r.scenarios) + " |",
            "|---|---|---|" + "---|" * len(r.scenarios)]
     for _v, cells in _matrix(r):

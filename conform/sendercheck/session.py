@@ -169,29 +169,40 @@ def _run_program(s: Session, proxy: ProxyCapture, control: LocalControl, faults:
         except OSError as exc:
             s.error = f"cannot start {argv[0]!r}: {exc.strerror or exc}"
             return
-        while True:
-            try:
-                s.exit_code = proc.wait(POLL)
-                break
-            except subprocess.TimeoutExpired:
-                pass
-            now = time.monotonic()
-            if now - start > s.timeout:
-                s.hung = True
-                _stop(proc)
-                s.exit_code = proc.returncode
-                break
-            done = len(truth.accepted) / n_job
-            while pending and done >= pending[0].at:
-                act = pending.pop(0)
-                undo.append((now + act.hold, act.kind))
-                _act(s, act.kind, True, now, control, faults, proxy, act.hold)
-            for item in [u for u in undo if u[0] <= now]:
-                undo.remove(item)
-                _act(s, item[1], False, now, control, faults, proxy, 0.0)
+        try:
+            _supervise(s, proc, start, truth, n_job, pending, undo, control, faults, proxy)
+        except BaseException:   # check-sender itself stopped (Ctrl-C, SIGTERM): so is the program
+            _stop(proc)
+            raise
     for _t, kind in undo:
         _act(s, kind, False, time.monotonic(), control, faults, proxy, 0.0)
     s.duration = time.monotonic() - start
+
+
+def _supervise(s: Session, proc: subprocess.Popen, start: float, truth: Any, n_job: int,
+               pending: list, undo: list[tuple[float, str]], control: LocalControl,
+               faults: ScriptedFaults, proxy: ProxyCapture) -> None:
+    """Wait for the program, firing the scenario's actions as the job progresses."""
+    while True:
+        try:
+            s.exit_code = proc.wait(POLL)
+            return
+        except subprocess.TimeoutExpired:
+            pass
+        now = time.monotonic()
+        if now - start > s.timeout:
+            s.hung = True
+            _stop(proc)
+            s.exit_code = proc.returncode
+            return
+        done = len(truth.accepted) / n_job
+        while pending and done >= pending[0].at:
+            act = pending.pop(0)
+            undo.append((now + act.hold, act.kind))
+            _act(s, act.kind, True, now, control, faults, proxy, act.hold)
+        for item in [u for u in undo if u[0] <= now]:
+            undo.remove(item)
+            _act(s, item[1], False, now, control, faults, proxy, 0.0)
 
 
 def _act(s: Session, kind: str, on: bool, now: float, control: LocalControl,

@@ -23,6 +23,7 @@ from conform.families.gve.conformance.safety import Guard
 from conform.families.gve.conformance.target import identify, open_target
 from conform.families.gve.spec import load_spec
 from conform.families.gve.spec.model import CommandSpec, Variant
+from conform.stops import halting
 
 
 def characterize(target: str, output: str, variant: str | None, *, baud: int = 115200,
@@ -57,7 +58,8 @@ def characterize(target: str, output: str, variant: str | None, *, baud: int = 1
                 task.update(advance=1, step=f.question)
                 show(f)
 
-            dialect, findings = probe(spec, tgt, vid, progress=step)
+            with halting(None if tgt.emulated else tgt.safe_stop):
+                dialect, findings = probe(spec, tgt, vid, progress=step)
         if not tgt.emulated and allow_motion:
             echo(tgt.safe_stop(), err=True)
     finally:

@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.grbl.conformance.checks import Session
+from conform.families.grbl.conformance.checks import Session, _stop
 from conform.families.grbl.spec.load import load_grbl
+from conform.stops import halting
 
 
 @dataclass
@@ -99,7 +100,8 @@ def run(target_text: str, output: str, variant: str | None, baud: int,
     else:
         target = open_link(target_text, baud=baud)
     try:
-        obs = characterize(target, vid)
+        with halting(None if target.emulated else lambda: _stop(target)):
+            obs = characterize(target, vid)
     finally:
         target.close()
     for o in obs:

@@ -27,6 +27,7 @@ from conform.errors import UserError
 from conform.families.grbl.sendercheck.rules import RULES, SHOULD
 from conform.families.grbl.sendercheck.session import Action, Scenario, SenderRun, run_sender
 from conform.families.grbl.spec.load import load_grbl
+from conform.stops import interrupted_by
 
 __all__ = ["SCENARIOS", "SenderRun", "Scenario", "check_sender", "grade", "run_cli"]
 
@@ -108,8 +109,15 @@ def run_scenarios(command: list[str], *, variant: str = "grbl-1.1f",
             sc = SCENARIOS[name]
             if progress:
                 progress(f"{name}: {sc.title} ...")
-            r = run_sender(command, sc, scenario_job(sc, job), root / name, variant=variant,
-                           settings=MACHINE, timeout=timeout, seed=seed)
+            try:
+                r = run_sender(command, sc, scenario_job(sc, job), root / name,
+                               variant=variant, settings=MACHINE, timeout=timeout, seed=seed)
+            except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP: grade what finished
+                run.aborted = (f"interrupted ({interrupted_by(exc)}) during {name}; not run: "
+                               f"{', '.join(names[len(sessions):])}")
+                if progress:
+                    progress(run.aborted)
+                break
             run.checks += grade(r, variant)
             sessions.append(r)
     run.duration = time.perf_counter() - t0
@@ -125,7 +133,14 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
 
     from conform.conformance.suite import results_of
     from conform.report.render import write_reports
-    from conform.sendercheck.options import check_timeout, read_job, report_folder, require_program
+    from conform.sendercheck.options import (
+        check_timeout,
+        job_of_family,
+        read_job,
+        report_folder,
+        require_program,
+    )
+    from conform.stops import shield
 
     names = [n for x in scenarios for n in x.split(",") if n]
     if "list" in names:
@@ -136,11 +151,13 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
     check_timeout(timeout)
     load_grbl().variant(variant)
     job = read_job(job_file)
+    job_of_family(job, job_file, sum(map(_moves, job or [])), "grbl")
     out = report_folder(report_dir)
     run = check_sender(command, variant=variant, scenarios=names or None, job=job,
                        timeout=timeout, directory=out, seed=seed, progress=progress)
     results = results_of([run], command_line or "conform check-sender " + " ".join(command))
-    write_reports(results, out)
+    with shield():   # the report of what finished, even while a signal stops us
+        write_reports(results, out)
     if as_json:
         echo(json.dumps(results.to_json(), indent=1, default=str))
     else:
@@ -148,8 +165,20 @@ def run_cli(command: list[str], variant: str, scenarios: list[str], report_dir: 
             echo(f"{c.grade.value:15} {c.id} — {c.actual}")
         counts = ", ".join(f"{k} {n}" for k, n in run.counts().items() if n)
         echo(f"{len(names or SCENARIOS)} scenario(s) in {run.duration:.1f} s: {counts}")
+        if run.aborted:
+            echo(f"INCOMPLETE: {run.aborted}")
         echo(f"report: {out / 'index.html'}")
     return 1 if results.failed() else 0
+
+
+def _moves(line: str) -> bool:
+    """A line of g-code with a motion, axis or machine word (what a grbl job is made of)."""
+    from conform.families.grbl.protocol.gcode import GcodeError, strip_line, words
+
+    try:
+        return any(w[0] in "GMXYZ" for w in words(strip_line(line.encode("latin-1"))[0]))
+    except (GcodeError, UnicodeEncodeError):
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:

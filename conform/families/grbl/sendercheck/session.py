@@ -152,8 +152,12 @@ def run_sender(command: list[str], scenario: Scenario, job: list[str], directory
                                         start_new_session=True)
             except OSError as exc:
                 raise UserError(f"cannot run {argv[0]!r}: {exc.strerror or exc}") from None
-            code, hung = _supervise(proc, scenario, unit, len(job), control, recorder, events,
-                                    limit)
+            try:
+                code, hung = _supervise(proc, scenario, unit, len(job), control, recorder,
+                                        events, limit)
+            except BaseException:   # check-sender itself stopped (Ctrl-C, SIGTERM): so is it
+                _kill_group(proc)
+                raise
         time.sleep(0.2)
     finally:
         emulator.stop()

@@ -259,16 +259,53 @@ def open_target(text: str, spec: Any, *, baud: int = 115200, guard: Guard | None
     return GveLinkTarget(endpoint, what, guard or Guard(False, None, False), baud), None
 
 
-def identify(target: GveTarget, spec: Any) -> tuple[str, str]:
-    """Ask ``?`` and map the firmware string to a variant; (variant id, how it was decided)."""
-    try:
-        reply = target.exchange(target.frame("!0?"), timeout=1.0)
-    except HarnessError as exc:
-        return DEFAULT_VARIANT, f"'?' failed ({exc}); assumed {DEFAULT_VARIANT}"
-    text = reply.lines[0].decode("latin-1") if reply.lines else ""
-    firmware = text.split(",", 1)[1] if "," in text else ""
-    firmware = re.sub(r",[0-9A-Fa-f]{2}$", "", firmware) if target.checksum_on else firmware
-    return variant_for_firmware(spec, firmware)
+def identify(target: GveTarget, spec: Any, attempts: int = 3) -> tuple[str, str]:
+    """Ask ``?`` and map the firmware string to a variant; (variant id, how it was decided).
+
+    A previous session may have left a line half-sent in the unit or answers on their way: the
+    line is ended and the link drained before each ``?``, and an answer naming no firmware of
+    the tables is asked again (``attempts`` times in all) before a default is assumed."""
+    found = DEFAULT_VARIANT, f"no answer to '?'; assumed {DEFAULT_VARIANT}"
+    for _attempt in range(attempts):
+        _quiet(target)
+        try:
+            reply = target.exchange(target.frame("!0?"), timeout=1.0)
+        except HarnessError as exc:
+            found = DEFAULT_VARIANT, f"'?' failed ({exc}); assumed {DEFAULT_VARIANT}"
+            continue
+        text = reply.lines[0].decode("latin-1") if reply.lines else ""
+        firmware = text.split(",", 1)[1] if "," in text else ""
+        firmware = re.sub(r",[0-9A-Fa-f]{2}$", "", firmware) if target.checksum_on else firmware
+        found = variant_for_firmware(spec, firmware)
+        if _known(spec, firmware):
+            break
+        if reply.lines and not target.checksum_on and _summed(reply.lines[0]):
+            target.checksum_on = True   # a previous session left checksums on: ask in kind
+    return found
+
+
+def _summed(line: bytes) -> bool:
+    """An answer in the checksummed form (the unit's checksum mode is on)."""
+    from conform.families.gve.protocol import Answer, parse_answer
+
+    summed = parse_answer(line, True)
+    return isinstance(summed, Answer) and bool(summed.checksum_ok)
+
+
+def _quiet(target: GveTarget, quiet: float = 0.1, bound: float = 1.0) -> None:
+    """End a line a previous session left unfinished (an empty line gets no answer) and drop
+    whatever arrives until the link has been quiet for ``quiet`` s (at most ``bound`` s)."""
+    target.send(b"\r")
+    end = target.now() + bound
+    while target.now() < end and target.receive(min(end, target.now() + quiet)):
+        pass
+    target.drain()
+
+
+def _known(spec: Any, firmware: str) -> bool:
+    fw = firmware.strip()
+    return bool(fw) and any(fw.startswith(v.firmware) or v.firmware.startswith(fw)
+                            for v in spec.variants.values())
 
 
 def variant_for_firmware(spec: Any, firmware: str) -> tuple[str, str]:

@@ -7,6 +7,7 @@ import time
 
 import click
 
+from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import (
     BAUD,
     INPUT_FILE,
@@ -120,10 +121,11 @@ def _finish(sender: object) -> None:
               help="G-code: skip words outside the subset and what cannot be read.")
 @click.option("--allow-motion", is_flag=True,
               help="Required to send motion to anything but an emulator.")
+@force_option("the --record file")
 def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, packet: int,
         policy: str, latency: float, timeout: float, noise: float, seed: int,
         corrupt_command: str, corrupt_answer: str, record: str | None, steps_per_mm: str,
-        feed: float, accel: float, lenient: bool, allow_motion: bool) -> None:
+        feed: float, accel: float, lenient: bool, allow_motion: bool, force: bool) -> None:
     """Stream JOB (one command per line, or .nc/.gcode) and report what happened.
 
     \b
@@ -134,6 +136,7 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
     from conform.families.gve.sender.job import load_job
     from conform.families.gve.spec import load_spec
 
+    fresh_output(record, force, "--record")
     spec = load_spec()
     emu = target.startswith("emu:")
     vid = (target[4:] if emu else None) or variant or "gve64-v19"
@@ -233,18 +236,19 @@ def _stream(items: list, var: object, port: object, target: str, checksums: bool
 
     from conform.families.gve.sender.core import Sender
     from conform.families.gve.sender.links import halt_and_delete, run_serial
+    from conform.stops import interrupted_by
 
     sender = Sender(items, var, policy=policy, checksums=checksums, packet=packet,  # type: ignore[arg-type]
                     timeout=timeout / 1000.0)
     progress = Progress(sender)
     try:
         run_serial(sender, port, latency=latency / 1000.0, on_progress=progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP (conform.stops)
         answers = halt_and_delete(sender, port)
         port.close()
         shown = ", ".join(a.decode("ascii", "replace").strip() or "(none)" for a in answers)
-        raise UserError(f"interrupted: sent H and D to leave the unit halted (answers: {shown})",
-                        exit_code=130) from None
+        raise UserError(f"interrupted ({interrupted_by(exc)}): sent H and D to leave the unit "
+                        f"halted (answers: {shown})", exit_code=130) from None
     except (serial.SerialException, OSError) as exc:
         raise LinkError(f"{target}: {exc}") from None
     if progress.shown:
