@@ -119,6 +119,13 @@ def test_conformance_report_first_screen(browser, tmp_path, capsys):
     assert "MUST" in _on_first_screen(browser, "#legend")
     first = _on_first_screen(browser, ".detail.FAIL")
     assert "expected" in first and "actual" in first and "conform run --target" in first
+    # what a reader needs first: the unit is another variant, and most FAILs are one cause
+    assert "try --variant gve64-v10" in _on_first_screen(browser, "#hint")
+    causes = _on_first_screen(browser, "#causes")
+    assert "VL, VK, VN, XM" in causes and "one cause" in causes
+    marked = browser.execute_script(
+        "return document.querySelector('.detail.FAIL mark.d').innerText")
+    assert marked   # the differing bytes of expected vs actual are highlighted
 
 
 def _crowded_first_screen():
@@ -195,3 +202,14 @@ def test_analysis_report_first_screen(browser, tmp_path, capsys):
     images = browser.execute_script(
         "return [...document.images].filter(i => !(i.complete && i.naturalWidth > 0)).length")
     assert images == 0, "a plot did not load"
+
+
+def test_fleet_report_loads_and_names_its_counts(browser, tmp_path, capsys):
+    out = tmp_path / "fleet"
+    with pytest.raises(SystemExit):
+        main(["analyze", str(REPO / "captures"), "--report", str(out), "--jobs", "1"])
+    capsys.readouterr()
+    assert _load(browser, out / "index.html", "fleet") == []
+    heading = _on_first_screen(browser, "h1")
+    assert heading.startswith("Fleet analysis: ") and " 1 machines" not in heading
+    assert "machine" in _on_first_screen(browser, "table")

@@ -193,3 +193,16 @@ def test_report_and_ports_0(tmp_path, capsys):
                           str(tmp_path / "again")], capsys)
     assert code == 0 and (tmp_path / "again" / "index.html").exists(), err
     assert _code(["ports"], capsys)[0] == 0
+
+
+def test_the_top_level_help_names_every_family(capsys):
+    from conform.families import families
+
+    code, out, _ = _code(["--help"], capsys)
+    assert code == 0
+    text = " ".join(out.split())
+    for fam in families():
+        assert fam.name in text
+        for v in fam.variants():
+            assert v.id in text, v.id
+    assert "130 Ctrl-C, 143 SIGTERM, 129 SIGHUP" in text

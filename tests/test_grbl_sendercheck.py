@@ -91,6 +91,11 @@ def test_an_overflowing_sender_is_caught_by_check_sender_and_analyze(tmp_path):
     results = json.loads((rep / "results.json").read_text())
     g = {c["id"].split("/", 2)[2]: c["grade"] for c in results["checks"]}
     assert g["stream/within-buffer"] == "FAIL" and g["stream/nothing-lost"] == "FAIL"
+    # the terminal names what failed and sums up the rest, as GVE's does (not a line per rule)
+    lines = p.stdout.splitlines()
+    failing = sorted(k for k, v in g.items() if v not in ("PASS", "NOT-APPLICABLE"))
+    assert len(lines) == len(failing) + 2, lines
+    assert sorted(x.split()[1].split("/", 2)[2] for x in lines[:-2]) == failing
     capture = rep / "stream" / "session.mcap"
     truth = json.loads((rep / "stream" / "truth.json").read_text())
     assert truth["bytes_lost"] > 0

@@ -34,10 +34,30 @@ SUBCOMMANDS: tuple[str, ...] = (
 )
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Conform(click.Group):
+    """The top-level group: its help names every registered family and its variants (read
+    when the help is shown, so no other command pays for loading the tables)."""
+
+    def format_help_text(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        import inspect
+
+        try:
+            from conform.families import families
+
+            rows = [f"{fam.name} ({', '.join(v.id for v in fam.variants())})"
+                    for fam in families()]
+        except Exception:  # noqa: BLE001 - the help must always show
+            rows = []
+        if rows and self.help and "Protocol families" not in self.help:
+            head, _, rest = inspect.cleandoc(self.help).partition("\n\n")
+            self.help = f"{head}\n\nProtocol families: {'; '.join(rows)}.\n\n{rest}"
+        super().format_help_text(ctx, formatter)
+
+
+@click.group(cls=_Conform, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="conform")
 def cli() -> None:
-    """Conformance, emulation, capture and analysis for serial motion controllers.
+    """Conformance, emulation, capture and analysis for serial CNC motion controllers.
 
     Exit status: 0 done, 1 something failed (a FAIL, a failed send, a damaged capture), 2 a
     usage or input mistake, a link that cannot be opened, or a run that stopped early; 128 + N
@@ -79,6 +99,7 @@ def _name_the_families() -> None:
 
 
 _register()
+
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -281,7 +281,25 @@ def identify(target: GveTarget, spec: Any, attempts: int = 3) -> tuple[str, str]
             break
         if reply.lines and not target.checksum_on and _summed(reply.lines[0]):
             target.checksum_on = True   # a previous session left checksums on: ask in kind
+    else:
+        _other_family(target)
     return found
+
+
+def _other_family(target: GveTarget) -> None:
+    """No answer named a firmware: when what came back is another family's traffic, say so
+    (one line) instead of running this family's checks into a lost link."""
+    from conform.families import detect_family
+
+    tx = b"".join(e.data for e in target.log if e.dir == "tx")
+    rx = b"".join(e.data for e in target.log if e.dir == "rx")
+    seen = detect_family(tx, rx, {})
+    if seen.family not in ("unknown", "gve"):
+        from conform.families import family
+
+        ids = ", ".join(v.id for v in family(seen.family).variants())
+        raise UserError(f"{target.name}: the unit answers as {seen.family} ({seen.why}), "
+                        f"not as a GVE unit: give --variant ({ids})")
 
 
 def _summed(line: bytes) -> bool:
