@@ -12,13 +12,24 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from conform.families import Detection, VariantInfo
+from conform.families import Detection, Family, VariantInfo
 
 
-class MarlinFamily:
+class MarlinFamily(Family):
+    """Marlin's hooks. It answers both the engine's older hook set (``run_targets``) and the
+    Family base class's (``plan_checks``, ``runner(options=, permissions=)``,
+    ``diff_variants``), so it plugs into either."""
+
     name = "marlin"
+    title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
+    default_rank = 300
+    table_files = ("variants", "messages", "commands", "caps")
     pytest_plugin = None
     check_sender = None   # judged by sendercheck.run_cli (conform check-sender --variant marlin-…)
+
+    @property
+    def default_variant(self) -> str:
+        return next(iter(self.load_tables().variants))
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.marlin.spec import load_marlin
@@ -38,10 +49,40 @@ class MarlinFamily:
         spec = self.load_tables()
         return make(spec.variant(variant), spec, t0=t0, **options)
 
-    def runner(self, target: Any, variant: str, **options: Any) -> Any:
+    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
+               **family_values: Any) -> Any:
         from conform.families.marlin.conformance.checks import MarlinRunner
 
-        return MarlinRunner(target, variant, **options)
+        motion = bool(permissions.allow_motion) if permissions is not None else \
+            bool(family_values.pop("allow_motion", False))
+        return MarlinRunner(target, variant, allow_motion=motion, options=options)
+
+    def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_values: Any
+                    ) -> list[Any]:
+        from conform.families.marlin.conformance.checks import generate, select
+
+        return select(generate(self.load_tables(), variant), patterns)
+
+    def permission_notes(self, permissions: Any) -> list[str]:
+        from conform.families.marlin.conformance.checks import HEATERS_ENV
+
+        notes = [] if permissions.allow_motion else [
+            "checks that move or halt the unit SKIPPED (no --allow-motion)"]
+        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"]
+
+    def mutant_fault(self, name: str) -> str:
+        from conform.families.marlin.conformance.mutants import MUTANTS
+
+        return (MUTANTS[name].__doc__ or name).strip()
+
+    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+        from conform.families.marlin.spec import diff
+
+        spec = self.load_tables()
+        va, vb = spec.variant(a), spec.variant(b)
+        rows = diff(va, vb)
+        return (f"{a} → {b}: {len(rows)} differences", ["what", a, b, "source"], rows)
 
     def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
         from conform.families.marlin.conformance.checks import run_checks
