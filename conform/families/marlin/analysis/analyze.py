@@ -154,9 +154,13 @@ def _parse(t: float, raw: bytes) -> HostLine:
             j = body.find(b"N", 4)
             if j >= 0:
                 k = j + 1
-                while k < len(body) and body[k:k + 1].isdigit():
+                while k < len(body) and (body[k:k + 1].isdigit() or (k == j + 1 and
+                                                                     body[k:k + 1] == b"-")):
                     k += 1
-                n = int(body[j + 1:k] or b"0")
+                try:
+                    n = int(body[j + 1:k])
+                except ValueError:
+                    n = 0
         text = body[i:].lstrip(b" ")
         ok = False
         if star >= 0:
