@@ -356,13 +356,14 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
         MarlinCheck(f"{vid}/G0_G1.cpp/motion/move-m400-m114", cmd["M400"] + "; " + cmd["M114"],
                     "G1 X10, M400 waits, M114 shows it", move_and_wait, motion=True),
     ]
+    # M112 leaves a unit dead until it is reset: the halt checks come last (stable sort)
     if v.on("AUTO_REPORT_TEMPERATURES"):
         out.append(MarlinCheck(f"{vid}/M155.cpp/report/m155", cmd["M155"],
                                "M155 S1 reports every second, S0 stops", m155))
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
-    return out
+    return sorted(out, key=lambda c: "/halt/" in c.id)
 
 
 def select(checks: list[MarlinCheck], patterns: Sequence[str]) -> list[MarlinCheck]:

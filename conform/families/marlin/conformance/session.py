@@ -50,9 +50,11 @@ class Session:
             return
         t.begin_log()
         t.drain()
-        got = self.talk(b"M110 N0\n", timeout=3.0)
+        # numbered: queue.cpp takes the number from M110's own N without a sequence check,
+        # and the M110 handler sets it again (either form sets Marlin's number)
+        got = self.talk(self.numbered("M110 N0", 0), timeout=3.0)
         if not any(self.spec.classify(x)[0].startswith("ok") for x in got.lines):
-            raise HarnessError(f"no ok for M110 N0 ({got.text()})")
+            raise HarnessError(f"no ok for N0 M110 N0 ({got.text()})")
 
     def oks(self, lines: list[str]) -> int:
         return sum(1 for x in lines if self.spec.classify(x)[0].startswith("ok"))

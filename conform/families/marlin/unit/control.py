@@ -85,5 +85,6 @@ class MarlinControl:
             return f"ok busy for {x:g} s"
         if kind == "unplug":
             f.unplug(t, x)
+            unit.power_off(t)       # a USB board is powered through its cable
             return f"ok cable pulled for {x:g} s"
         raise ValueError(f"unknown fault {kind!r} (lose, busy, unplug, line)")

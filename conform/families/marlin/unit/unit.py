@@ -101,6 +101,17 @@ class MarlinUnit:
         self.ep_state = ""                  # emergency parser: the command seen so far
         self._say(self.booting_until, *self._banner())
 
+    def power_off(self, t: float) -> None:
+        """The board loses power (its USB cable pulled): it stops where it is and says
+        nothing until ``power_cycle``."""
+        self._advance(t)
+        self._out = [o for o in self._out if o[0] <= t]
+        self.queue.clear()
+        self.planner.clear()
+        self.cur = None
+        self.rx.clear()
+        self.halted = True
+
     def power_cycle(self, t: float, boot: float = BOOT) -> None:
         """A reset (DTR on port open, the reset button, a power cycle): the banner, all
         state lost."""
