@@ -21,11 +21,13 @@ capture ended first.
 from __future__ import annotations
 
 import json
+import re
+from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
+from functools import reduce
+from operator import xor
 from pathlib import Path
 from typing import Any
-
-from conform.families.marlin.protocol.codec import checksum
 
 MAX_LISTED = 50
 DEFAULT_VARIANT = "marlin-2.1"
@@ -120,17 +122,25 @@ class MarlinAnalysis:
                 "starvations": m["planner_empty"]}
 
 
-def timed_lines(chunks: list[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
+def iter_lines(chunks: Iterable[tuple[float, bytes]]) -> Iterator[tuple[float, bytes]]:
     """Lines (ended by LF or CR, empty ones dropped) with the time of the chunk that ended
-    them."""
-    out: list[tuple[float, bytes]] = []
+    them, one at a time."""
     rest = b""
     for t, data in chunks:
         buf = rest + data
         parts = buf.replace(b"\r", b"\n").split(b"\n")
         rest = parts.pop()
-        out += [(t, p) for p in parts if p]
-    return out
+        for p in parts:
+            if p:
+                yield t, p
+
+
+def timed_lines(chunks: Iterable[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
+    return list(iter_lines(chunks))
+
+
+_NUMBERED = re.compile(rb"N(-?\d*)")
+_SECOND_N = re.compile(rb"N(-?\d+)")
 
 
 def _parse(t: float, raw: bytes) -> HostLine:
@@ -138,37 +148,22 @@ def _parse(t: float, raw: bytes) -> HostLine:
     gone), N and the checksum checked."""
     cut = raw.find(b";")
     body = (raw if cut < 0 else raw[:cut]).lstrip(b" ")
-    n = None
-    ok: bool | None = None
-    text = body
     star = body.rfind(b"*")
-    if body[:1] == b"N":
-        i = 1
-        while i < len(body) and (body[i:i + 1].isdigit() or (i == 1 and body[i:i + 1] == b"-")):
-            i += 1
-        try:
-            n = int(body[1:i])
-        except ValueError:
-            n = 0
-        if b"M110" in body:
-            j = body.find(b"N", 4)
-            if j >= 0:
-                k = j + 1
-                while k < len(body) and (body[k:k + 1].isdigit() or (k == j + 1 and
-                                                                     body[k:k + 1] == b"-")):
-                    k += 1
-                try:
-                    n = int(body[j + 1:k])
-                except ValueError:
-                    n = 0
-        text = body[i:].lstrip(b" ")
-        ok = False
-        if star >= 0:
-            digits = body[star + 1:].strip()
-            ok = digits.isdigit() and int(digits) == checksum(body[:star])
+    text = body if star < 0 else body[:star]
+    if body[:1] != b"N":
+        return HostLine(t, None, text.decode("latin-1").strip(), len(raw), None)
+    m = _NUMBERED.match(body)
+    digits = m.group(1) if m else b""
+    n = int(digits) if digits not in (b"", b"-") else 0
+    if b"M110" in body:
+        second = _SECOND_N.search(body, 4)
+        if second:
+            n = int(second.group(1))
+    ok = False
     if star >= 0:
-        text = text[:text.rfind(b"*")] if b"*" in text else text
-    return HostLine(t, n, text.decode("latin-1").strip(), len(raw), ok)
+        tail = body[star + 1:].strip()
+        ok = tail.isdigit() and int(tail) == reduce(xor, body[:star], 0)
+    return HostLine(t, n, text[m.end() if m else 1:].decode("latin-1").strip(), len(raw), ok)
 
 
 def _pct_ms(ordered: list[float], q: float) -> float | None:
@@ -180,14 +175,12 @@ def _pct_ms(ordered: list[float], q: float) -> float | None:
 def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFAULT_VARIANT,
                     path: str = "", detected: str = "", keepalive: float = 2.0,
                     planner_blocks: int = 15) -> MarlinAnalysis:
-    hl = [_parse(t, raw) for t, raw in timed_lines(host)]
-    ul = [(t, raw.decode("latin-1")) for t, raw in timed_lines(unit)]
+    hl = [_parse(t, raw) for t, raw in iter_lines(host)]
+    ul = iter_lines(unit)
     findings: list[Finding] = []
-    t0 = min([x.t for x in hl[:1]] + [x[0] for x in ul[:1]] or [0.0])
-    # both directions in time; at the same time the unit's line first (a host answering it
-    # cannot have sent before it came)
-    events = sorted([(x.t, 1, i) for i, x in enumerate(hl)] + [(t, 0, i) for i, (t, _) in
-                                                                enumerate(ul)])
+    first_unit = next(ul, None)
+    starts = [x.t for x in hl[:1]] + ([first_unit[0]] if first_unit else [])
+    t0 = min(starts, default=0.0)
     last_n = 0
     epoch = 0
     sent_max = 0
@@ -199,9 +192,10 @@ def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFA
     busy: list[float] = []
     planner_free: list[int] = []
     latency: list[float] = []
-    for t, kind, i in events:
+    t_last = t0
+    for t, kind, x, line in _merged(hl, first_unit, ul):
+        t_last = t
         if kind == 1:
-            x = hl[i]
             x.epoch = epoch
             if x.n is None:
                 x.accepted = True
@@ -227,7 +221,6 @@ def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFA
                 if m110:
                     epoch += 1
             continue
-        line = ul[i][1]
         if line.startswith("ok"):
             oks += 1
             if in_error:
@@ -280,7 +273,7 @@ def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFA
             findings.append(Finding("reset", t - t0, "warning", "the unit restarted (start): "
                                     "line numbers begin again at 1, queued lines are lost",
                                     "MarlinCore.cpp setup()"))
-    duration = max([x.t for x in hl[-1:]] + [t for t, _ in ul[-1:]] or [t0]) - t0
+    duration = t_last - t0
     findings += _storms(resends, hl, t0)
     twice_c, twice_p = _twice(hl, findings, t0)
     never_c, never_p = _never(hl, findings, t0)
@@ -312,17 +305,36 @@ def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFA
     return MarlinAnalysis(path, variant, detected, hl, findings, metrics)
 
 
+def _merged(hl: list[HostLine], first: tuple[float, bytes] | None,
+            rest: Iterator[tuple[float, bytes]]) -> Iterator[tuple[float, int, Any, str]]:
+    """Both directions in time order, the unit's line first at the same time (a host answering
+    it cannot have sent before it came): (t, 0, None, unit line) or (t, 1, host line, "")."""
+    u = first
+    i = 0
+    n = len(hl)
+    while i < n or u is not None:
+        if u is not None and (i >= n or u[0] <= hl[i].t):
+            yield u[0], 0, None, u[1].decode("latin-1")
+            u = next(rest, None)
+        else:
+            yield hl[i].t, 1, hl[i], ""
+            i += 1
+
+
 def _storms(resends: list[tuple[float, int]], hl: list[HostLine], t0: float) -> list[Finding]:
     """Runs of Resend: requests (each within STORM_WINDOW of the last) in which the unit took
     fewer lines than it asked to be sent again: the link makes no progress."""
+    from bisect import bisect_left, bisect_right
+
+    taken_at = [x.t for x in hl if x.accepted and x.n is not None] if resends else []
     out = []
     i = 0
     while i < len(resends):
         j = i
         while j + 1 < len(resends) and resends[j + 1][0] - resends[j][0] <= STORM_WINDOW:
             j += 1
-        taken = sum(1 for x in hl if x.accepted and x.n is not None
-                    and resends[i][0] <= x.t <= resends[j][0])
+        taken = (bisect_right(taken_at, resends[j][0]) - bisect_left(taken_at, resends[i][0])
+                 if j > i else 0)
         if j - i + 1 >= STORM_MIN and taken < j - i + 1:
             asked = [n for _, n in resends[i:j + 1]]
             out.append(Finding("resend-storm", resends[i][0] - t0, "error",
