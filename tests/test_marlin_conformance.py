@@ -116,19 +116,26 @@ def test_conform_run_over_the_pty(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_halts_a_real_unit(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_ctrl_c_and_signals_halt_a_real_unit(tmp_path, sig):
     proc, path, control = start()
     try:
         run = subprocess.Popen([sys.executable, "-m", "conform", "run", "--target", path,
                                 "--variant", "marlin-2.1", "--baud", "250000", "--report",
                                 str(tmp_path), "-q", "--check", "*/keepalive/*"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(2.5)                                  # inside the 5 s dwell
-        run.send_signal(signal.SIGINT)
+        from conform.emulator.control import send_control
+
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:                # wait until the 5 s dwell runs
+            running = json.loads(send_control(control, "state")[3:])["running"] or ""
+            if "G4" in running:
+                break
+            time.sleep(0.1)
+        run.send_signal(sig)
         out, err = run.communicate(timeout=30)
         assert run.returncode == 2, out + err
         assert "interrupted" in err and "M410" in err
-        from conform.emulator.control import send_control
 
         state = json.loads(send_control(control, "state")[3:])
         assert state["planner"] == 0 and not state["halted"]
