@@ -155,3 +155,22 @@ def test_detect():
     assert detect(host, b"ok\n" * 5).score >= 0.8
     assert detect(b"", b"Resend: 3\nok\n").score >= 0.9
     assert detect(b"G1X1\n", b"<Idle|MPos:0,0,0>\nok\n").score < 0.5
+
+
+@pytest.mark.parametrize("vid", ["marlin-2.1", "marlin-2.1-adv"])
+def test_random_traffic_never_stops_the_unit(vid):
+    import random
+
+    rng = random.Random(7)
+    words = [b"N", b"M110", b"M112", b"M108", b"M410", b"G4 S1", b"G1 X5", b"*", b";", b"\\",
+             b"\n", b"\r", b"M105", b"M155 S1", b"G28", b"\x08", b"-", b"99", b" "]
+    for _ in range(30):
+        u = MarlinUnit(S.variant(vid), S)
+        t = 0.0
+        for _ in range(200):
+            t += rng.random() * 0.5
+            u.receive(b"".join(rng.choice(words) for _ in range(rng.randrange(1, 12))), t)
+            u.poll(t)
+        u.power_cycle(t + 10)     # (a halted unit needs the reset; a busy one is freed by it)
+        u.poll(t + 60)
+        assert lines(u, frame(1, "G90"), t + 61, until=t + 90)[-1].startswith("ok")
