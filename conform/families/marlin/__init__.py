@@ -1,0 +1,144 @@
+"""Marlin 2.1 as a protocol family: tables in marlin/spec/tables/, a sans-I/O reference unit,
+conformance checks graded per clause, traffic detection and capture analysis, check-sender.
+
+Rooms: ``spec`` (tables and their loader), ``protocol`` (checksums, framing, reading lines,
+detection), ``unit`` (the reference unit, its faults, control requests and ``serve``),
+``conformance`` (checks in the engine's runner, mutants), ``analysis`` (captures),
+``sendercheck`` (judging a sender program), ``show`` (``conform spec show``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from conform.families import Detection, Family, VariantInfo
+
+
+class MarlinFamily(Family):
+    """Marlin's hooks. It answers both the engine's older hook set (``run_targets``) and the
+    Family base class's (``plan_checks``, ``runner(options=, permissions=)``,
+    ``diff_variants``), so it plugs into either."""
+
+    name = "marlin"
+    title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
+    default_rank = 300
+    table_files = ("variants", "messages", "commands", "caps")
+    pytest_plugin = None
+    check_sender = None   # judged by sendercheck.run_cli (conform check-sender --variant marlin-…)
+
+    @property
+    def default_variant(self) -> str:
+        return next(iter(self.load_tables().variants))
+
+    def load_tables(self, root: str | None = None) -> Any:
+        from conform.families.marlin.spec import load_marlin
+
+        return load_marlin(root)
+
+    def variants(self) -> Sequence[VariantInfo]:
+        spec = self.load_tables()
+        return [VariantInfo(v.id, self.name, v.title, f"Marlin {v.firmware}", "XYZE",
+                            f"queue {v.bufsize}, rx {v.rx_buffer} B, planner {v.planner_blocks}",
+                            ", ".join(k for k in ("ADVANCED_OK", "EMERGENCY_PARSER") if v.on(k))
+                            or "ok, no emergency parser") for v in spec.variants.values()]
+
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+        from conform.families.marlin.conformance.mutants import make
+
+        spec = self.load_tables()
+        return make(spec.variant(variant), spec, t0=t0, **options)
+
+    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
+               **family_values: Any) -> Any:
+        from conform.families.marlin.conformance.checks import MarlinRunner
+
+        motion = bool(permissions.allow_motion) if permissions is not None else \
+            bool(family_values.pop("allow_motion", False))
+        return MarlinRunner(target, variant, allow_motion=motion, options=options)
+
+    def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_values: Any
+                    ) -> list[Any]:
+        from conform.families.marlin.conformance.checks import generate, select
+
+        return select(generate(self.load_tables(), variant), patterns)
+
+    def permission_notes(self, permissions: Any) -> list[str]:
+        from conform.families.marlin.conformance.checks import HEATERS_ENV
+
+        notes = [] if permissions.allow_motion else [
+            "checks that move or halt the unit SKIPPED (no --allow-motion)"]
+        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"]
+
+    def mutant_fault(self, name: str) -> str:
+        from conform.families.marlin.conformance.mutants import MUTANTS
+
+        return (MUTANTS[name].__doc__ or name).strip()
+
+    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+        from conform.families.marlin.spec import diff
+
+        spec = self.load_tables()
+        va, vb = spec.variant(a), spec.variant(b)
+        rows = diff(va, vb)
+        return (f"{a} → {b}: {len(rows)} differences", ["what", a, b, "source"], rows)
+
+    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
+        from conform.families.marlin.conformance.checks import run_checks
+
+        return run_checks(target, variant, **options)
+
+    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
+        from conform.families.marlin.conformance.checks import run_targets
+
+        return run_targets(targets, variant, **options)
+
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+        return None   # recorded raw; lines are paired when the capture is analysed
+
+    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
+        from conform.families.marlin.sendercheck.cli import run_cli
+
+        return run_cli(*args, **kw)
+
+    def characterize(self, target: str, output: str, variant: str | None, **_options: Any
+                     ) -> None:
+        from conform.errors import UserError
+
+        raise UserError("characterize: Marlin leaves no choice this suite probes yet; its "
+                        "configuration is read from M115 (conform run --check '*/m115/*')")
+
+    def show_spec(self, variant: str, command: str | None, *, console: Any,
+                  as_json: bool = False) -> None:
+        from conform.families.marlin.show import show
+
+        show(variant, command, console, as_json)
+
+    def tables_summary(self, root: str | None = None) -> str:
+        s = self.load_tables(root)
+        return (f"ok: marlin: {len(s.variants)} variants, {len(s.messages)} message kinds, "
+                f"{len(s.commands)} commands, {len(s.caps)} M115 capabilities")
+
+    def mutants(self) -> Sequence[str]:
+        from conform.families.marlin.conformance.mutants import MUTANTS
+
+        return tuple(MUTANTS)
+
+    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+        from conform.families.marlin.protocol.codec import detect
+
+        return detect(host, unit)
+
+    def analyze(self, path: str, **options: Any) -> Any:
+        from conform.families.marlin.analysis.analyze import analyze_capture
+
+        return analyze_capture(path, **options)
+
+    def serve(self, variant: str, **options: Any) -> None:
+        from conform.families.marlin.unit.serve import serve
+
+        serve(variant, **options)
+
+
+FAMILY = MarlinFamily()

@@ -1,0 +1,547 @@
+"""Marlin conformance checks, graded per clause in the engine's runner.
+
+A check id reads ``<variant>/<source file>/<group>/<name>``, e.g.
+``marlin-2.1/queue.cpp/checksum/comment-before-star``; its clause is the function of Marlin's
+source (spec/tables) whose behaviour it holds the unit to. Groups: ``line`` (numbers, M110,
+repeats), ``checksum``, ``reply`` (ok, unknown command), ``report`` (M105, M114, M115, M155),
+``keepalive``, ``buffer`` (MAX_CMD_SIZE, the receive buffer emptied on an error, ADVANCED_OK),
+``halt`` (M112 and the emergency parser), ``reset``, ``motion``.
+
+On a real unit: checks that move need ``--allow-motion``, checks that heat need
+``CONFORM_MARLIN_ALLOW_HEATERS=1``, and M112 (the unit stays dead until reset) needs
+``--allow-motion`` too; otherwise they are SKIPPED. Ctrl-C, SIGTERM and a harness error halt the
+unit: M108 (break a heating wait), M410 (stop the steppers), heaters off, until an ok.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
+from conform.conformance.runner import RunAborted, Runner, RunOptions
+from conform.conformance.target import HarnessError
+from conform.errors import UserError
+from conform.families.marlin.conformance.session import Session, Talk
+from conform.families.marlin.spec import MarlinSpec, load_marlin
+
+Outcome = tuple[bool | None, str, str]      # passed (None: not applicable), expected, actual
+HEATERS_ENV = "CONFORM_MARLIN_ALLOW_HEATERS"
+Q = "queue.cpp"
+
+
+@dataclass
+class MarlinCheck:
+    id: str
+    clause: str
+    title: str
+    run: Callable[[Session], Outcome]
+    level: str = MUST
+    motion: bool = False      # moves axes, or leaves the unit dead (M112)
+    heat: bool = False
+    emulator_only: bool = False
+
+
+def _ok_kind(s: Session, line: str) -> bool:
+    return s.spec.classify(line)[0].startswith("ok")
+
+
+def _error_then_resend(s: Session, got: Talk, error: str, last: int) -> Outcome:
+    want = [f"Error:{error}, Last Line: {last}", f"Resend: {last + 1}", "ok"]
+    return got.lines[:3] == want, " | ".join(want), got.text()
+
+
+def _expect_ok(s: Session, got: Talk, n: int | None = None) -> bool:
+    """One ok for one line (ADVANCED_OK: ``ok N<n> P.. B..``)."""
+    if len(got.lines) != 1 or not _ok_kind(s, got.lines[0]):
+        return False
+    if s.v.on("ADVANCED_OK"):
+        return got.lines[0].startswith(f"ok N{n} " if n is not None else "ok P")
+    return got.lines[0] == "ok"
+
+
+def _ok_text(s: Session, n: int | None = None) -> str:
+    if not s.v.on("ADVANCED_OK"):
+        return "ok"
+    return f"ok N{n} P<n> B<n>" if n is not None else "ok P<n> B<n>"
+
+
+def numbered_ok(s: Session) -> Outcome:
+    got = s.talk(s.numbered("G90"))
+    return _expect_ok(s, got, 1), _ok_text(s, 1), got.text()
+
+
+def _damaged(s: Session, command: str, n: int) -> bytes:
+    """``N<n> <command>`` with a checksum one off the right one."""
+    from conform.families.marlin.protocol.codec import checksum
+
+    return s.numbered(command, n, cs=checksum(f"N{n} {command}".encode()) ^ 1)
+
+
+def checksum_mismatch(s: Session) -> Outcome:
+    return _error_then_resend(s, s.talk(_damaged(s, "G90", 1)), "checksum mismatch", 0)
+
+
+def no_checksum(s: Session) -> Outcome:
+    return _error_then_resend(s, s.talk(b"N1 G90\n"), "No Checksum with line number", 0)
+
+
+def comment_before_star(s: Session) -> Outcome:
+    """The checksum is right for the whole line, but ';' cut it off with the comment."""
+    body = b"N1 G90 ; absolute"
+    from conform.families.marlin.protocol.codec import checksum
+
+    got = s.talk(body + b"*%d\n" % checksum(body))
+    return _error_then_resend(s, got, "No Checksum with line number", 0)
+
+
+def checksum_without_number(s: Session) -> Outcome:
+    got = s.talk(b"M114*99\n", answers=1)
+    pos = [x for x in got.lines if s.spec.classify(x)[0] == "position"]
+    ok = len(pos) == 1 and s.oks(got.lines) == 1
+    return ok, "executed: the position, then ok (no line number: nothing checked)", got.text()
+
+
+def skip_ahead(s: Session) -> Outcome:
+    s.talk(s.numbered("G90"))
+    return _error_then_resend(s, s.talk(s.numbered("G90", 3)), "Line Number is not Last Line "
+                              "Number+1", 1)
+
+
+def repeat_silent(s: Session) -> Outcome:
+    a = s.talk(s.numbered("G90"))
+    b = s.talk(s.numbered("G90"))
+    again = s.talk(s.numbered("G90", 2), timeout=0.6)
+    older = s.talk(s.numbered("G90", 1), timeout=0.6)
+    nxt = s.talk(s.numbered("G90", 3))
+    ok = (_expect_ok(s, a, 1) and _expect_ok(s, b, 2) and not again.lines and not older.lines
+          and _expect_ok(s, nxt, 3))
+    return ok, f"N2 again: silence; N1 again: silence; N3: {_ok_text(s, 3)}", \
+        f"{again.text()}; {older.text()}; {nxt.text()}"
+
+
+def older_is_error(s: Session) -> Outcome:
+    for _ in range(3):
+        s.talk(s.numbered("G90"))
+    return _error_then_resend(s, s.talk(s.numbered("G90", 1)), "Line Number is not Last Line "
+                              "Number+1", 3)
+
+
+def m110_plain(s: Session) -> Outcome:
+    a = s.talk(b"M110 N10\n")
+    b = s.talk(s.numbered("G90", 11))
+    return s.oks(a.lines) == 1 and _expect_ok(s, b, 11), f"ok; N11: {_ok_text(s, 11)}", \
+        f"{a.text()}; {b.text()}"
+
+
+def m110_numbered(s: Session) -> Outcome:
+    """N1 M110 N20: the number taken is the last N on the line, with no sequence check."""
+    a = s.talk(s.numbered("M110 N20", 7))
+    b = s.talk(s.numbered("G90", 21))
+    return s.oks(a.lines) == 1 and _expect_ok(s, b, 21), f"ok; N21: {_ok_text(s, 21)}", \
+        f"{a.text()}; {b.text()}"
+
+
+def unknown_command(s: Session) -> Outcome:
+    got = s.talk(s.numbered("M9999 P1"))
+    want = 'echo:Unknown command: "M9999 P1"'
+    return (got.lines[:1] == [want] and len(got.lines) == 2 and _ok_kind(s, got.lines[1]),
+            f"{want} | {_ok_text(s, 1)}", got.text())
+
+
+def crlf_one_answer(s: Session) -> Outcome:
+    got = s.talk(b"G90\r\n", answers=1, linger=0.3)
+    return _expect_ok(s, got), _ok_text(s) + " (the empty line between CR and LF is ignored)", \
+        got.text()
+
+
+def m105(s: Session) -> Outcome:
+    got = s.talk(b"M105\n")
+    line = got.lines[0] if len(got.lines) == 1 else ""
+    hit = s.spec.messages["ok_temp"].pattern.match(line)
+    temps = hit and s.spec.messages["temps"].pattern.match(hit.group("temps"))
+    ok = bool(temps and temps.group("b") is not None)
+    return ok, "ok T:<t> /<target> B:<t> /<target> @:<p> B@:<p> (one line)", got.text()
+
+
+def m114(s: Session) -> Outcome:
+    got = s.talk(b"M114\n")
+    kinds = got.kinds(s.spec)
+    return kinds[:1] == ["position"] and len(kinds) == 2 and kinds[1].startswith("ok"), \
+        "X:.. Y:.. Z:.. E:.. Count X:.. Y:.. Z:.. | ok", got.text()
+
+
+def m115(s: Session) -> Outcome:
+    got = s.talk(b"M115\n")
+    v, spec = s.v, s.spec
+    first = spec.messages["firmware"].pattern.match(got.lines[0]) if got.lines else None
+    caps = [x for x in got.lines if spec.classify(x)[0] == "cap"]
+    want_caps = [f"Cap:{c.name}:{c.value(v)}" for c in spec.caps] if v.on(
+        "EXTENDED_CAPABILITIES_REPORT") else []
+    problems = []
+    if not first:
+        problems.append("no FIRMWARE_NAME line first")
+    else:
+        if not first.group("name").startswith(f"Marlin {v.firmware}"):
+            problems.append(f"firmware {first.group('name')!r}")
+        if first.group("proto") != v.protocol_version:
+            problems.append(f"PROTOCOL_VERSION:{first.group('proto')}")
+        if first.group("extruders") != str(v.extruders):
+            problems.append(f"EXTRUDER_COUNT:{first.group('extruders')}")
+    wrong = sorted(set(want_caps) ^ set(caps))
+    if wrong:
+        problems.append("capabilities differ: " + ", ".join(wrong[:8]))
+    if not got.lines or not _ok_kind(s, got.lines[-1]):
+        problems.append("no ok at the end")
+    return not problems, f"FIRMWARE_NAME:Marlin {v.firmware} ... PROTOCOL_VERSION:" \
+        f"{v.protocol_version} ..., {len(want_caps)} Cap: lines as configured, ok", \
+        "; ".join(problems) or f"as expected ({len(caps)} Cap: lines)"
+
+
+def m155(s: Session) -> Outcome:
+    a = s.talk(b"M155 S1\n")
+    reports = [x for x in s.wait(2.5).lines if s.spec.classify(x)[0] == "temps"]
+    b = s.talk(b"M155 S0\n")
+    quiet = [x for x in s.wait(1.5).lines if s.spec.classify(x)[0] == "temps"]
+    ok = s.oks(a.lines) == 1 and len(reports) >= 2 and s.oks(b.lines) == 1 and not quiet
+    return ok, "ok; a temperature report every second; ok; then none", \
+        f"{a.text()}; {len(reports)} reports in 2.5 s; {b.text()}; {len(quiet)} after S0"
+
+
+def keepalive(s: Session) -> Outcome:
+    """G4 S5 blocks the handler for 5 s: busy: processing every DEFAULT_KEEPALIVE_INTERVAL."""
+    got = s.talk(b"G4 S5\n", timeout=8.0)
+    busy = sum(1 for x in got.lines if s.spec.classify(x)[0] == "busy")
+    want = int(5 // s.v.keepalive) if s.v.keepalive else 0
+    ok = busy in (want, want - 1) and want > 0 and got.lines and _ok_kind(s, got.lines[-1])
+    return bool(ok), f"{want} x echo:busy: processing (every {s.v.keepalive} s), then ok", \
+        f"{busy} busy lines; {got.text()[-80:]}"
+
+
+def max_cmd_size(s: Session) -> Outcome:
+    """A line longer than MAX_CMD_SIZE - 2 characters loses its tail, the checksum with it."""
+    room = s.v.max_cmd_size - 2
+    fit = s.numbered("M117 " + "A" * (room - len("N1 M117 ") - len("*000")))
+    fit_text = fit.rstrip(b"\n")
+    a = s.talk(fit)
+    body = b"N2 M117 " + b"B" * room
+    from conform.families.marlin.protocol.codec import checksum
+
+    b = s.talk(body + b"*%d\n" % checksum(body))
+    ok = _expect_ok(s, a, 1) and b.lines[:3] == ["Error:No Checksum with line number, Last "
+                                                 "Line: 1", "Resend: 2", "ok"]
+    return ok, f"{len(fit_text)} characters: ok; {len(body) + 4}: No Checksum, Resend: 2, ok", \
+        f"{a.text()}; {b.text()}"
+
+
+def error_empties_rx(s: Session) -> Outcome:
+    """gcode_line_error reads the receive buffer empty: a good line behind a bad one in the
+    same write is gone too (only the one Resend:)."""
+    got = s.talk(_damaged(s, "G90", 1) + s.numbered("G90", 2), answers=1, linger=0.5)
+    want = ["Error:checksum mismatch, Last Line: 0", "Resend: 1", "ok"]
+    return got.lines == want, " | ".join(want) + " (N2 discarded with the buffer)", got.text()
+
+
+def advanced_ok(s: Session) -> Outcome:
+    got = s.talk(s.numbered("G90"))
+    m = s.spec.messages["ok_adv"].pattern.match(got.lines[0]) if got.lines else None
+    want = f"ok N1 P{s.v.planner_blocks} B{s.v.bufsize - 1}"
+    return bool(m) and got.lines[0] == want, want, got.text()
+
+
+def m112_halt(s: Session) -> Outcome:
+    s.target.send(b"M112\n")
+    a = s.wait(1.0)
+    b = s.talk(b"M105\n", answers=1, timeout=1.5)
+    want = "Error:Printer halted. kill() called!"
+    return a.lines == [want] and not b.lines, f"{want}; then silence", f"{a.text()}; {b.text()}"
+
+
+def m112_while_busy(s: Session) -> Outcome:
+    """With EMERGENCY_PARSER M112 acts as its bytes arrive; without, it waits in the receive
+    buffer until the blocking command before it ends."""
+    s.target.send(b"G4 S3\n")
+    s.wait(0.3)
+    s.target.send(b"M112\n")
+    got = s.collect(until=lambda ls: any(s.spec.classify(x)[0] == "halted" for x in ls),
+                    timeout=4.5, linger=0.0)
+    halted = next((i for i, x in enumerate(got.lines) if s.spec.classify(x)[0] == "halted"), None)
+    if halted is None:
+        return False, "Error:Printer halted. kill() called!", got.text()
+    oks_before = s.oks(got.lines[:halted])
+    if s.v.on("EMERGENCY_PARSER"):
+        return oks_before == 0, "halted at once, before the dwell's ok", got.text()
+    return oks_before == 1, "the dwell's ok, then halted", got.text()
+
+
+def reset_banner(s: Session) -> Outcome:
+    s.talk(s.numbered("G90"))
+    s.target.reset()
+    got = s.collect(until=lambda ls: "start" in ls, timeout=2.0, linger=0.2)
+    s.n = 0
+    b = s.talk(s.numbered("G90"))
+    ok = got.lines[:1] == ["start"] and _expect_ok(s, b, 1)
+    return ok, "start, echo: lines; then N1 accepted (line number back to 0)", \
+        f"{got.text()[:60]}; {b.text()}"
+
+
+def move_and_wait(s: Session) -> Outcome:
+    s.talk(b"G28\n", timeout=30.0)
+    s.talk(b"G1 X10 F3000\n")
+    w = s.talk(b"M400\n", timeout=10.0)
+    got = s.talk(b"M114\n")
+    pos = next((x for x in got.lines if s.spec.classify(x)[0] == "position"), "")
+    want = f"X:10.00 Y:0.00 Z:0.00 E:0.00 Count X:{round(10 * s.v.steps_per_mm[0])} Y:0 Z:0"
+    return s.oks(w.lines) == 1 and pos == want, f"M400 ok after the move; {want}", pos or got.text()
+
+
+def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
+    v = spec.variant(vid)
+    c = {m.kind: m.cite for m in spec.messages.values()}
+    cmd = {k: x.cite for k, x in spec.commands.items()}
+    out = [
+        MarlinCheck(f"{vid}/{Q}/line/numbered-ok", c["ok"], "a numbered, checksummed line: ok",
+                    numbered_ok),
+        MarlinCheck(f"{vid}/{Q}/checksum/mismatch", c["err_checksum"],
+                    "a wrong checksum: Error, Resend: N, ok", checksum_mismatch),
+        MarlinCheck(f"{vid}/{Q}/checksum/missing", c["err_no_checksum"],
+                    "N without *: No Checksum with line number", no_checksum),
+        MarlinCheck(f"{vid}/{Q}/checksum/comment-before-star", c["err_no_checksum"] +
+                    "; process_stream_char ';'", "a ';' comment before '*' drops the checksum",
+                    comment_before_star),
+        MarlinCheck(f"{vid}/{Q}/checksum/without-number", c["err_no_line"],
+                    "a checksum without N is simply executed", checksum_without_number),
+        MarlinCheck(f"{vid}/{Q}/line/skip-ahead", c["err_line_no"],
+                    "a skipped number: Line Number error, Resend of the next", skip_ahead),
+        MarlinCheck(f"{vid}/{Q}/line/repeat-silent", c["err_line_no"] + " (WITHIN last_N - 1, "
+                    "last_N: continue)", "the last two numbers again: no answer at all",
+                    repeat_silent),
+        MarlinCheck(f"{vid}/{Q}/line/older-error", c["err_line_no"],
+                    "a number older than the last two: Line Number error", older_is_error),
+        MarlinCheck(f"{vid}/M110.cpp/line/m110-plain", cmd["M110"], "M110 N10 sets the number",
+                    m110_plain),
+        MarlinCheck(f"{vid}/M110.cpp/line/m110-numbered", cmd["M110"],
+                    "N7 M110 N20: the last N counts, no sequence check", m110_numbered),
+        MarlinCheck(f"{vid}/gcode.cpp/reply/unknown", c["unknown"],
+                    "an unknown command is named, then ok", unknown_command),
+        MarlinCheck(f"{vid}/{Q}/reply/crlf", "queue.cpp get_serial_commands (ISEOL: CR and LF; "
+                    "process_line_done: an empty line is skipped)", "CR LF: one line, one ok",
+                    crlf_one_answer),
+        MarlinCheck(f"{vid}/M105.cpp/report/m105", c["ok_temp"], "M105: temperatures in the ok",
+                    m105),
+        MarlinCheck(f"{vid}/M114.cpp/report/m114", c["position"], "M114: position, then ok",
+                    m114),
+        MarlinCheck(f"{vid}/M115.cpp/report/m115", c["firmware"] + "; " + c["cap"],
+                    "M115: firmware, protocol, capabilities as configured", m115),
+        MarlinCheck(f"{vid}/gcode.cpp/keepalive/busy", c["busy"],
+                    "a blocking command: busy: processing every interval", keepalive),
+        MarlinCheck(f"{vid}/{Q}/buffer/max-cmd-size", v.cite["max_cmd_size"],
+                    "a line past MAX_CMD_SIZE loses its checksum", max_cmd_size),
+        MarlinCheck(f"{vid}/{Q}/buffer/error-empties-rx", "queue.cpp gcode_line_error (while "
+                    "(read_serial(..) != -1))", "an error empties the receive buffer",
+                    error_empties_rx, level=INFO),
+        MarlinCheck(f"{vid}/MarlinCore.cpp/halt/m112", c["halted"],
+                    "M112: Error:Printer halted, then nothing answered", m112_halt, motion=True),
+        MarlinCheck(f"{vid}/{'e_parser.h' if v.on('EMERGENCY_PARSER') else Q}/halt/m112-while-busy",
+                    v.cite["options"] if v.on("EMERGENCY_PARSER") else
+                    "queue.cpp get_serial_commands (nothing is read while a command blocks)",
+                    "M112 during a dwell", m112_while_busy, motion=True),
+        MarlinCheck(f"{vid}/MarlinCore.cpp/reset/banner", c["start"],
+                    "a reset: start and the banner, line number 0", reset_banner,
+                    emulator_only=True),
+        MarlinCheck(f"{vid}/G0_G1.cpp/motion/move-m400-m114", cmd["M400"] + "; " + cmd["M114"],
+                    "G1 X10, M400 waits, M114 shows it", move_and_wait, motion=True),
+    ]
+    # M112 leaves a unit dead until it is reset: the halt checks come last (stable sort)
+    if v.on("AUTO_REPORT_TEMPERATURES"):
+        out.append(MarlinCheck(f"{vid}/M155.cpp/report/m155", cmd["M155"],
+                               "M155 S1 reports every second, S0 stops", m155))
+    if v.on("ADVANCED_OK"):
+        out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
+                               "ok N<n> P<planner free> B<queue free>", advanced_ok))
+    return sorted(out, key=lambda c: "/halt/" in c.id)
+
+
+def select(checks: list[MarlinCheck], patterns: Sequence[str]) -> list[MarlinCheck]:
+    if not patterns:
+        return checks
+    return [c for c in checks if any(fnmatch.fnmatchcase(c.id, p) for p in patterns)]
+
+
+HALT = (b"M108\n", b"M410\n", b"M104 S0\n", b"M140 S0\n")
+
+
+def halt(target: Any, attempts: int = 3) -> str:
+    """Stop a Marlin unit: M108 ends a heating wait, M410 stops the steppers at once, the
+    heaters are switched off; acknowledged when the last gets its ok."""
+    notes = []
+    for _ in range(attempts):
+        try:
+            for line in HALT:
+                target.send(line)
+            deadline = target.now() + 3.0
+            buf = b""
+            while target.now() < deadline and buf.count(b"ok") < len(HALT):
+                buf += target.receive(deadline)
+            if buf.count(b"ok") >= len(HALT):
+                return "stopped: M108, M410 (quickstop), heaters off, acknowledged by ok"
+            notes.append(f"{buf.count(b'ok')} of {len(HALT)} ok")
+        except Exception as exc:  # noqa: BLE001 - report, try again
+            notes.append(f"not sent ({exc})")
+    return "stop NOT acknowledged: " + "; ".join(notes)
+
+
+class MarlinRunner(Runner):
+    """Marlin's part of the engine's runner: a fresh state per check, grading by the check's
+    own comparison, checks beyond what the run may do SKIPPED, and the halt."""
+
+    def __init__(self, target: Any, vid: str, *, spec: MarlinSpec | None = None,
+                 allow_motion: bool = False, allow_heaters: bool | None = None,
+                 options: RunOptions | None = None, **_ignored: Any) -> None:
+        super().__init__(target, vid, options)
+        self.spec = spec or load_marlin()
+        self.session = Session(target, self.spec, self.spec.variant(vid))
+        self.motion_ok = allow_motion or target.emulated
+        if allow_heaters is None:
+            allow_heaters = os.environ.get(HEATERS_ENV, "") == "1"
+        self.heat_ok = allow_heaters or target.emulated
+
+    def run_check(self, check: MarlinCheck) -> CheckResult:
+        base = dict(id=check.id, clause=check.clause, level=check.level, title=check.title,
+                    variant=self.variant_id, target=self.target.name)
+        if check.emulator_only and not self.target.emulated:
+            return CheckResult(grade=Grade.NOT_APPLICABLE, detail="needs a reset the harness "
+                               "can only give the emulator (DTR)", **base)
+        if check.motion and not self.motion_ok:
+            return CheckResult(grade=Grade.SKIPPED, detail="moves the machine or halts it: "
+                               "needs --allow-motion", **base)
+        if check.heat and not self.heat_ok:
+            return CheckResult(grade=Grade.SKIPPED, detail=f"heats: needs {HEATERS_ENV}=1",
+                               **base)
+        t0 = time.perf_counter()
+        s = self.session
+        try:
+            s.fresh()
+            passed, expected, actual = check.run(s)
+            grade = Grade.PASS if passed else (Grade.DEVIATION if check.level == INFO
+                                               else Grade.FAIL)
+            detail = ""
+            if passed is None:
+                grade, detail = Grade.NOT_APPLICABLE, "not applicable here"
+        except HarnessError as exc:
+            grade, expected, actual, detail = Grade.ERROR, "", "", f"HarnessError: {exc}"
+        if grade is not Grade.PASS and not self.target.emulated and (check.motion or check.heat):
+            detail = (detail + "; " if detail else "") + halt(self.target)
+        return CheckResult(grade=grade, expected=expected, actual=actual, detail=detail,
+                           log=list(self.target.log), duration=time.perf_counter() - t0, **base)
+
+    def halt(self, after_silence: bool = False) -> str:
+        return halt(self.target)
+
+    def run(self, checks: Sequence[Any], progress: Any = None) -> TargetRun:
+        """The engine's loop, with SIGTERM and SIGHUP taken as Ctrl-C while it runs on a real
+        unit, so that every way a run is ended halts the unit and keeps the report."""
+        import signal
+        import threading
+
+        if self.target.emulated or threading.current_thread() is not threading.main_thread():
+            return super().run(checks, progress)
+
+        def interrupt(signum: int, _frame: Any) -> None:
+            raise KeyboardInterrupt(signal.Signals(signum).name)
+
+        old = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+        try:
+            return super().run(checks, progress)
+        finally:
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
+
+    def stop_at_end(self) -> bool:
+        return not self.target.emulated and (self.motion_ok or self.heat_ok)
+
+
+def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: str = "quick",
+               allow_motion: bool = False, notes: list[str] | None = None,
+               progress: Callable[[CheckResult], None] | None = None,
+               spec: MarlinSpec | None = None, announce: Callable[[str], None] | None = None,
+               **_ignored: Any) -> TargetRun:
+    runner = MarlinRunner(target, vid, spec=spec, allow_motion=allow_motion,
+                          options=RunOptions(profile=profile, notes=list(notes or []),
+                                             announce=announce))
+    try:
+        return runner.run(select(generate(runner.spec, vid), patterns), progress)
+    except RunAborted as exc:
+        return exc.run
+
+
+def _emu(vid: str, mutant: str | None, baud: int) -> Any:
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+
+    fam = family("marlin")
+    name = f"emu:{vid}" + (f":{mutant}" if mutant else "")
+    return EmuTarget(lambda: fam.make_unit(vid, mutant=mutant), name, baud=baud)
+
+
+def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
+                patterns: Sequence[str] = (), profile: str = "quick", allow_motion: bool = False,
+                list_only: bool = False, mutants: bool = False,
+                echo: Callable[[str], None] = print, announce: Callable[[str], None] | None = None,
+                **_ignored: Any) -> tuple[list[TargetRun], list[dict[str, Any]]] | None:
+    """``conform run`` for Marlin targets: ``emu:marlin-…[:MUTANT]`` or a port / URL; with
+    ``mutants`` every deviant unit is run too and the kill report returned."""
+    from conform.conformance.target import open_link, parse_target
+
+    spec = load_marlin()
+    runs: list[TargetRun] = []
+    vid_default = variant or next(iter(spec.variants))
+    for text in plan or [f"emu:{vid_default}"]:
+        kind, what, mutant = parse_target(text)
+        if kind == "emu" and what and what not in spec.variants:
+            raise UserError(f"target {text!r} is not a Marlin unit: run each family's targets "
+                            "separately")
+        vid = variant or (what if kind == "emu" else None) or vid_default
+        spec.variant(vid)
+        checks = select(generate(spec, vid), patterns)
+        if not checks:
+            raise UserError(f"no check of {vid} matches {' '.join(patterns)} (see --list)")
+        if list_only:
+            for c in checks:
+                echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
+            continue
+        target = _emu(vid, mutant, baud) if kind == "emu" else open_link(text, baud=baud)
+        notes = []
+        if not target.emulated and not allow_motion:
+            notes.append("checks that move or halt the unit SKIPPED (no --allow-motion)")
+        try:
+            runs.append(run_checks(target, vid, patterns=patterns, profile=profile,
+                                   allow_motion=allow_motion, notes=notes, spec=spec,
+                                   announce=announce))
+        finally:
+            target.close()
+        if runs[-1].aborted:
+            break
+    if list_only:
+        return None
+    report = mutant_report(runs[0].variant, patterns, baud) if mutants and runs else []
+    return runs, report
+
+
+def mutant_report(vid: str, patterns: Sequence[str] = (), baud: int = 115200
+                  ) -> list[dict[str, Any]]:
+    """Every deviant unit run through the checks: killed when some check FAILs on it."""
+    from conform.families.marlin.conformance.mutants import MUTANTS
+
+    out = []
+    for name, cls in MUTANTS.items():
+        run = run_checks(_emu(vid, name, baud), vid, patterns=patterns)
+        killers = [c.id for c in run.checks if c.grade in (Grade.FAIL, Grade.DEVIATION)]
+        out.append({"name": name, "variant": vid, "fault": (cls.__doc__ or "").strip(),
+                    "killed": bool(killers), "caught_by": killers[:5]})
+    return out
+

@@ -1,0 +1,564 @@
+"""The Marlin reference unit: sans-I/O (bytes and time in, bytes out when due), on a virtual
+clock, modelling what Marlin 2.1.2.4's source does (spec/tables cite the functions).
+
+Its main loop is MarlinCore's: between commands it reads the serial receive buffer into the
+command queue (queue.cpp ``get_serial_commands``: line numbers, checksums, errors and
+``Resend:``), then runs one queued command to its end (``advance``), which may block while the
+planner is full, a dwell runs or a heater warms up (``busy: processing`` keepalives meanwhile).
+While a command blocks nothing is read: bytes wait in the receive buffer, and what does not fit
+is lost. The emergency parser (where enabled) looks at every byte as it arrives.
+
+Ground truth: ``executed`` counts how many times each numbered line ran, ``log`` lists every
+command run (time, N, text).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from conform.families.marlin.protocol.codec import checksum
+from conform.families.marlin.spec import MarlinSpec, Variant
+
+EOL = b"\r\n"
+BACKSPACE = 0x08
+AMBIENT = 25.0
+HEAT_RATE = (4.0, 1.5)        # °C/s of the hotend and the bed (an assumption: a fast machine)
+COOL_RATE = (1.0, 0.3)
+TEMP_WINDOW = 1.0             # Configuration.h TEMP_WINDOW / TEMP_BED_WINDOW (°C)
+ACCEL = 3000.0                # Configuration.h DEFAULT_ACCELERATION (mm/s²)
+DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
+HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
+BOOT = 0.1                    # s from reset to "start" (the simulator; a real AVR board waits
+                              # ~0.5-2 s in its bootloader)
+_WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d+)")
+
+
+@dataclass
+class Queued:
+    text: str          # the line as stored in the queue (after N checks), checksum included
+    n: int | None      # its line number (None: an unnumbered line)
+    t_in: float
+
+
+@dataclass
+class Truth:
+    """What the unit did: every command run, and how often each numbered line ran."""
+
+    executed: dict[int, int] = field(default_factory=dict)
+    log: list[tuple[float, int | None, str]] = field(default_factory=list)
+    resends: list[tuple[float, int, str]] = field(default_factory=list)   # (t, asked, why)
+    dropped: list[tuple[float, int]] = field(default_factory=list)   # duplicates ignored
+    resets: list[float] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"executed": {str(k): v for k, v in sorted(self.executed.items())},
+                "twice": sorted(k for k, v in self.executed.items() if v > 1),
+                "commands": len(self.log), "resends": self.resends, "dropped": self.dropped,
+                "resets": self.resets}
+
+
+class MarlinUnit:
+    def __init__(self, v: Variant, spec: MarlinSpec, *, t0: float = 0.0,
+                 line_time: float = 0.0005, boot: float = 0.0, **_options: Any) -> None:
+        self.v, self.spec = v, spec
+        self.line_time = line_time
+        self.now = t0
+        self.truth = Truth()
+        self.lost = 0                       # bytes lost to a full receive buffer
+        self.discarded = 0                  # bytes thrown away by gcode_line_error
+        self._out: list[tuple[float, bytes]] = []
+        self.deaf = False                   # after a deviant unit's choice (mutants)
+        self._kind = ""
+        self._reset_state(t0, boot)
+
+    # -- power -----------------------------------------------------------------------------
+    def _reset_state(self, t: float, boot: float) -> None:
+        self.rx = bytearray()
+        self.sis = 0                        # 0 normal, 1 EOL comment or overflow, 4+ escape
+        self.buf = bytearray()
+        self.last_n = 0
+        self.queue: deque[Queued] = deque()
+        self.cur: Queued | None = None
+        self.cur_start = self.cur_done = 0.0
+        self.cur_busy = False
+        self.planner: deque[tuple[float, list[float]]] = deque()   # (end time, end position)
+        self.position = [0.0, 0.0, 0.0, 0.0]          # where the planner ends (current_position)
+        self.stepped = [0.0, 0.0, 0.0, 0.0]           # where the steppers are
+        self.relative = self.e_relative = False
+        self.feed = DEFAULT_FEED
+        self.heat = [(AMBIENT, 0.0, t), (AMBIENT, 0.0, t)]   # (temp at t, target, t)
+        self.temp_every = 0.0
+        self.next_temp = math.inf
+        self.pos_every = 0.0
+        self.next_pos = math.inf
+        self.next_busy = math.inf
+        self.halted = False
+        self.booting_until = t + boot
+        self.ep_state = ""                  # emergency parser: the command seen so far
+        self._say(self.booting_until, *self._banner())
+
+    def power_off(self, t: float) -> None:
+        """The board loses power (its USB cable pulled): it stops where it is and says
+        nothing until ``power_cycle``."""
+        self._advance(t)
+        self._out = [o for o in self._out if o[0] <= t]
+        self.queue.clear()
+        self.planner.clear()
+        self.cur = None
+        self.rx.clear()
+        self.halted = True
+
+    def power_cycle(self, t: float, boot: float = BOOT) -> None:
+        """A reset (DTR on port open, the reset button, a power cycle): the banner, all
+        state lost."""
+        self._advance(t)
+        self.truth.resets.append(t)
+        self._out = [o for o in self._out if o[0] <= t]
+        self._reset_state(t, boot)
+
+    def stall(self, t: float, seconds: float) -> None:
+        """The unit is busy for ``seconds`` more (a fault: a long move or a slow heater)."""
+        self._advance(t)
+        if self.halted:
+            return
+        if self.cur is None:
+            self.cur, self._kind = Queued("", None, t), "_stall"
+            self.cur_start = self.cur_done = t
+        self.cur_done += seconds
+        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not self.cur_busy:
+            self.cur_busy, self.next_busy = True, t + self.v.keepalive
+
+    def _banner(self) -> list[str]:
+        v = self.v
+        return ["start", f"echo:Marlin {v.firmware}", "",
+                "echo: Last Updated: 2024-06-19 | Author: (none, default config)",
+                "echo: Compiled: conform emulator",
+                "echo: Free Memory: 4096  PlannerBufferBytes: 1792",
+                "echo:  G21    ; Units in mm (mm)",
+                "echo:  M200 S0 D1.75",
+                f"echo:  M92 X{v.steps_per_mm[0]:.2f} Y{v.steps_per_mm[1]:.2f} "
+                f"Z{v.steps_per_mm[2]:.2f} E{v.steps_per_mm[3]:.2f}"]
+
+    # -- the sans-I/O interface --------------------------------------------------------------
+    def receive(self, data: bytes, t: float) -> None:
+        self._advance(t)
+        if self.halted or self.deaf:
+            return
+        room = self.v.rx_buffer - len(self.rx)
+        if len(data) > room:
+            self.lost += len(data) - max(room, 0)
+            data = data[:max(room, 0)]
+        if self.v.on("EMERGENCY_PARSER"):
+            for b in data:
+                self._e_parser(b, t)
+                if self.halted:
+                    return
+        self.rx += data
+        self._advance(t)
+
+    def poll(self, t: float) -> list[tuple[float, bytes]]:
+        self._advance(t)
+        due = [o for o in self._out if o[0] <= t]
+        if due:
+            self._out = [o for o in self._out if o[0] > t]
+        return due
+
+    def next_deadline(self) -> float | None:
+        times = [o[0] for o in self._out]
+        if not self.halted:
+            nxt = self._next_event()
+            if nxt is not None:
+                times.append(nxt)
+        return min(times) if times else None
+
+    # -- the main loop -----------------------------------------------------------------------
+    def _next_event(self) -> float | None:
+        times = [self.next_temp, self.next_pos]
+        if self.cur is not None:
+            times.append(self.cur_done)
+            if self.cur_busy:
+                times.append(self.next_busy)
+        elif (self.queue or self.rx) and self.now < self.booting_until:
+            times.append(max(self.now, self.booting_until))
+        t = min(times)
+        return None if t == math.inf else t
+
+    def _advance(self, t: float) -> None:
+        for _ in range(1_000_000):
+            if self.halted:
+                break
+            if self.cur is None and self.now >= self.booting_until:
+                self._read_serial()
+                if self.cur is None and self.queue and not self.halted:
+                    self._start(self.queue.popleft())
+            nxt = self._next_event()
+            if nxt is None or nxt > t:
+                break
+            self.now = max(self.now, nxt)
+            self._fire()
+        self.now = max(self.now, t)
+
+    def _fire(self) -> None:
+        t = self.now
+        if self.cur is not None and self.cur_busy and self.next_busy <= t < self.cur_done:
+            self._say(t, "echo:busy: processing")
+            self.next_busy = t + self.v.keepalive
+        if self.next_temp <= t:
+            self._say(t, self._temps_line())
+            self.next_temp = t + self.temp_every
+        if self.next_pos <= t:
+            self._say(t, self._position_line())
+            self.next_pos = t + self.pos_every
+        if self.cur is not None and self.cur_done <= t:
+            self._finish()
+
+    def _say(self, t: float, *lines: str) -> None:
+        for line in lines:
+            self._out.append((t, line.encode("latin-1") + b"\n"))
+
+    # -- reading the serial port (queue.cpp get_serial_commands) -----------------------------
+    def _read_serial(self) -> None:
+        i = 0
+        while i < len(self.rx) and len(self.queue) < self.v.bufsize and not self.halted:
+            c = self.rx[i]
+            i += 1
+            if c in EOL:
+                line = bytes(self.buf)
+                self.sis = 0
+                self.buf.clear()
+                if line:
+                    consumed = self._line_done(line)
+                    if consumed is False:     # gcode_line_error emptied the receive buffer
+                        self.discarded += len(self.rx) - i
+                        i = len(self.rx)
+            else:
+                self._stream_char(c)
+        del self.rx[:i]
+
+    def _stream_char(self, c: int) -> None:
+        """queue.cpp process_stream_char: ';' starts a comment to the end of the line (a
+        checksum after it is gone too), backslash escapes, backspace erases, and beyond
+        MAX_CMD_SIZE - 1 characters the rest of the line is skipped."""
+        if self.sis == 1:
+            return
+        if self.sis >= 4:
+            self.sis -= 4
+        elif c == 0x5C:
+            self.sis += 4
+            return
+        elif c == 0x3B:
+            self.sis = 1
+            return
+        if c == BACKSPACE:
+            if self.buf:
+                self.buf.pop()
+            return
+        self.buf.append(c)
+        if len(self.buf) >= self.v.max_cmd_size - 1:
+            self.sis = 1
+
+    def _line_done(self, line: bytes) -> bool:
+        t = self.now
+        command = line.lstrip(b" ")
+        if command[:1] == b"N":
+            m110 = b"M110" in command
+            npos = command
+            if m110:
+                second = command.find(b"N", 4)
+                if second >= 0:
+                    npos = command[second:]
+            n = _strtol(npos[1:])
+            if n != self.last_n + 1 and not m110:
+                if self.last_n - 1 <= n <= self.last_n:
+                    return self._duplicate(n, line)
+                return self._line_error("Line Number is not Last Line Number+1", "line-number")
+            star = command.rfind(b"*")
+            if star < 0:
+                return self._line_error("No Checksum with line number", "no-checksum")
+            if not self._checksum_ok(command, star):
+                return self._line_error("checksum mismatch", "checksum")
+            self.last_n = n
+            number: int | None = n
+        else:
+            number = None
+        text = line.decode("latin-1")
+        if not self.v.on("EMERGENCY_PARSER") and command[:1] == b"M":
+            if command.startswith(b"M108"):
+                self._break_wait(t)
+            elif command.startswith(b"M112"):
+                self._kill(t)
+                return True
+            elif command.startswith(b"M410"):
+                self._quickstop(t)
+        self.queue.append(Queued(text, number, t))
+        return True
+
+    def _duplicate(self, n: int, line: bytes) -> bool:
+        """queue.cpp: a number within last_N - 1 .. last_N ("A request-for-resend line was
+        already in transit so we got two - oops!") is ignored: no answer, no resend."""
+        self.truth.dropped.append((self.now, n))
+        return True
+
+    def _checksum_ok(self, command: bytes, star: int) -> bool:
+        return _strtol(command[star + 1:]) == checksum(command[:star])
+
+    def _line_error(self, message: str, why: str) -> bool:
+        """queue.cpp gcode_line_error: Error:..., the receive buffer emptied, Resend: and ok."""
+        t = self.now
+        self._say(t, f"Error:{message}, Last Line: {self.last_n}", f"Resend: {self.last_n + 1}",
+                  "ok")
+        self.truth.resends.append((t, self.last_n + 1, why))
+        return False
+
+    # -- the emergency parser (feature/e_parser.h) ---------------------------------------------
+    def _e_parser(self, b: int, t: float) -> None:
+        c = chr(b).upper()
+        s = self.ep_state
+        if c in "\r\n":
+            if s in ("M108", "M112", "M410"):
+                {"M108": self._break_wait, "M112": self._kill, "M410": self._quickstop}[s](t)
+            self.ep_state = ""
+        elif s == "!":
+            return
+        elif s == "" and c == "N":
+            self.ep_state = "N"
+        elif s in ("", "N") and (c == " " or (s == "N" and (c.isdigit() or c == "-"))):
+            return
+        elif s in ("", "N") and c == "M":
+            self.ep_state = "M"
+        elif s == "M" and c == " ":
+            return
+        elif s in ("M108", "M112", "M410"):
+            return                       # anything to the end of the line (a checksum)
+        elif len(s) < 4 and any(k.startswith(s + c) for k in ("M108", "M112", "M410")):
+            self.ep_state = s + c
+        else:
+            self.ep_state = "!"          # not one of its commands: ignore to the end of line
+
+    def _break_wait(self, t: float) -> None:
+        if self.cur is not None and self.cur.text and _code(self.cur.text) in ("M109", "M190"):
+            self.cur_done = min(self.cur_done, t + self.line_time)
+
+    def _quickstop(self, t: float) -> None:
+        self._settle(t)
+        self.planner.clear()
+        self.position = list(self.stepped)
+        if self.cur is not None and self.cur_busy:
+            self.cur_done = min(self.cur_done, t + self.line_time)
+
+    def _kill(self, t: float) -> None:
+        """MarlinCore.cpp kill(): the heaters off, Error:Printer halted, then minkill()
+        loops forever: nothing is read or answered until a reset."""
+        self._settle(t)
+        self._say(t, "Error:Printer halted. kill() called!")
+        self.halted = True
+        self.cur = None
+        self.queue.clear()
+        self.planner.clear()
+
+    # -- running one command (gcode.cpp process_parsed_command) --------------------------------
+    def _start(self, q: Queued) -> None:
+        t = max(self.now, self.booting_until)
+        self.cur, self.cur_start, self.cur_busy = q, t, False
+        done = t + self.line_time
+        code = _code(q.text)
+        words = _words(q.text)
+        cmd = self.spec.command(code, self.v) if code else None
+        kind = cmd.kind if cmd else ""
+        self._settle(t)
+        if kind == "move":
+            done = self._move(t, words) + self.line_time
+        elif kind in ("dwell", "sync", "home"):
+            end = self.planner[-1][0] if self.planner else t
+            if kind == "dwell":
+                end += words.get("P", 0.0) / 1000.0 + words.get("S", 0.0)
+            elif kind == "home":
+                end += 0.2 + max(abs(self.position[i]) for i in range(3)) / HOMING
+                self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
+                self.position[:3] = [0.0, 0.0, 0.0]
+            done = end + self.line_time
+        elif kind == "wait_temp":
+            h = 0 if code == "M109" else 1
+            if "S" in words or "R" in words:
+                self._set_target(h, words.get("S", words.get("R", 0.0)), t)
+            done = max(t, self._reached(h)) + self.line_time
+        elif kind == "set_temp":
+            self._set_target(0 if code == "M104" else 1, words.get("S", 0.0), t)
+        elif kind == "position":
+            for i, a in enumerate("XYZE"):
+                if a in words:
+                    self.position[i] = words[a]
+        elif kind == "set" and code in ("G90", "G91", "M82", "M83"):
+            if code in ("G90", "G91"):
+                self.relative = self.e_relative = code == "G91"
+            else:
+                self.e_relative = code == "M83"
+        elif kind == "autoreport_temp":
+            self.temp_every = words.get("S", 0.0)
+            self.next_temp = t + self.temp_every if self.temp_every > 0 else math.inf
+        elif kind == "autoreport_pos":
+            self.pos_every = words.get("S", 0.0)
+            self.next_pos = t + self.pos_every if self.pos_every > 0 else math.inf
+        elif kind == "line_no" and "N" in words:
+            self.last_n = int(words["N"])
+        elif kind == "quickstop":
+            self._quickstop(t)
+        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE"):
+            self.cur_busy = True
+            self.next_busy = t + self.v.keepalive
+        self.cur_done = done
+        self._kind = kind
+
+    def _finish(self) -> None:
+        q, t = self.cur, self.cur_done
+        assert q is not None
+        self.cur, self.cur_busy = None, False
+        self.next_busy = math.inf
+        self._settle(t)
+        if self._kind == "_stall":
+            return
+        self.truth.log.append((t, q.n, q.text))
+        if q.n is not None:
+            self.truth.executed[q.n] = self.truth.executed.get(q.n, 0) + 1
+        kind = self._kind
+        if kind == "halt":
+            self._kill(t)
+            return
+        if kind == "report_temp":
+            self._say(t, "ok " + self._temps_line().lstrip())
+            return
+        if kind == "report_pos":
+            self._say(t, self._position_line())
+        elif kind == "firmware":
+            self._say(t, *self._m115())
+        elif kind == "eeprom":
+            self._say(t, "echo:Settings Stored (616 bytes; crc 12345)")
+        elif not kind:
+            self._unknown(q, t)
+        self._ok(q, t)
+
+    def _unknown(self, q: Queued, t: float) -> None:
+        self._say(t, f'echo:Unknown command: "{_after_number(q.text)}"')
+
+    def _ok(self, q: Queued, t: float) -> None:
+        """queue.cpp RingBuffer::ok_to_send (ADVANCED_OK: the line's N, planner and queue free)."""
+        if not self.v.on("ADVANCED_OK"):
+            self._say(t, "ok")
+            return
+        head = ""
+        if q.text.startswith("N"):
+            m = re.match(r"N(-?\d*)", q.text)
+            head = f" N{m.group(1) if m else ''}"
+        free_planner = self.v.planner_blocks - len(self.planner)
+        free_queue = self.v.bufsize - len(self.queue) - 1
+        self._say(t, f"ok{head} P{free_planner} B{free_queue}")
+
+    # -- motion ------------------------------------------------------------------------------
+    def _settle(self, t: float) -> None:
+        while self.planner and self.planner[0][0] <= t:
+            self.stepped = list(self.planner.popleft()[1])
+
+    def _move(self, t: float, words: dict[str, float]) -> float:
+        if "F" in words and words["F"] > 0:
+            self.feed = words["F"] / 60.0
+        target = list(self.position)
+        for i, a in enumerate("XYZE"):
+            if a in words:
+                rel = self.e_relative if a == "E" else self.relative
+                target[i] = (target[i] if rel else 0.0) + words[a]
+        delta = [b - a for a, b in zip(self.position, target, strict=True)]
+        dist = math.sqrt(sum(d * d for d in delta[:3])) or abs(delta[3])
+        if dist < 1e-9:
+            return t
+        speed = self.feed
+        for i in range(4):
+            if delta[i]:
+                speed = min(speed, self.v.max_feedrate[i] * dist / abs(delta[i]))
+        ramp = speed * speed / ACCEL
+        duration = dist / speed + speed / ACCEL if dist > ramp else 2 * math.sqrt(dist / ACCEL)
+        start = t
+        if len(self.planner) >= self.v.planner_blocks:      # wait for a free block
+            start = self.planner[0][0]
+            self._settle(start)
+        begin = max(start, self.planner[-1][0] if self.planner else start)
+        self.planner.append((begin + duration, target))
+        self.position = target
+        return start
+
+    def _position_line(self) -> str:
+        p, s = self.position, self.stepped
+        counts = [round(s[i] * self.v.steps_per_mm[i]) for i in range(3)]
+        return (f"X:{p[0]:.2f} Y:{p[1]:.2f} Z:{p[2]:.2f} E:{p[3]:.2f} "
+                f"Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}")
+
+    # -- heaters -----------------------------------------------------------------------------
+    def temp(self, h: int, t: float) -> float:
+        t0_temp, target, t0 = self.heat[h]
+        if target > t0_temp:
+            return min(target, t0_temp + HEAT_RATE[h] * (t - t0))
+        return max(target, AMBIENT, t0_temp - COOL_RATE[h] * (t - t0))
+
+    def _set_target(self, h: int, target: float, t: float) -> None:
+        self.heat[h] = (self.temp(h, t), max(0.0, target), t)
+
+    def _reached(self, h: int) -> float:
+        now_temp, target, t0 = self.heat[h]
+        if target <= 0 or abs(now_temp - target) <= TEMP_WINDOW:
+            return t0
+        rate = HEAT_RATE[h] if target > now_temp else COOL_RATE[h]
+        return t0 + max(0.0, abs(target - now_temp) - TEMP_WINDOW) / rate
+
+    def _temps_line(self) -> str:
+        t = self.now
+        (_, th, _), (_, tb, _) = self.heat
+        hp = 127 if th > self.temp(0, t) + TEMP_WINDOW else 0
+        bp = 127 if tb > self.temp(1, t) + TEMP_WINDOW else 0
+        return (f" T:{self.temp(0, t):.2f} /{th:.2f} B:{self.temp(1, t):.2f} /{tb:.2f} "
+                f"@:{hp} B@:{bp}")
+
+    def _m115(self) -> list[str]:
+        v = self.v
+        lines = [f"FIRMWARE_NAME:Marlin {v.firmware} (conform emulator) SOURCE_CODE_URL:"
+                 f"{v.source_url} PROTOCOL_VERSION:{v.protocol_version} MACHINE_TYPE:"
+                 f"{v.machine_name} EXTRUDER_COUNT:{v.extruders} UUID:{v.uuid}"]
+        if v.on("EXTENDED_CAPABILITIES_REPORT"):
+            lines += [f"Cap:{c.name}:{c.value(v)}" for c in self.spec.caps]
+        return lines
+
+
+def _strtol(b: bytes) -> int:
+    m = re.match(rb"\s*([-+]?\d+)", b)
+    return int(m.group(1)) if m else 0
+
+
+def _after_number(text: str) -> str:
+    """parser.cpp parse: the command after N and its spaces, the checksum and the spaces
+    before it cut off (what unknown_command_warning echoes)."""
+    s = text.lstrip(" ")
+    m = re.match(r"N[-\d]\d*\s*", s)
+    if m:
+        s = s[m.end():]
+    star = s.find("*", 1)
+    return s[:star].rstrip(" ") if star >= 0 else s
+
+
+def _code(text: str) -> str:
+    m = re.match(r"\s*([GMTgmt])\s*(\d+)", _after_number(text))
+    return f"{m.group(1).upper()}{int(m.group(2))}" if m else ""
+
+
+def _after_command(text: str) -> str:
+    s = _after_number(text)
+    m = re.match(r"\s*[GMTgmt]\s*\d+", s)
+    return s[m.end():] if m else s
+
+
+def _words(text: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for letter, value in _WORD.findall(_after_command(text)):
+        out.setdefault(letter.upper(), float(value))
+    return out

@@ -1,0 +1,84 @@
+"""A Marlin capture analysed: detected by its bytes, the resend storm of an off-by-one sender
+named with its ratio, a reset mid-job that makes the sender run lines twice named line by line
+(confirmed against the unit's own ground truth), and the report, Parquet tables and fleet row."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pyarrow.parquet as pq
+import pytest
+
+from conform.families.marlin.analysis.analyze import analyze_capture, analyze_streams
+from conform.families.marlin.sender.sim import stream, write_capture
+from conform.families.marlin.spec import load_marlin
+from conform.families.marlin.unit.faults import MarlinFaults
+from conform.families.marlin.unit.unit import MarlinUnit
+from conform.link.faults import FaultConfig
+
+S = load_marlin()
+JOB = [f"G1 X{i % 50}.{i % 7} Y{i % 13} F6000" for i in range(1, 301)]
+
+
+def session(**kw):
+    u = MarlinUnit(S.variant("marlin-2.1"), S)
+    return u, stream(u, JOB, **kw)
+
+
+@pytest.fixture(scope="module")
+def storm(tmp_path_factory):
+    u, r = session(faults=MarlinFaults(FaultConfig.parse("host.corrupt=1e-3"), seed=3),
+                   wrong_resends=20)
+    path = tmp_path_factory.mktemp("storm") / "storm.mcap"
+    write_capture(str(path), r)          # no variant in the metadata: detected by its bytes
+    return u, path
+
+
+def test_resend_storm_is_named_with_its_ratio(storm, tmp_path):
+    u, path = storm
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(path), "--report",
+                        str(tmp_path / "r"), "--parquet", str(tmp_path / "t")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "protocol family marlin" in p.stdout
+    assert "resend-storm: 21 Resend: requests" in p.stdout and "most N69" in p.stdout
+    a = analyze_capture(str(path))
+    resends = len(u.truth.resends)
+    assert a.metrics["resends"] == resends
+    assert a.metrics["resend_ratio"] == pytest.approx(resends / a.metrics["numbered"])
+    why = [w for _, _, w in u.truth.resends]
+    assert a.metrics["line_number_errors"] == why.count("line-number")
+    assert a.metrics["checksum_errors"] == why.count("checksum") and a.metrics["storms"] == 1
+    # nothing ran twice or never: the unit's ground truth agrees
+    assert not [n for n, k in u.truth.executed.items() if k > 1]
+    assert a.metrics["twice_confirmed"] == a.metrics["twice_possible"] == 0
+    assert a.metrics["never_confirmed"] == 0
+    found = json.loads((tmp_path / "r" / "findings.json").read_text())
+    assert found["metrics"]["storms"] == 1
+    lines = pq.read_table(tmp_path / "t" / "lines.parquet")
+    assert lines.num_rows == a.metrics["host_lines"]
+    assert (tmp_path / "r" / "index.html").read_text().count("resend-storm") >= 1
+
+
+def test_a_reset_mid_job_and_a_restarted_sender_run_lines_twice(tmp_path):
+    u, r = session(restart_at=100)
+    twice = sorted(n for n, k in u.truth.executed.items() if k > 1)
+    assert twice == list(range(1, 101))
+    path = tmp_path / "restart.mcap"
+    write_capture(str(path), r, {"variant": "marlin-2.1"})
+    a = analyze_capture(str(path))
+    named = sorted(f.extra["n"] for f in a.findings if f.kind == "ran-twice" and f.extra["confirmed"])
+    assert named == twice
+    assert a.metrics["twice_confirmed"] == 100 and a.kinds()["reset"] == 1
+    row = a.fleet_row()
+    assert row["family"] == "marlin" and row["hazards"] == 100 and row["exchanges"] == 401
+
+
+def test_a_lost_ok_is_a_possible_double_or_nothing():
+    u, r = session(faults=MarlinFaults(seed=1, lose=0.02), timeout=1.5)
+    a = analyze_streams(r.host, r.unit)
+    assert sum(u.truth.executed.values()) == len(JOB)      # this sender never resends unasked
+    assert a.metrics["twice_confirmed"] == 0 and a.metrics["never_confirmed"] == 0
+    assert a.metrics["oks"] < len(JOB)
