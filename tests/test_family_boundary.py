@@ -137,3 +137,26 @@ def test_a_plugin_bug_is_one_line_not_a_traceback(tmp_path):
     p = subprocess.run(args, capture_output=True, text=True, env=env | {"CONFORM_DEBUG": "1"},
                        cwd=tmp_path, timeout=120)
     assert "Traceback" in p.stderr
+
+
+def test_a_plugin_that_does_not_load_is_left_out_in_one_line(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    info = tmp_path / "ghost-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: ghost\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[conform.families]\nghost = ghostpkg:FAMILY\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    p = subprocess.run([sys.executable, "-m", "conform", "spec", "list", "--json"],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    assert p.returncode == 0 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines() == [
+        "conform: protocol family 'ghost' (ghostpkg:FAMILY) does not load: "
+        "ModuleNotFoundError: No module named 'ghostpkg'; left out"]
+    assert "gve64-v19" in p.stdout
+    p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", "emu:gve64-v19",
+                        "--list"], capture_output=True, text=True, env=env, cwd=tmp_path,
+                       timeout=120)
+    assert p.returncode == 0 and p.stderr.count("does not load") == 1

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
@@ -355,6 +356,7 @@ VARIANT_ENV = "CONFORM_VARIANT"
 """A variant named here is what commands address when given none (else the default family's)."""
 
 _loaded: dict[str, Family] = {}
+_broken: set[str] = set()
 
 
 @functools.cache
@@ -386,8 +388,18 @@ def family(name: str) -> Family:
 
 
 def families() -> list[Family]:
-    """Every registered family, the default one (lowest ``default_rank``) first."""
-    return sorted((family(n) for n in _entry_points()), key=lambda f: (f.default_rank, f.name))
+    """Every registered family that loads, the default one (lowest ``default_rank``) first.
+    A registered family that does not load is said once on stderr and left out, so one broken
+    plugin does not take every command down (asking for it by name gives the error)."""
+    found = []
+    for n in _entry_points():
+        try:
+            found.append(family(n))
+        except UserError as exc:
+            if n not in _broken:
+                _broken.add(n)
+                print(f"conform: {exc}; left out", file=sys.stderr)
+    return sorted(found, key=lambda f: (f.default_rank, f.name))
 
 
 def default_family() -> Family:

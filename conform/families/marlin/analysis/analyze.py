@@ -419,7 +419,7 @@ def _busy(times: list[float], interval: float) -> tuple[int, float]:
 def analyze_capture(path: str, *, variant: str | None = None, detected: str = "",
                     **_ignored: Any) -> MarlinAnalysis:
     """Analyse a capture file of Marlin traffic."""
-    from conform.analysis.rawread import read_raw
+    from conform.analysis.stream import read_raw
     from conform.families.marlin.spec import load_marlin
 
     raw = read_raw(path)

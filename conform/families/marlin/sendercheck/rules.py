@@ -59,7 +59,7 @@ def resend_exact(r: Any) -> tuple[str, str, str]:
 
 
 def _unit_chunks(r: Any) -> list[tuple[float, bytes]]:
-    from conform.analysis.rawread import read_raw
+    from conform.analysis.stream import read_raw
 
     raw = read_raw(r.analysis.path)
     data = raw.unit.data.tobytes()
