@@ -140,6 +140,10 @@ class Family(Protocol):
         turns this family's traffic into frames while it is recorded, or None: the capture
         then holds the raw bytes only (they are decoded when analysed)."""
 
+    def host_lines(self) -> Any:
+        """The sniffer's count of host lines owed an answer (a
+        ``conform.capture.merge.HostLines``), or None: every line owes one answer."""
+
     pytest_plugin: str | None
     """The module of this family's pytest plugin (``pytest --conform-target``), or None; the
     engine's ``pytest11`` entry point loads it by name, so pytest needs no family import."""
