@@ -138,7 +138,9 @@ class Family(Protocol):
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         """A frame decoder for the capture recorder (``conform.capture.session.Decoder``) that
         turns this family's traffic into frames while it is recorded, or None: the capture
-        then holds the raw bytes only (they are decoded when analysed)."""
+        then holds the raw bytes only (they are decoded when analysed). Its ``fields``
+        (``conform.capture.schemas.CaptureFields``) declare what its frames and exchanges
+        record besides the engine's neutral fields."""
 
     def host_lines(self) -> Any:
         """The sniffer's count of host lines owed an answer (a
