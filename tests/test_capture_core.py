@@ -220,8 +220,21 @@ def test_merge_lets_unsolicited_bytes_through_after_the_hold():
 
 
 def test_merge_packets_owe_one_answer():
-    m = Merger(None)
+    """GVE's count of owed answers (its family's ``host_lines``): a packet owes one."""
+    from conform.families import family
+
+    m = Merger(None, host_lines=family("gve").host_lines())
     reads = [("unit", b"0,2\r", 1.0), ("host", b"!0*S\r!0C1,1,0\r", 1.01),
              ("host", b"!0C2,2,0\r!0*E2\r", 1.02)]
     out = order(m, reads, 2.0)
     assert [c.direction for c in out] == ["host", "host", "unit"]
+
+
+def test_merge_without_a_family_rule_owes_every_line_an_answer():
+    """The engine's own count: each host line owes an answer, so an answer that comes back
+    before a second line's read goes right after the first line."""
+    m = Merger(None)
+    reads = [("unit", b"0,2\r", 1.0), ("host", b"!0*S\r!0C1,1,0\r", 1.01),
+             ("host", b"!0C2,2,0\r!0*E2\r", 1.02)]
+    out = order(m, reads, 2.0)
+    assert [c.direction for c in out] == ["host", "unit", "host"]

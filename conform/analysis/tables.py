@@ -99,9 +99,9 @@ def relative_times(part: pd.DataFrame, t0: float, cols: tuple[str, ...]) -> pd.D
 
 CODED = frozenset({"name", "kind", "status", "answer_kind", "direction", "checksum_status",
                    "detail"})  # text columns written dictionary-encoded (and a family's)
-TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
-         "frames_host": ("t_first", "t_last"), "frames_unit": ("t_first", "t_last"),
-         "queue_depth": ("t",)}
+TIMES = {"frames_host": ("t_first", "t_last"), "frames_unit": ("t_first", "t_last")}
+"""A table's time columns (seconds from the capture's start): the frames' neutral ones; a
+family adds its tables' (``ParquetStream.times``)."""
 
 
 def escaped(bodies: pa.BinaryArray) -> pa.Array:
@@ -141,8 +141,8 @@ def _arrow(df: pd.DataFrame, coded: frozenset[str] = CODED) -> pa.Table:
 
 class ParquetStream:
     """The tables of a streamed analysis written as their rows come (``--parquet DIR``):
-    ``exchanges``, ``frames_host``, ``frames_unit``, ``queue_depth`` a row group per window,
-    ``series`` at the end. Times are seconds from the capture's start; the start is only
+    ``exchanges``, ``frames_host``, ``frames_unit`` and a family's own tables (``rows``) a
+    row group per window, ``series`` at the end. Times are seconds from the capture's start; the start is only
     known at the end, so parts are written from the first window's start and, in the rare
     capture whose earliest byte comes later in the file, rewritten a row group at a time."""
 
@@ -164,6 +164,7 @@ class ParquetStream:
         self.writers: dict[str, pq.ParquetWriter] = {}
         self.t0: float | None = None
         self.coded = CODED
+        self.times = dict(TIMES)
 
     def path(self, name: str) -> Path:
         return self.files.get(name, self.dir / f"{name}.parquet")
@@ -172,7 +173,7 @@ class ParquetStream:
         assert self.t0 is not None
         if self.only is not None and name not in self.only:
             return
-        for c in TIMES.get(name, ()):
+        for c in self.times.get(name, ()):
             df[c] = df[c].to_numpy() - self.t0
         if name == "exchanges" and self.const:
             for k, v in reversed(self.const.items()):
@@ -210,9 +211,10 @@ class ParquetStream:
         if len(unit):
             self._put("frames_unit", frames_frame(unit, 0.0, base=unit_base, arrow_text=True))
 
-    def depth(self, t: Any, depth: Any) -> None:
-        if self.t0 is not None and len(t):
-            self._put("queue_depth", pd.DataFrame({"t": t, "depth": depth}))
+    def rows(self, name: str, df: pd.DataFrame) -> None:
+        """Rows of a family's own table ``name`` (its time columns in ``times``)."""
+        if self.t0 is not None and len(df):
+            self._put(name, df)
 
     def finish(self, t0: float, series: pd.DataFrame) -> dict[str, Path]:
         if self.t0 is None:
@@ -223,7 +225,7 @@ class ParquetStream:
         out = {name: self.path(name) for name in self.writers}
         if t0 != self.t0:
             for name, path in out.items():
-                _shift(path, TIMES.get(name, ()), self.t0 - t0,
+                _shift(path, self.times.get(name, ()), self.t0 - t0,
                        t0 if name == "exchanges" and "t0" in self.const else None)
         return out
 

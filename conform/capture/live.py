@@ -16,9 +16,10 @@ import os
 import threading
 from collections.abc import Callable
 
-from conform.capture.merge import Merger
+from conform.capture.merge import HostLines, Merger
 from conform.capture.recorder import Recorder
 from conform.capture.session import wire_time
+from conform.errors import UserError
 from conform.link.endpoint import Endpoint
 from conform.link.forward import Forwarder, Tap
 from conform.link.peerwatch import PeerWatch
@@ -169,7 +170,7 @@ class SniffCapture(_Live):
             host.close()
             unit.close()
             raise
-        self.merger = Merger(baud, read_size=read_size)
+        self.merger = Merger(baud, read_size=read_size, host_lines=_host_lines(variant))
         self._lock = threading.Lock()
         self.recorder.link_event("open", f"{host_url} at {baud} Bd (host->unit tap)",
                                  side="host")
@@ -207,6 +208,18 @@ class SniffCapture(_Live):
         self.recorder.link_event("close", "capture finished", side="session")
         self.recorder.close({"late_chunks": self.merger.late,
                              "ended_by": self.failure or "stop"})
+
+
+def _host_lines(variant: str | None) -> HostLines | None:
+    """The count of owed answers of the family serving ``variant`` (the default family's
+    without one), for the merge; None (one answer per line) if it has none."""
+    from conform.families import family_for_variant
+
+    try:
+        make = getattr(family_for_variant(variant or ""), "host_lines", None)
+    except UserError:
+        return None
+    return make() if make is not None else None
 
 
 def run_until_signal(live: _Live) -> str | None:

@@ -8,24 +8,23 @@ for a short window, and emits them ordered by that estimate with two tie-breaks:
 
 * at equal times the host's bytes go first (a command precedes its answer);
 * cause and effect: a unit chunk that starts a new answer line while no command is owed an
-  answer is moved after the next buffered host chunk that completes a command (a line
-  outside a ``*S``..``*E`` packet, or the ``*E`` that closes one). If no such host chunk
-  turns up within ``hold`` seconds the unit bytes are emitted where their time puts them
-  (unsolicited output such as MPG reports).
+  answer is moved after the next buffered host chunk that completes a command owed one
+  (``HostLines``: every line, unless the protocol family says otherwise, e.g. GVE's
+  packets, which owe one answer after their end). If no such host chunk turns up within
+  ``hold`` seconds the unit bytes are emitted where their time puts them (unsolicited
+  output such as MPG reports).
 
 Sans-I/O: ``push`` and ``tick`` take times and return what is ready; no threads, no clock.
 """
 
 from __future__ import annotations
 
-import re
+import copy
 from dataclasses import dataclass
 
 from conform.capture.session import wire_time
 
 _RANK = {"host": 0, "unit": 1}
-_PACKET_START = re.compile(rb"^!\d\*S")
-_PACKET_END = re.compile(rb"^!\d\*E")
 _TERMINATORS = b"\r\n"
 
 
@@ -41,16 +40,18 @@ class MergedChunk:
 
 
 class HostLines:
-    """Counts host lines that are owed an answer (packets get one answer, after ``*E``)."""
+    """Counts host lines that are owed an answer: one each, by default. A protocol family
+    whose lines owe none or share one gives its own ``owes`` (``Family.host_lines``)."""
 
     def __init__(self) -> None:
         self.partial = b""
-        self.in_packet = False
 
     def copy(self) -> HostLines:
-        other = HostLines()
-        other.partial, other.in_packet = self.partial, self.in_packet
-        return other
+        return copy.copy(self)
+
+    def owes(self, line: bytes) -> int:
+        """Answers a complete, non-empty host line (stripped) is owed."""
+        return 1
 
     def feed(self, data: bytes) -> int:
         owed = 0
@@ -60,16 +61,8 @@ class HostLines:
             if b in _TERMINATORS:
                 line = buf[start:i].strip()
                 start = i + 1
-                if not line:
-                    continue
-                if _PACKET_START.match(line):
-                    self.in_packet = True
-                elif self.in_packet:
-                    if _PACKET_END.match(line):
-                        self.in_packet = False
-                        owed += 1
-                else:
-                    owed += 1
+                if line:
+                    owed += self.owes(line)
         self.partial = buf[start:][-256:]
         return owed
 
@@ -96,7 +89,8 @@ class Merger:
     """Two directions in, one causally ordered sequence of chunks out."""
 
     def __init__(
-        self, baud: int | None, *, read_size: int = 256, slack: float = 0.02, hold: float = 0.3
+        self, baud: int | None, *, read_size: int = 256, slack: float = 0.02, hold: float = 0.3,
+        host_lines: HostLines | None = None,
     ) -> None:
         self.baud = baud
         self.window = wire_time(read_size, baud) + slack
@@ -104,7 +98,7 @@ class Merger:
         self._pending: list[MergedChunk] = []
         self._last_read = {"host": float("-inf"), "unit": float("-inf")}
         self._seq = 0
-        self._host = HostLines()
+        self._host = host_lines if host_lines is not None else HostLines()
         self._unit = UnitLines()
         self._owed = 0
         self.emitted_until = float("-inf")

@@ -25,8 +25,9 @@ FAIL_ON = ("never", "warning", "error", "hazard")   # the findings' severities, 
 @click.option("--report", "report_dir", type=OUTPUT_DIR,
               default=None, help="Write DIR/index.html, DIR/summary.md, DIR/findings.json.")
 @click.option("--parquet", "parquet_dir", type=OUTPUT_DIR, default=None,
-              help="Write the tables (exchanges, frames_host, frames_unit, series, "
-                   "queue_depth) as Parquet files into DIR, for pandas, polars or DuckDB.")
+              help="Write the analysis's tables (exchanges, frames_host, frames_unit, series "
+                   "and the protocol family's own) as Parquet files into DIR, for pandas, "
+                   "polars or DuckDB.")
 @click.option("--variant", type=VARIANT, default=None,
               help="Decode as this variant (default: the capture's).")
 @click.option("--baud", type=FRACTIONAL_BAUD, default=None,

@@ -288,7 +288,14 @@ class Family:
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         """A frame decoder for the capture recorder (``conform.capture.session.Decoder``), or
-        None: the capture then holds the raw bytes only (decoded when analysed)."""
+        None: the capture then holds the raw bytes only (decoded when analysed). Its ``fields``
+        (``conform.capture.schemas.CaptureFields``) declare what its frames and exchanges
+        record besides the engine's neutral fields."""
+        return None
+
+    def host_lines(self) -> Any:
+        """The sniffer's count of host lines owed an answer (a
+        ``conform.capture.merge.HostLines``), or None: every line owes one answer."""
         return None
 
     def analyze(self, path: str, **options: Any) -> AnalysisResult:

@@ -60,6 +60,9 @@ class GrblFamily(Family):
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
 
+    def host_lines(self) -> Any:
+        return None  # every line gets exactly one ok or error: the engine's default count
+
     pytest_plugin = None
     # a fleet summary's grbl columns (GrblAnalysis.fleet_row): motion lines answered ok,
     # hazards and planner starvations

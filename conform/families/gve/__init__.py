@@ -108,6 +108,11 @@ class GveFamily(Family):
 
         return make_decoder(variant, baud=baud)
 
+    def host_lines(self) -> Any:
+        from conform.families.gve.decode import PacketLines
+
+        return PacketLines()
+
     pytest_plugin = "conform.families.gve.conformance.pytest_plugin"
 
     # a fleet summary's GVE columns: vectors the unit accepted, hazards (findings of that

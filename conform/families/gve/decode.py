@@ -27,6 +27,7 @@ import re
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from conform.capture.merge import HostLines
 from conform.capture.schemas import TOPIC_EXCHANGES, TOPIC_FRAMES
 from conform.capture.session import Record, escape_bytes, to_ns
 from conform.families.gve.capture_fields import CAPTURE_FIELDS, EXCHANGE_KEYS, FRAME_KEYS
@@ -34,6 +35,7 @@ from conform.families.gve.protocol import Answer, Command, CommandParser, Reject
 from conform.families.gve.protocol.checksum import split_checksum, verify
 from conform.families.gve.spec import Dialect, Variant, load_spec
 
+_PACKET_START = re.compile(rb"^!\d\*S")
 _PACKET_END = re.compile(rb"^!\d\*E")
 Item = tuple[str, float, dict[str, Any]]  # (topic, time in seconds, payload)
 Span = tuple[bytes, int, int, float]  # a line: bytes without terminator, offset, length, t_first
@@ -536,6 +538,26 @@ class FrameDecoder:
             self._exchange(("answered", o.text, u.text, o.t_last, t_first, t_first - o.t_last,
                             o.offset, offset, o.name, u.code, u.inta, o.packet,
                             o.packet_commands), t_last)
+
+
+class PacketLines(HostLines):
+    """The sniffer's merge (``conform.capture.merge``) counting GVE's owed answers: a
+    packet's ``*S`` and members owe none, its ``*E`` one (GVE64 §13.3.3)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.in_packet = False
+
+    def owes(self, line: bytes) -> int:
+        if _PACKET_START.match(line):
+            self.in_packet = True
+            return 0
+        if self.in_packet:
+            if _PACKET_END.match(line):
+                self.in_packet = False
+                return 1
+            return 0
+        return 1
 
 
 def make_decoder(variant: str | Variant, *, baud: int | None = None,

@@ -197,6 +197,8 @@ def _dialect_from(spec: Any, text: str) -> Any:
 
 PACKET_COLUMNS = ("packet", "packet_role")  # a host line's packet, in its frames table
 CODED = frozenset({"packet_role"})  # its text columns written dictionary-encoded in Parquet
+TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
+         "queue_depth": ("t",)}  # its tables' time columns (conform.analysis.tables)
 KEEP_ROWS = 200_000  # command lines up to which the whole tables are kept (``Analysis``)
 FORCE_ROWS = 262_144  # rows waiting behind an undecided vector before it is judged anyway
 
@@ -230,7 +232,7 @@ class _Session:
         self.unsolicited: list[np.ndarray] = []
         self.parquet = parquet
         if parquet is not None:
-            self.replay.sink = parquet.depth
+            self.replay.sink = lambda t, d: parquet.rows("queue_depth", _depth(t, d))
         self.T: pd.DataFrame | None = None
         self.Th: fr.DecodedLines | None = None
         self.Tu: fr.DecodedLines | None = None
@@ -539,7 +541,7 @@ def analyze(path: str | os.PathLike[str], *, variant: str | None = None,
                           "variant": var.id, "dialect_changes": dia.changed()}
     out.finish(t0)
     if sink is not None and rep is not None:
-        sink.depth(rep.depth_t, rep.depth)
+        sink.rows("queue_depth", _depth(rep.depth_t, rep.depth))
     tables = sink.finish(t0, series) if sink is not None else {}
     unsolicited = np.concatenate(s.unsolicited) if s.unsolicited else np.zeros(0, np.int64)
     plot = PlotData.of(s.metrics, rep_stream, t0) if not whole else None
@@ -557,7 +559,13 @@ def _sink(parquet: Any, old: ParquetStream | None = None) -> ParquetStream | Non
         else ParquetStream(parquet)
     if sink is not None:
         sink.coded |= CODED
+        sink.times |= TIMES
     return sink
+
+
+def _depth(t: np.ndarray, depth: np.ndarray) -> pd.DataFrame:
+    """Rows of the ``queue_depth`` table: the replayed queue's depth from time ``t`` on."""
+    return pd.DataFrame({"t": t, "depth": depth})
 
 
 def _events(rep: QueueReplay) -> Any:

@@ -80,12 +80,12 @@ def write_tables(a: Any, out_dir: str | Path, row_group: int | None = None
     except OSError as exc:
         raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
     from conform.analysis.tables import ROW_GROUP, relative_times, write_frame, write_table
+    from conform.families.gve.analysis.analyze import TIMES
 
     rows = row_group or ROW_GROUP
-    times = ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last")
 
     def exchange_rows(part: Any, lo: int, hi: int) -> Any:
-        part = relative_times(part, a.t0, times)
+        part = relative_times(part, a.t0, TIMES["exchanges"])
         bodies = a.host.lines.bodies.slice(lo, hi - lo).to_pylist()
         part["command"] = [escape_bytes(b) for b in bodies]
         return part
