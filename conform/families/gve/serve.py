@@ -14,8 +14,10 @@ from conform.families.gve.spec import load_spec
 
 def serve(variant: str, *, dialect_pairs: tuple[str, ...] = (), profile: str | None = None,
           switch_pairs: tuple[str, ...] = (), answer_delay: float = 0.0,
-          truth_path: str | None = None, **served: Any) -> None:
-    """Serve until SIGINT/SIGTERM; the first line of stdout is the device path."""
+          truth_path: str | None = None, mutant: str | None = None, **served: Any) -> None:
+    """Serve until SIGINT/SIGTERM; the first line of stdout is the device path. ``mutant``
+    serves a deviant unit (conform.families.gve.conformance.mutants) instead of the reference,
+    so that the suite can be run against it over a real pty as against a real unit."""
     from conform.emulator.launch import ServedUnit, serve_unit
     from conform.families.gve.unit.control import run_control
     from conform.families.gve.unit.model import Unit
@@ -24,10 +26,17 @@ def serve(variant: str, *, dialect_pairs: tuple[str, ...] = (), profile: str | N
     v = spec.variant(variant)
     dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
     switches = _switches(switch_pairs)
+    cls: Any = Unit
+    if mutant is not None:
+        from conform.families.gve.conformance.mutants import MUTANTS
+
+        if mutant not in MUTANTS:
+            raise UserError(f"unknown mutant {mutant!r} (known: {', '.join(MUTANTS)})")
+        cls = MUTANTS[mutant].cls
 
     def build(t_start: float) -> ServedUnit:
         try:
-            unit = Unit(v, dialect, t0=t_start, switches=switches, answer_delay=answer_delay)
+            unit = cls(v, dialect, t0=t_start, switches=switches, answer_delay=answer_delay)
         except ValueError as exc:
             raise UserError(f"--switch: {exc}") from None
         truth = None

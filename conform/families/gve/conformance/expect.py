@@ -144,14 +144,32 @@ def line_mismatch(step: Step, expected: bytes, actual: bytes, loose: bool,
         return f"{len(a_f) - 1} fields where {len(e_f) - 1} were expected"
     for i, (e, a) in enumerate(zip(e_f[1:], a_f[1:], strict=True)):
         if step.kind == POSITION:
-            try:
-                if abs(int(e) - int(a)) > tol:
-                    return f"position {a} is not within {tol:g} of {e}"
-            except ValueError:
+            if re.fullmatch(r"-?\d+", a) is None:  # no sign +, spaces or LF (§13.7)
                 return f"position field {a!r} is not an integer"
+            if abs(int(e) - int(a)) > tol:
+                return f"position {a} is not within {tol:g} of {e}"
         elif not _field_shape_ok(e, a, step.shape[i] if i < len(step.shape) else None):
             return f"field {a!r} does not have the shape of {e!r}"
     return None
+
+
+def _trailing(reply: Reply) -> bytes:
+    return getattr(reply, "trailing", b"")
+
+
+def _shown(data: bytes) -> str:
+    return repr(data.decode("latin-1"))
+
+
+def _trailing_mismatch(expected: bytes, actual: bytes, loose: bool) -> str | None:
+    """The answer judged whole (GVE64 §13.7: the code, its fields, Enter 0Dh): bytes after its
+    CR before the line went quiet are part of it. On a link, lines the reference also sends
+    unasked there (MPG reports) may differ in content, never in framing."""
+    if actual == expected:
+        return None
+    if loose and expected and (not actual or actual.endswith(b"\r") and b"\n" not in actual):
+        return None
+    return f"bytes after the answer's CR: {_shown(actual)}"
 
 
 def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loose: bool,
@@ -161,6 +179,9 @@ def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loo
         return None if expected is actual else "step not run"
     if not loose and expected.stray != actual.stray:
         return "unexpected bytes before the command" if actual.stray else "bytes missing"
+    if loose and b"\n" in actual.stray and b"\n" not in expected.stray:
+        # late bytes of the previous answer: an answer ends with its CR (GVE64 §13.7)
+        return f"an LF after the previous answer's CR ({_shown(actual.stray)})"
     if actual.partial and not expected.partial:
         return "answer not terminated by CR"
     if len(expected.lines) != len(actual.lines):
@@ -173,6 +194,9 @@ def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loo
         why = line_mismatch(step, e, a, loose, tol if expected.moving else 0.0)
         if why:
             return why
+    why = _trailing_mismatch(_trailing(expected), _trailing(actual), loose)
+    if why:
+        return why
     if step.tolerance is not None and expected.t_rx is not None and actual.t_rx is not None:
         d_e, d_a = expected.t_rx - expected.t_tx, actual.t_rx - actual.t_tx
         if abs(d_a - d_e) > step.tolerance:
@@ -197,6 +221,8 @@ def show(step: Step, reply: Reply | None) -> str:
     if reply is None:
         return "(nothing)"
     out = reply.text()
+    if _trailing(reply):
+        out += f" [after the CR: {_shown(_trailing(reply))}]"
     if reply.stray:
         out = f"[unasked: {reply.stray.decode('latin-1')!r}] " + out
     return out

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from dataclasses import dataclass, fields
 from typing import Any
 
 from conform.conformance.target import (
@@ -24,8 +25,21 @@ from conform.families.gve.conformance.safety import STOP_SEQUENCE, Guard
 from conform.families.gve.protocol.checksum import append_checksum
 
 DEFAULT_VARIANT = "gve64-v19"
+# how long the line must stay quiet after an answer's CR before the answer is judged whole
+# (GVE64 §13.7: an answer is one code, its fields and Enter (0Dh), nothing after it): a few
+# characters' time at the baud, and at least QUIET_FLOOR_S for a host's scheduling
+QUIET_CHARS = 3
+QUIET_FLOOR_S = 0.002
 POLL_LINE = b"!0@\r"  # readiness after J: answered once the unit hears; not counted (A10)
 _CHECKSUM_CMD = re.compile(rb"^![07]%([+-])")
+
+
+@dataclass
+class GveReply(Reply):
+    """A reply judged whole: ``trailing`` holds what came after the last answer line's CR
+    before the line went quiet (nothing, for a unit that frames its answers as §13.7 says)."""
+
+    trailing: bytes = b""
 
 
 class GveTarget(Target):
@@ -48,6 +62,30 @@ class GveTarget(Target):
 
     def exchanged(self, line: bytes, reply: Reply) -> None:
         self._track_checksum(line, reply)
+
+    def exchange(self, line: bytes, timeout: float = DEFAULT_TIMEOUT, lines: int = 1,
+                 linger: float = 0.05) -> GveReply:
+        """The engine's exchange, then read on until the line is quiet: whatever follows the
+        answer's CR (an LF, a second answer) belongs to this answer and is judged with it,
+        instead of being cleared as stray before the next line."""
+        reply = super().exchange(line, timeout, lines, linger)
+        out = GveReply(**{f.name: getattr(reply, f.name) for f in fields(Reply)})
+        if reply.lines and not reply.partial:
+            out.trailing = self.until_quiet()
+        return out
+
+    def until_quiet(self, most: int = 256) -> bytes:
+        """Bytes pending and arriving until nothing has come for the quiet time."""
+        quiet = max(QUIET_CHARS * 10.0 / self.baud, QUIET_FLOOR_S)
+        got = self._buffer
+        self._buffer = b""
+        while len(got) < most:
+            chunk = self._read(self.now() + quiet)
+            if not chunk:
+                break
+            self._note("rx", chunk)
+            got += chunk
+        return got
 
     def _track_checksum(self, line: bytes, reply: Reply) -> None:
         """What the host believes about checksums changes only with a command the unit took:
@@ -139,7 +177,7 @@ class GveEmuTarget(GveTarget, EmuTarget):
         super().__init__(factory, name, guard or Guard.emulated(), baud=baud)
 
     def exchange(self, line: bytes, timeout: float = DEFAULT_TIMEOUT, lines: int = 1,
-                 linger: float = 0.05) -> Reply:
+                 linger: float = 0.05) -> GveReply:
         reply = super().exchange(line, timeout, lines, linger)
         try:
             reply.moving = bool(self.unit.run) or self.unit.queue_len > 0
