@@ -151,6 +151,8 @@ def _count(lines: list[str], spec: GrblSpec) -> dict[str, int]:
     return out
 
 
+ALARM_DELAY = 0.5    # report.c report_alarm_message: delay_ms(500) after every ALARM:N
+REALTIME_GAP = 0.02  # protocol.c handles all pending realtime flags in one pass: keep them apart
 Outcome = tuple[bool | None, str, str]     # passed (None: not applicable), expected, actual
 
 
@@ -252,6 +254,7 @@ def _rt_feed_override(s: Session) -> Outcome:
     s.talk(b"?")
     s.talk(b"?")   # WCO: then Ov: after a reset; now the counters are running
     s.target.send(b"\x91")
+    s.wait(REALTIME_GAP)   # two realtime bytes in one main-loop pass: the report would go first
     report = _status_has(s)
     ov = next((f for f in report.strip("<>").split("|") if f.startswith("Ov:")), "(no Ov:)")
     return ov == "Ov:110,100,100", "Ov:110,100,100 in the next report", ov
@@ -321,21 +324,31 @@ def _sleep(s: Session) -> Outcome:
 
 
 def _alarm_soft_limit(s: Session) -> Outcome:
+    """ALARM:2, half a second of silence (report.c report_alarm_message delay_ms(500)), then
+    [MSG:Reset to continue]; the critical loop takes nothing but a reset (protocol.c), and the
+    G0 line grbl was inside is answered ok after the reset, before the banner."""
     _setup(s, [b"$22=1\n", b"$20=1\n", b"\x18", b"$X\n"])
-    got = s.talk(b"G0X10\n", answers=0, timeout=0.5, linger=0.2)
+    got = s.talk(b"G0X10\n", answers=0, timeout=ALARM_DELAY + 1.0, linger=ALARM_DELAY + 0.5)
     after = _status_has(s)
-    s.talk(b"\x18")
+    reset = s.talk(b"\x18", timeout=2.0)
     s.talk(b"$X\n")
     s.talk(b"$20=0\n")
     s.talk(b"$22=0\n")
     want = ["ALARM:2", "[MSG:Reset to continue]"]
-    return got.lines == want and after == "(no status report)", " | ".join(want) + "; '?' ignored", \
-        " | ".join(got.lines) + f"; {after}"
+    want_reset = ["ok", "", s.v.banner]
+    ok = got.lines == want and after == "(no status report)" and reset.lines[:3] == want_reset
+    return ok, " | ".join(want) + "; '?' ignored; " + " | ".join(want_reset), \
+        " | ".join(got.lines) + f"; {after}; " + " | ".join(reset.lines[:3])
 
 
 def _alarm_probe(s: Session) -> Outcome:
-    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0)
-    return got.lines == ["ALARM:5", "ok"], "ALARM:5 | ok", " | ".join(got.lines)
+    """ALARM:5, then (after report.c's 0.5 s) [PRB:…:0] with the last probe position kept
+    (motion_control.c mc_probe_cycle, MESSAGE_PROBE_COORDINATES), then the line's ok."""
+    before = next((x for x in s.talk(b"$#\n").lines if x.startswith("[PRB:")), "(no PRB)")
+    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0 + ALARM_DELAY)
+    kept = before[:-3] + ":0]" if before.startswith("[PRB:") else "[PRB:…:0]"
+    want = ["ALARM:5", kept, "ok"]
+    return got.lines == want, " | ".join(want), " | ".join(got.lines)
 
 
 def _crlf(s: Session) -> Outcome:

@@ -59,7 +59,7 @@ class Setting:
         """What grbl stores for ``value`` (integers truncated, booleans 0/1)."""
         if self.type == "float":
             return float(value)
-        n = int(value)
+        n = int(value) & 0xFF if self.bits <= 8 else int(value)   # settings.c: uint8 int_value
         if self.type == "bool":
             return 1 if n else 0
         return n & ((1 << self.bits) - 1)
@@ -122,7 +122,13 @@ class Variant:
     coord_systems: int
     crlf_is_two_lines: bool
     cite: dict[str, str]
+    build_options: dict[str, Any] = field(default_factory=dict)
     family: str = "grbl"
+
+    def option(self, name: str) -> Any:
+        """A config.h build option the variant assumes (``build_options``): its value, or
+        False when the table leaves it out (commented out in config.h)."""
+        return self.build_options.get(name, False)
 
     @property
     def banner(self) -> str:
@@ -268,7 +274,10 @@ def _variant(rows: _Rows, vid: str, d: dict[str, Any]) -> Variant:
                 g(row, d, "options", str), g(row, d, "tool_max", int),
                 g(row, d, "line_number_max", int), g(row, d, "n_startup_lines", int),
                 g(row, d, "coord_systems", int), g(row, d, "crlf_is_two_lines", bool),
-                dict(g(row, d, "cite", dict, {})))
+                dict(g(row, d, "cite", dict, {})), dict(g(row, d, "build_options", dict, {})))
+    for key, value in v.build_options.items():
+        if not isinstance(value, (bool, int)) or not key.isupper():
+            raise rows.fail(row, f"build_options.{key}: expected a config.h NAME = true/false/number")
     for name in ("rx_buffer", "line_max", "planner_blocks", "baud"):
         if getattr(v, name) <= 0:
             raise rows.fail(row, f"field {name!r} must be positive")
