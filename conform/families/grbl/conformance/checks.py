@@ -6,8 +6,9 @@ summary.md, junit.xml) for grbl as for GVE. A check id reads
 ``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
 
 Groups: ``example`` (the documented exchanges, grbl/spec/tables/examples.toml), ``error`` (every
-code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x accepts its
-default and prints it back), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
+code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x at each
+documented edge: lo, lo-1, hi, hi+1, a fraction, a stray letter, no number;
+:func:`setting_edges`), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
 ``buffer`` (the line limit and the receive ring), ``state`` (check mode, unlock, sleep).
 
 A real unit is driven only as far as it is allowed: checks that move the machine need
@@ -30,7 +31,7 @@ from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRu
 from conform.conformance.runner import Estimate, Runner, RunOptions
 from conform.conformance.target import HarnessError
 from conform.families.grbl.protocol.codec import split_unit
-from conform.families.grbl.spec.load import GrblSpec, Variant, load_grbl
+from conform.families.grbl.spec.load import GrblSpec, Setting, Variant, load_grbl
 
 STOP = (b"!", b"\x18")
 _SETTING = re.compile(r"^\$(\d+)=(.*)$")
@@ -206,11 +207,45 @@ def _setting(number: int, text: str) -> Callable[[Session], Outcome]:
     return run
 
 
-def _negative(number: int) -> Callable[[Session], Outcome]:
+def _edge(number: int, send: str, want: str, setup: Sequence[bytes]) -> Callable[[Session],
+                                                                               Outcome]:
+    """``$n=send`` answers ``want`` (``ok`` then ``$n=shown`` in ``$$``, or ``error:N``)."""
     def run(s: Session) -> Outcome:
-        got = s.talk(f"${number}=-1\n".encode())
-        return got.lines[-1:] == ["error:4"], "error:4", " | ".join(got.lines)
+        _setup(s, setup)
+        a = s.talk(f"${number}={send}\n".encode())
+        if not want.startswith("$"):
+            return a.lines[-1:] == [want], want, " | ".join(a.lines) or "(silence)"
+        row = next((x for x in s.talk(b"$$\n").lines if x.startswith(f"${number}=")),
+                   "(missing)")
+        return (a.lines[-1:] == ["ok"] and row == want, f"ok, then {want} in $$",
+                f"{' | '.join(a.lines)}; {row}")
     return run
+
+
+def setting_edges(st: Setting) -> list[tuple[str, str, str]]:
+    """(edge, value sent, what grbl answers) at every documented edge of one setting, from
+    its table row: lo, lo - 1 (``below`` or 4 when negative), hi and hi + 1 for the integer
+    kinds (kept as a truncated uint8_t, settings.c), a fraction (truncated, or kept to
+    ``decimals`` places), a value with a stray letter after it (error:3, system.c) and no
+    number at all (error:2, read_float)."""
+    def expect(value: float) -> str:
+        if value < 0:
+            return "error:4"
+        if st.type != "float" and (int(value) & 0xFF) < st.lo:
+            return f"error:{st.below}"
+        return f"${st.number}={st.text(st.coerce(value))}"
+
+    def text(value: float) -> str:
+        return f"{value:.{st.decimals}f}" if st.type == "float" else f"{value:g}"
+
+    out = [("min", text(st.lo), expect(st.lo)), ("min-1", text(st.lo - 1), expect(st.lo - 1))]
+    if st.type != "float":          # a float setting has no documented maximum
+        out += [("max", text(st.hi), expect(st.hi)), ("max+1", text(st.hi + 1), expect(st.hi + 1))]
+    frac = st.lo + 1.75
+    out += [("fraction", f"{frac:.2f}", expect(frac)),
+            ("trailing-letter", f"{text(st.default)}x", "error:3"),
+            ("not-a-number", "x", "error:2")]
+    return out
 
 
 def _status_has(s: Session, *, timeout: float = 0.5) -> str:
@@ -386,8 +421,11 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
         out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}", st.cite,
                              f"${n} ({st.name}) takes its default", _setting(n, st.text(st.default)),
                              eeprom=True))
-        out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}/negative", st.cite,
-                             f"${n}=-1 is error:4", _negative(n), eeprom=True))
+        setup = tuple(f"${k}=1\n".encode() for k in st.needs)
+        for edge, send, want in setting_edges(st):
+            out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}/{edge}", st.cite,
+                                 f"${n}={send} at its {edge} edge: {want}",
+                                 _edge(n, send, want, setup), eeprom=True))
     rt = {r.effect: r.cite for r in spec.realtime.values()}
     out += [
         GrblCheck(f"{vid}/realtime_cmds/realtime/status", rt["status"],

@@ -48,6 +48,8 @@ class Setting:
     cite: str
     decimals: int = 3
     bits: int = 8
+    below: int = 4      # the error for a value below ``lo`` (a negative one is always 4)
+    needs: tuple[int, ...] = ()   # settings that must be 1 for a non-zero value ($20: $22)
 
     def text(self, value: float) -> str:
         """The value as ``$$`` prints it."""
@@ -244,7 +246,9 @@ def _setting(rows: _Rows, row: str, number: int, d: dict[str, Any], prefix: str 
         raise rows.fail(row, f"default {default} is outside {lo}..{hi}")
     return Setting(number, prefix + rows.get(row, d, "name", str), rows.get(row, d, "unit", str),
                    kind, float(lo), float(hi), float(default), rows.get(row, d, "cite", str),
-                   int(rows.get(row, d, "decimals", int, 3)), int(rows.get(row, d, "bits", int, 8)))
+                   int(rows.get(row, d, "decimals", int, 3)), int(rows.get(row, d, "bits", int, 8)),
+                   int(rows.get(row, d, "below", int, 4)),
+                   tuple(int(x) for x in rows.get(row, d, "needs", list, [])))
 
 
 def _settings(rows: _Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[int, Setting]:

@@ -168,12 +168,12 @@ def store_setting(u: GrblUnit, number: int, value: float) -> int:
         other = u.settings[number + 10] if number < 110 else u.settings[number - 10]
         if value * other > step_rate * 60.0:
             return 12
-    if number < 100:
+    if setting.type != "float":
         as_uint8 = int(math.trunc(value)) & 0xFF
-        if number == 0 and as_uint8 < 3:
-            return 6
-        if number == 20 and as_uint8 and not u.settings[22]:
-            return 10
+        if as_uint8 < setting.lo:
+            return setting.below            # $0: int_value < 3 is 6 (settings.c case 0)
+        if as_uint8 and any(not u.settings[k] for k in setting.needs):
+            return 10                       # $20 without homing (settings.c case 20)
     u.settings[number] = setting.coerce(value)
     _apply(u)
     return 0
