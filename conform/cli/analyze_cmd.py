@@ -76,7 +76,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     file = files[0]
     from conform.families.capture_hook import analyze_other_family
 
-    if analyze_other_family(file, variant, report_dir, parquet_dir):  # grbl or unknown traffic
+    if analyze_other_family(file, variant, report_dir, parquet_dir, as_json):  # not GVE traffic
         return
     window = _time_range(time_range)
 

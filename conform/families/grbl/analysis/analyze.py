@@ -49,6 +49,7 @@ class Exchange:
     lines_in_flight: int = 0
     bytes_in_flight: int = 0
     t_gone: float | None = None     # unanswered, flushed from grbl's buffer by a reset
+    after_realtime: bool = False    # an empty line right after a realtime byte ("?\n")
 
 
 @dataclass
@@ -70,6 +71,14 @@ class GrblAnalysis:
 
     def hazards(self) -> list[Finding]:
         return [f for f in self.findings if f.severity == "hazard"]
+
+    def findings_document(self) -> dict[str, Any]:
+        """``conform analyze --json``: the document GVE's analysis prints (capture, variant,
+        findings with kind and severity, metrics, notes; conform.analysis.report)."""
+        return {"capture": self.path, "variant": self.variant,
+                "findings": [{k: v for k, v in asdict(f).items() if k != "extra"} | f.extra
+                             for f in self.findings],
+                "metrics": self.metrics, "notes": self.notes}
 
     def to_json(self) -> dict[str, Any]:
         return {"format": "conform-grbl-analysis/1", "path": self.path, "family": self.family,
@@ -169,7 +178,9 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         return t - t0
 
     # pair answers with lines, in order
-    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end])
+    rt_at = {r.offset for r in realtime}
+    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end],
+                          after_realtime=not ln.data and ln.end - 1 in rt_at)
                  for i, ln in enumerate(lines)]
     answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error", "banner")]
     k = 0
@@ -260,10 +271,18 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                 + (f"; {flushed} of them were flushed by a reset" if flushed else ""),
                 "interface.md §Grbl Response Messages", count=len(unanswered), flushed=flushed)
 
-    # streaming method
+    # streaming method, from what the sender awaits: the job's lines (g-code and jogs) in
+    # flight when each one was sent. Empty lines (stream.py's wake-up, a sync) and '$' queries
+    # a polling thread sends ($G, $#) take buffer room, counted above for the hazard, but do
+    # not make a sender counting; realtime bytes ('?') are no lines at all.
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
     over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
+    job = [e for e in exchanges if is_job_line(e.text)]
+    job_sent = np.fromiter((e.t_sent for e in job), float, len(job))
+    job_done = np.sort(np.fromiter((_done_at(e) for e in job), float, len(job)))
+    job_in_flight = np.arange(1, len(job) + 1) - np.searchsorted(job_done, job_sent, "left")
+    max_job_lines = int(job_in_flight.max()) if len(job) else 0
     # a sender that counts waits for an answer before it sends more once the buffer is full:
     # most of its lines follow an answer that came after its previous line. One that does not
     # count sends in bursts, whatever comes back. (Counting bytes in flight alone would
@@ -272,9 +291,11 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     n_done = np.searchsorted(t_done, t_sent, side="right")
     paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
     share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
-    if not exchanges:
+    if not hb and not ub:
+        method = "empty"
+    elif not job:
         method = "none"
-    elif max_lines <= 1:
+    elif max_job_lines <= 1:
         method = "send-response"
     elif share >= 0.5:
         method = "character-counting"
@@ -313,7 +334,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "alarms": out.counts.get("alarm", 0), "duration_s": duration,
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
         "streaming_method": method, "paced_share": round(share, 3),
-        "max_lines_in_flight": max_lines,
+        "max_lines_in_flight": max_lines, "max_job_lines_in_flight": max_job_lines,
         "max_bytes_in_flight": max_bytes, "rx_buffer": limit, "planner_blocks": v.planner_blocks,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
@@ -323,6 +344,17 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     }
     return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
                         realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports)
+
+
+def is_job_line(text: str) -> bool:
+    """A line the sender streams as part of a job (g-code, a jog), not an empty line or a
+    ``$`` command/query (``$G``, ``$#``, ``$X``, ``$10=2``...)."""
+    return bool(text) and (not text.startswith("$") or text.upper().startswith("$J="))
+
+
+def _done_at(e: Exchange) -> float:
+    t = e.t_answer if e.t_answer is not None else e.t_gone
+    return float("inf") if t is None else t
 
 
 _AXIS_WORD = re.compile(r"[XYZ][-+.\d]")
