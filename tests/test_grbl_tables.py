@@ -113,7 +113,7 @@ def test_gve_only_options_are_usage_errors_for_grbl():
     import subprocess
     import sys
 
-    for args in (["run", "--target", "emu:grbl-1.1f", "--mutants"],
+    for args in (["run", "--target", "emu:grbl-1.1f", "--matrix"],   # (grbl has --mutants)
                  ["emulate", "serve", "grbl-1.1f", "--dialect", "A1=crlf"],
                  ["emulate", "serve", "grbl-1.1f", "--answer-delay", "nan"]):
         p = subprocess.run([sys.executable, "-m", "conform", *args], capture_output=True,

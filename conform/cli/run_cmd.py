@@ -77,8 +77,10 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     from conform.families import DEFAULT_FAMILY
 
     fam = _family_of(targets, variant)
-    if fam.name != DEFAULT_FAMILY and (mutants or matrix or replay or dialect_file):
-        raise UserError("--mutants, --matrix, --replay and --dialect apply to GVE units only")
+    if fam.name != DEFAULT_FAMILY and (matrix or replay or dialect_file
+                                       or (mutants and not fam.mutants())):
+        raise UserError(f"--matrix, --replay and --dialect (and --mutants for a family without "
+                        f"mutants) apply to GVE units only, not to {fam.name}")
     command = command_line()
     planned = fam.run_targets(
         list(targets), variant, baud=baud, profile=profile, patterns=patterns,

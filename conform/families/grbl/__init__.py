@@ -52,14 +52,15 @@ class GrblFamily:
     def run_targets(self, targets: list[str], variant: str | None, *, baud: int = 115200,
                     patterns: Any = (), profile: str = "quick", allow_motion: bool = False,
                     allow_eeprom: bool = False, list_only: bool = False, echo: Any = print,
-                    announce: Any = None, **_options: Any) -> Any:
+                    announce: Any = None, mutants: bool = False, **_options: Any) -> Any:
         from conform.families.grbl.conformance.checks import run_targets
 
-        runs = run_targets(targets or [f"emu:{variant}"], variant, baud=baud,
-                           patterns=patterns, profile=profile, allow_motion=allow_motion,
-                           allow_eeprom=allow_eeprom, list_only=list_only, echo=echo,
-                           announce=announce)
-        return None if list_only else (runs, [])
+        runs, report = run_targets(targets or [f"emu:{variant or 'grbl-1.1f'}"], variant,
+                                   baud=baud, patterns=patterns, profile=profile,
+                                   allow_motion=allow_motion, allow_eeprom=allow_eeprom,
+                                   list_only=list_only, echo=echo, announce=announce,
+                                   mutants=mutants)
+        return None if list_only else (runs, report)
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
@@ -92,7 +93,9 @@ class GrblFamily:
                 f"{len(g.commands)} $ commands, {len(g.examples)} examples")
 
     def mutants(self) -> Sequence[str]:
-        return ()
+        from conform.families.grbl.conformance.mutants import MUTANTS
+
+        return tuple(MUTANTS)
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.protocol.codec import detect

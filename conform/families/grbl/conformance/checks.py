@@ -363,7 +363,9 @@ def _alarm_soft_limit(s: Session) -> Outcome:
     [MSG:Reset to continue]; the critical loop takes nothing but a reset (protocol.c), and the
     G0 line grbl was inside is answered ok after the reset, before the banner."""
     _setup(s, [b"$22=1\n", b"$20=1\n", b"\x18", b"$X\n"])
-    got = s.talk(b"G0X10\n", answers=0, timeout=ALARM_DELAY + 1.0, linger=ALARM_DELAY + 0.5)
+    first = s.talk(b"G0X10\n", answers=0, timeout=ALARM_DELAY / 2, linger=ALARM_DELAY / 2)
+    later = s.wait(ALARM_DELAY + 0.5)
+    got = Talk(first.lines + later, first.t)
     after = _status_has(s)
     reset = s.talk(b"\x18", timeout=2.0)
     s.talk(b"$X\n")
@@ -371,8 +373,9 @@ def _alarm_soft_limit(s: Session) -> Outcome:
     s.talk(b"$22=0\n")
     want = ["ALARM:2", "[MSG:Reset to continue]"]
     want_reset = ["ok", "", s.v.banner]
-    ok = got.lines == want and after == "(no status report)" and reset.lines[:3] == want_reset
-    return ok, " | ".join(want) + "; '?' ignored; " + " | ".join(want_reset), \
+    ok = (first.lines == want[:1] and got.lines == want and after == "(no status report)"
+          and reset.lines[:3] == want_reset)
+    return ok, "ALARM:2 | (0.5 s) " + want[1] + "; '?' ignored; " + " | ".join(want_reset), \
         " | ".join(got.lines) + f"; {after}; " + " | ".join(reset.lines[:3])
 
 
@@ -454,6 +457,8 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
 
 def _src(cite: str) -> str:
     head = cite.split(";")[0].split("§")[0].strip()
+    if head.startswith("src:"):                      # src:gcode.c:783 ... -> gcode.c
+        return head[4:].split(":")[0].split()[0]
     return {"iface": "interface", "guide": "guide", "rt": "realtime_cmds", "cmds": "commands",
             "jog": "jogging"}.get(head, head.rsplit("/", 1)[-1].split("#")[0].removesuffix(".csv")
                                   .removesuffix(".md") or "grbl")
@@ -600,17 +605,21 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
                 patterns: Sequence[str] = (), profile: str = "quick", allow_motion: bool = False,
                 allow_eeprom: bool = False, list_only: bool = False,
                 echo: Callable[[str], None] = print,
-                announce: Callable[[str], None] | None = None) -> list[TargetRun]:
-    """``conform run`` for grbl targets: ``emu:grbl-…`` or a serial port / URL."""
+                announce: Callable[[str], None] | None = None, mutants: bool = False
+                ) -> tuple[list[TargetRun], list[dict[str, Any]]]:
+    """``conform run`` for grbl targets: ``emu:grbl-…[:MUTANT]`` or a serial port / URL;
+    with ``mutants`` every deviant unit (:mod:`.mutants`) after the targets. Returns the runs
+    and the mutant report."""
     from conform.conformance.target import EmuTarget, open_link, parse_target
     from conform.errors import UserError
     from conform.families import family
+    from conform.families.grbl.conformance.mutants import mutant, run_mutants
 
     spec = load_grbl()
     fam = family("grbl")
     runs = []
     for text in plan:
-        kind, what, mutant = parse_target(text)
+        kind, what, mutant_name = parse_target(text)
         if kind == "emu" and what and what not in spec.variants:
             raise UserError(f"target {text!r} is not a grbl unit: run GVE and grbl targets "
                             "separately")
@@ -620,10 +629,13 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
             for c in select(generate(spec, vid), patterns):
                 echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
             continue
-        if mutant is not None:
-            raise UserError(f"target {text!r}: grbl has no deviant units")
-        if kind == "emu":
-            target: Any = EmuTarget(lambda vid=vid: fam.make_unit(vid), f"emu:{vid}", baud=baud)
+        if mutant_name is not None and kind != "emu":
+            raise UserError(f"target {text!r}: a mutant is an emulated unit (emu:VARIANT:NAME)")
+        if mutant_name is not None:
+            m = mutant(mutant_name)
+            target: Any = EmuTarget(lambda vid=vid, m=m: m.make(spec, vid), text, baud=baud)
+        elif kind == "emu":
+            target = EmuTarget(lambda vid=vid: fam.make_unit(vid), f"emu:{vid}", baud=baud)
         else:
             target = open_link(text, baud=baud)
         notes = []
@@ -641,4 +653,9 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
             target.close()
         if runs[-1].aborted:
             break
-    return runs
+    report: list[dict[str, Any]] = []
+    if mutants and not list_only and not any(r.aborted for r in runs):
+        vid = variant or next(iter(spec.variants))
+        report, _ = run_mutants(spec, vid, lambda target, vid: run_checks(
+            target, vid, patterns=patterns, profile=profile, spec=spec))
+    return runs, report

@@ -7,7 +7,7 @@ import math
 import re
 from typing import TYPE_CHECKING
 
-from conform.families.grbl.protocol.gcode import GcodeError, parse, read_float
+from conform.families.grbl.protocol.gcode import GcodeError, read_float
 from conform.families.grbl.unit import replies as rp
 
 if TYPE_CHECKING:
@@ -36,8 +36,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             return 3
         body = rest[2:]
         try:      # gc_execute_line reads the words after "$J=" (system.c case 'J')
-            block = parse(body, u.modal, u.parser_position(), jog=True, tool_max=u.v.tool_max,
-                          line_number_max=u.v.line_number_max, mist=u.v.option("ENABLE_M7"))
+            block = u.parse(body, jog=True)
         except GcodeError as exc:
             return exc.code
         u._execute(block, t, jog=True)
@@ -124,8 +123,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             return 3
         line = rest[end + 1:]
         try:      # gc_execute_line checks the block (and grbl runs it: its modes stay)
-            block = parse(line, u.modal, u.parser_position(), tool_max=u.v.tool_max,
-                          line_number_max=u.v.line_number_max, mist=u.v.option("ENABLE_M7"))
+            block = u.parse(line)
         except GcodeError as exc:
             return exc.code
         u.modal = block.modal
