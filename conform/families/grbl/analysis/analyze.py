@@ -271,16 +271,20 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                 + (f"; {flushed} of them were flushed by a reset" if flushed else ""),
                 "interface.md §Grbl Response Messages", count=len(unanswered), flushed=flushed)
 
-    # streaming method, from what the sender awaits: the job's lines (g-code and jogs) in
-    # flight when each one was sent. Empty lines (stream.py's wake-up, a sync) and '$' queries
-    # a polling thread sends ($G, $#) take buffer room, counted above for the hazard, but do
-    # not make a sender counting; realtime bytes ('?') are no lines at all.
+    # streaming method, from what the sender awaits: a send-response sender writes each job
+    # line (g-code, a jog) only after an answer came since its previous one; a counting one
+    # writes several back to back while the buffer has room. Empty lines (stream.py's wake-up,
+    # a sync) and '$' queries a polling thread sends ($G, $#) take buffer room, counted above
+    # for the hazard, but are not the job; their answers still count as answers (a sender that
+    # takes a $G's ok for a job line's is still sending one line per answer). Realtime bytes
+    # ('?') are no lines at all.
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
     over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
-    job = [e for e in exchanges if is_job_line(e.text)]
-    job_sent = np.fromiter((e.t_sent for e in job), float, len(job))
+    job_at = np.fromiter((i for i, e in enumerate(exchanges) if is_job_line(e.text)), np.int64)
+    job = [exchanges[i] for i in job_at.tolist()]
     job_done = np.sort(np.fromiter((_done_at(e) for e in job), float, len(job)))
+    job_sent = np.fromiter((e.t_sent for e in job), float, len(job))
     job_in_flight = np.arange(1, len(job) + 1) - np.searchsorted(job_done, job_sent, "left")
     max_job_lines = int(job_in_flight.max()) if len(job) else 0
     # a sender that counts waits for an answer before it sends more once the buffer is full:
@@ -291,11 +295,12 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     n_done = np.searchsorted(t_done, t_sent, side="right")
     paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
     share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
+    back_to_back = _lines_beyond_answers(n_done[job_at])
     if not hb and not ub:
         method = "empty"
     elif not job:
         method = "none"
-    elif max_job_lines <= 1:
+    elif back_to_back == 0:
         method = "send-response"
     elif share >= 0.5:
         method = "character-counting"
@@ -335,6 +340,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
         "streaming_method": method, "paced_share": round(share, 3),
         "max_lines_in_flight": max_lines, "max_job_lines_in_flight": max_job_lines,
+        "job_lines_back_to_back": back_to_back,
         "max_bytes_in_flight": max_bytes, "rx_buffer": limit, "planner_blocks": v.planner_blocks,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
@@ -350,6 +356,20 @@ def is_job_line(text: str) -> bool:
     """A line the sender streams as part of a job (g-code, a jog), not an empty line or a
     ``$`` command/query (``$G``, ``$#``, ``$X``, ``$10=2``...)."""
     return bool(text) and (not text.startswith("$") or text.upper().startswith("$J="))
+
+
+def _lines_beyond_answers(answered_before: Any) -> int:
+    """How many job lines went out beyond one per answer: the lines sent after the same
+    number of answers form a group, and a group may hold as many lines as answers came since
+    the group before (the first line needs none). A send-response sender stays at 0 even when
+    two answers arrive in one read; a counting one fills the buffer in a burst."""
+    import numpy as np
+
+    if len(answered_before) < 2:
+        return 0
+    values, sizes = np.unique(answered_before, return_counts=True)
+    gain = np.diff(values, prepend=values[0] - 1)
+    return int(np.maximum(sizes - gain, 0).sum())
 
 
 def _done_at(e: Exchange) -> float:
