@@ -24,7 +24,8 @@ def test_there_are_at_least_fifteen_bug_classes():
 
 @pytest.fixture(scope="module")
 def report():
-    rep, _ = run_mutants(G, "grbl-1.1f", lambda target, vid: run_checks(target, vid, spec=G))
+    rep, _ = run_mutants(G, "grbl-1.1f", lambda target, vid: run_checks(target, vid, spec=G,
+                                                                          sequences=False))
     return {m["name"]: m for m in rep}
 
 
@@ -51,3 +52,33 @@ def test_conform_run_mutants_and_a_mutant_target(tmp_path):
                         "emu:grbl-1.1f:no-such-bug"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no mutant 'no-such-bug'" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("name", ["jog-checked-first", "m7-built", "fraction-is-23"])
+def test_random_sequences_find_a_mutant_and_shrink_it_to_its_replay(name):
+    """The hypothesis machine drives the mutant and the reference side by side and shrinks
+    the first difference to the shortest sequence: one line for these bugs."""
+    from conform.conformance.target import EmuTarget
+
+    m = MUTANTS[name]
+    target = EmuTarget(lambda: m.make(G, "grbl-1.1f"), f"emu:grbl-1.1f:{name}")
+    try:
+        run = run_checks(target, "grbl-1.1f", spec=G, patterns=["*/sequences/*"])
+    finally:
+        target.close()
+    (c,) = run.checks
+    assert c.grade.name == "FAIL"
+    replay = c.actual.split("replay: ")[1]
+    assert replay.count("\\n") == 1, replay          # shrunk to one line
+
+
+def test_random_sequences_agree_on_the_reference():
+    from conform.conformance.target import EmuTarget
+    from conform.families.grbl.unit.model import GrblUnit
+
+    target = EmuTarget(lambda: GrblUnit(G.variant("grbl-1.1f"), G), "emu:grbl-1.1f")
+    try:
+        (c,) = run_checks(target, "grbl-1.1f", spec=G, patterns=["*/sequences/*"]).checks
+    finally:
+        target.close()
+    assert c.grade.name == "PASS" and "random sequences agreed" in c.actual

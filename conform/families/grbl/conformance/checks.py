@@ -152,6 +152,7 @@ def _count(lines: list[str], spec: GrblSpec) -> dict[str, int]:
     return out
 
 
+SEQUENCES = "/interface/sequences/random"
 ALARM_DELAY = 0.5    # report.c report_alarm_message: delay_ms(500) after every ALARM:N
 REALTIME_GAP = 0.02  # protocol.c handles all pending realtime flags in one pass: keep them apart
 Outcome = tuple[bool | None, str, str]     # passed (None: not applicable), expected, actual
@@ -389,6 +390,25 @@ def _alarm_probe(s: Session) -> Outcome:
     return got.lines == want, " | ".join(want), " | ".join(got.lines)
 
 
+def _sequences(s: Session) -> Outcome:
+    """Random sequences drawn from the tables, on the target and on the reference unit side
+    by side (:mod:`.machine`); a difference is shrunk and given as its replay."""
+    from conform.conformance.target import EmuTarget
+    from conform.families.grbl.conformance.machine import replay_text, run_sequences
+    from conform.families.grbl.unit.model import GrblUnit
+
+    reference = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}")
+    try:
+        out = run_sequences(s, Session(reference, s.spec, s.v), s.spec, s.v,
+                            emulated=s.target.emulated)
+    finally:
+        reference.close()
+    want = "every answer as the reference unit's"
+    if not out.steps:
+        return True, want, f"{out.examples} random sequences agreed"
+    return False, want, f"{out.why}; replay: {replay_text(out.steps)}"
+
+
 def _crlf(s: Session) -> Outcome:
     got = s.talk(b"G90\r\n", answers=2 if s.v.crlf_is_two_lines else 1, linger=0.1)
     want = ["ok", "ok"] if s.v.crlf_is_two_lines else ["ok"]
@@ -451,6 +471,10 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
                   "locked after a reset from sleep; error:9; $X unlocks", _alarm_unlock),
         GrblCheck(f"{vid}/commands/state/sleep", spec.commands["$SLP"].cite,
                   "$SLP sleeps; a reset wakes into Alarm", _sleep),
+        GrblCheck(f"{vid}{SEQUENCES}", "src:gcode.c gc_execute_line; "
+                  "protocol.c; system.c; settings.c (the reference unit models them)",
+                  "random lines, $ commands, settings and realtime bytes agree with the "
+                  "reference unit", _sequences, motion=True, eeprom=True),
     ]
     return out
 
@@ -526,9 +550,11 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
-               announce: Callable[[str], None] | None = None) -> TargetRun:
+               announce: Callable[[str], None] | None = None, sequences: bool = True
+               ) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
-    interrupted run comes back with ``aborted`` saying what was sent to stop the unit."""
+    interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
+    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's)."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
@@ -536,7 +562,9 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                         options=RunOptions(profile=profile, notes=list(notes or []),
                                            announce=announce))
     try:
-        return runner.run(select(generate(runner.spec, vid), patterns), progress)
+        checks = [c for c in generate(runner.spec, vid)
+                  if sequences or not c.id.endswith(SEQUENCES)]
+        return runner.run(select(checks, patterns), progress)
     except RunAborted as exc:
         return exc.run
 
@@ -657,5 +685,5 @@ def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
     if mutants and not list_only and not any(r.aborted for r in runs):
         vid = variant or next(iter(spec.variants))
         report, _ = run_mutants(spec, vid, lambda target, vid: run_checks(
-            target, vid, patterns=patterns, profile=profile, spec=spec))
+            target, vid, patterns=patterns, profile=profile, spec=spec, sequences=False))
     return runs, report
