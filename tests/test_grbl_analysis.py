@@ -182,3 +182,80 @@ def test_recording_a_grbl_session_says_why_frames_are_not_decoded(tmp_path):
     notes = [x.get("message", "") for x in open_capture(path).logs()]
     assert any("decoded by conform analyze from the raw bytes" in n for n in notes)
     assert not any("unknown variant" in n for n in notes)
+
+
+def _exchange_traffic(lines, *, wake=b"", gap=0.01, window=1):
+    """Host and unit chunks of a sender that keeps ``window`` lines in flight (1: it waits
+    for each answer), after an optional wake-up, polling '?' between lines."""
+    host, unit, t = [], [], 0.0
+    if wake:
+        host.append((t, wake))
+        unit.append((t + 0.005, b"ok\r\n" * (wake.count(b"\n") + wake.count(b"\r"))))
+        t += 0.5
+    pending = []
+    for text in lines:
+        host.append((t, text + b"\n"))
+        host.append((t + 0.001, b"?"))
+        unit.append((t + 0.002, b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"))
+        pending.append(t)
+        if len(pending) >= window:
+            unit.append((pending.pop(0) + gap, b"ok\r\n"))
+        t += gap * (1.5 if window == 1 else 0.2)
+    unit += [(p + gap, b"ok\r\n") for p in pending]
+    return sorted(host), sorted(unit)
+
+
+def test_send_response_with_a_wake_up_and_polls_is_send_response():
+    """grbl's stream.py -s: '\\r\\n\\r\\n' wakes grbl (four empty lines in flight), then each
+    line waits for its ok; '?' polls are realtime bytes. None of that is counting."""
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(20)], wake=b"\r\n\r\n")
+    a = analyze_streams(host, unit, spec=G)
+    assert a.metrics["streaming_method"] == "send-response"
+    assert a.metrics["max_job_lines_in_flight"] == 1
+
+
+def test_several_job_lines_in_flight_is_counting():
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(40)], window=4)
+    a = analyze_streams(host, unit, spec=G)
+    assert a.metrics["streaming_method"] == "character-counting"
+
+
+def test_an_empty_capture_is_empty():
+    a = analyze_streams([], [], spec=G)
+    assert a.metrics["streaming_method"] == "empty" and a.metrics["lines"] == 0
+
+
+def test_findings_document_has_the_shape_gve_prints():
+    """conform.analysis.report.findings_document: capture, variant, findings (kind,
+    severity, ...), metrics, notes."""
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(5)])
+    doc = analyze_streams(host, unit, spec=G, path="x.mcap").findings_document()
+    assert set(doc) == {"capture", "variant", "findings", "metrics", "notes"}
+    assert doc["metrics"]["streaming_method"] == "send-response"
+    assert all({"kind", "severity", "t", "message"} <= set(f) for f in doc["findings"])
+
+
+def test_analyze_json_on_a_grbl_capture_and_on_an_empty_one(tmp_path):
+    """``conform analyze --json``: one JSON document on stdout, the shape GVE's has; a capture
+    with no byte either way (a sender that died at once) is empty, not GVE traffic."""
+    import json
+
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(10)], wake=b"\r\n\r\n")
+    path = tmp_path / "sr.mcap"
+    record(path, host, unit)
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(path), "--json"],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert set(doc) >= {"capture", "variant", "findings", "metrics", "notes"}
+    assert doc["variant"] == "grbl-1.1f" and doc["metrics"]["streaming_method"] == "send-response"
+    assert "protocol family grbl" in p.stderr
+    empty = tmp_path / "dead.mcap"
+    record(empty, [], [])
+    for args in ([], ["--json"]):
+        q = subprocess.run([sys.executable, "-m", "conform", "analyze", str(empty), *args],
+                           capture_output=True, text=True, timeout=60)
+        assert q.returncode == 0, q.stderr
+        assert "empty capture" in (q.stderr if args else q.stdout)
+        assert "gve" not in (q.stdout + q.stderr).lower()
+    assert json.loads(q.stdout)["empty"] is True

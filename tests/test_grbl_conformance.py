@@ -121,3 +121,24 @@ def test_ctrl_c_halts_the_unit_and_keeps_the_results():
     run = run_checks(target, V.id, progress=interrupt)
     assert len(run.checks) == 3
     assert run.aborted.startswith("interrupted (Ctrl-C) after 3 checks; stopped: feed hold")
+
+
+def test_setting_edges_come_from_the_source():
+    """Every setting is checked at lo, lo-1, a fraction, a stray letter and no number; the
+    integer kinds at hi and hi+1 as well. What grbl answers follows settings.c and system.c:
+    $0=2 is error:6 (int_value < 3), $1=256 is kept as 0 (uint8_t), $4=255 shows 1 (a flag),
+    $110=500x is error:3 (system.c: something after the value)."""
+    from conform.families.grbl.conformance.checks import setting_edges
+
+    edges = {n: dict((e, (send, want)) for e, send, want in setting_edges(st))
+             for n, st in G.settings.items()}
+    assert edges[0]["min-1"] == ("2", "error:6")
+    assert edges[0]["max+1"] == ("256", "error:6")
+    assert edges[1]["max+1"] == ("256", "$1=0")
+    assert edges[4]["max"] == ("255", "$4=1")
+    assert edges[110]["min-1"] == ("-1.000", "error:4")
+    assert edges[110]["trailing-letter"] == ("500.000x", "error:3")
+    assert "max" not in edges[110]             # no documented maximum for a float setting
+    assert all({"min", "min-1", "fraction", "not-a-number"} <= set(e) for e in edges.values())
+    checks = {c.id for c in generate(G, V.id)}
+    assert f"{V.id}/setting_codes/setting/0/min-1" in checks

@@ -126,6 +126,9 @@ def test_usage_errors_are_one_line(tmp_path, args, capsys):
     (["G90", "G1X-1F100", "G1X-1F100", "G0X0"], "stream", "FAIL"),   # a line sent twice
     (["G90"], "error", "PASS"),                                      # stopped early: a prefix
     (["G1X-1F100"], "error", "FAIL"),
+    # what grbl executes is compared, not the text (gcode.c reads G01 as G1, X-1.0 as X-1)
+    (["G90", "G01 X-1.0 F100", "G00 X0"], "stream", "PASS"),
+    (["G90", "G1X-2F100", "G0X0"], "stream", "FAIL"),               # another move
 ])
 def test_job_in_order_rule(sent, scenario, grade):
     from conform.families.grbl.analysis.analyze import Exchange, GrblAnalysis
@@ -147,3 +150,27 @@ def test_truth_counts_lines_run_twice_and_lines_never_run():
     assert not t.whole
     t = compare(job, [["$G", 0], ["G90", 0], ["G1X-1F100", 0], ["G0X0", 0], ["M5", 0]])
     assert t.whole and t.extras == ["M5"]
+
+
+def test_a_line_of_modal_words_split_in_two_is_the_same_program():
+    """grbl-streamer splits G21G90 into G21 and G90 and writes G1 as G01: the same blocks."""
+    from conform.families.grbl.sendercheck.rules import compare
+
+    job = ["G21G90", "G1X-1F100", "M2"]
+    t = compare(job, [["G21", 0], ["G90", 0], ["G01X-1.000F100", 0], ["M2", 0]])
+    assert t.whole and not t.extras and not t.doubles
+
+
+def test_realtime_rule_counts_realtime_bytes_sent_as_lines_not_empty_lines():
+    """stream.py wakes grbl with "\r\n\r\n" (four empty lines, grbl's own idiom): fine.
+    "?\n" is a realtime byte and an empty line: the rule's evidence."""
+    from conform.families.grbl.analysis.analyze import analyze_streams
+    from conform.families.grbl.sendercheck.rules import realtime_not_lines
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    def grade(host: bytes) -> str:
+        a = analyze_streams([(0.0, host)], [(0.1, b"ok\r\n" * 8)])
+        return realtime_not_lines(SenderRun(SCENARIOS["stream"], ["G90"], a, 0, 0, False, ""))[0]
+
+    assert grade(b"\r\n\r\nG90\n?") == "PASS"
+    assert grade(b"\r\n\r\nG90\n?\n?\n?") == "FAIL"          # its polls, as lines

@@ -132,10 +132,12 @@ def test_feed_hold_and_resume():
 def test_reset_in_motion_raises_alarm_3_and_locks():
     u = fresh()
     say(u, b"G1X-20F300\n", 0.0)
-    assert say(u, b"\x18", 1.0) == ["ALARM:3", "", V.banner, "[MSG:'$H'|'$X' to unlock]"]
-    assert say(u, b"G0X0\n", 1.1) == ["error:9"]
-    assert say(u, b"$X\n", 1.2) == ["[MSG:Caution: Unlocked]", "ok"]
-    assert say(u, b"G0X0\n", 1.3) == ["ok"]
+    # ALARM:3, then report.c's delay_ms(500) before anything else (the banner)
+    assert say(u, b"\x18", 1.0, wait=0.45) == ["ALARM:3"]
+    assert say(u, b"", 1.45, wait=0.1) == ["", V.banner, "[MSG:'$H'|'$X' to unlock]"]
+    assert say(u, b"G0X0\n", 1.6) == ["error:9"]
+    assert say(u, b"$X\n", 1.7) == ["[MSG:Caution: Unlocked]", "ok"]
+    assert say(u, b"G0X0\n", 1.8) == ["ok"]
 
 
 def test_reset_at_rest_keeps_position_and_no_alarm():
@@ -169,10 +171,12 @@ def test_soft_limit_alarm_is_critical():
     u = fresh()
     for t, line in enumerate((b"$22=1\n", b"$20=1\n")):
         assert say(u, line, 0.1 * (t + 1)) == ["ok"]
-    assert say(u, b"G0X5\n", 0.5) == ["ALARM:2", "[MSG:Reset to continue]"]
-    assert say(u, b"?", 0.6) == []                             # ignored until a reset
-    assert say(u, b"$X\n", 0.7) == []
-    assert say(u, b"\x18", 0.8)[-1] == "[MSG:'$H'|'$X' to unlock]"
+    assert say(u, b"G0X5\n", 0.5, wait=0.4) == ["ALARM:2"]     # report.c delay_ms(500)
+    assert say(u, b"", 0.9, wait=0.2) == ["[MSG:Reset to continue]"]
+    assert say(u, b"?", 1.2) == []                             # ignored until a reset
+    assert say(u, b"$X\n", 1.3) == []
+    # the G0 line grbl was inside is answered at the reset, before the banner (protocol.c)
+    assert say(u, b"\x18", 1.4) == ["ok", "", V.banner, "[MSG:'$H'|'$X' to unlock]"]
 
 
 def test_overrides_and_program_end():
@@ -230,5 +234,6 @@ def test_the_parser_waits_for_a_probe():
     u.receive(b"G38.3Z-1F60\nG90\n", 0.1)
     assert [d for _, d in u.poll(0.5)] == []           # neither answered while probing
     out = say(u, b"", 2.0)
-    assert out == ["ok", "ok"]                         # G38.3: no alarm without contact
+    # G38.3: no alarm without contact; [PRB:…:0] first (motion_control.c mc_probe_cycle)
+    assert out == ["[PRB:0.000,0.000,-1.000:0]", "ok", "ok"]
     assert say(u, b"$#\n", 2.1)[-2] == "[PRB:0.000,0.000,-1.000:0]"

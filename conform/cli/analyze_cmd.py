@@ -94,7 +94,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     if wrong:
         raise UserError(f"{file}: {wrong}")
 
-    other = analyze_other_family(file, variant, report_dir, parquet_dir)
+    other = analyze_other_family(file, variant, report_dir, parquet_dir, as_json)
     if other:  # another family's traffic, or unknown traffic
         _fail(getattr(other, "findings", []), fail_on)
         return

@@ -86,26 +86,71 @@ def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[
 
 
 def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
-                         parquet_dir: str | None = None) -> Any:
-    """Analyse ``path`` with its family if it is not GVE traffic: that family's analysis (True
-    for traffic of no family); False leaves it to GVE."""
-    d = detect_capture(path, variant)
+                         parquet_dir: str | None = None, as_json: bool = False) -> Any:
+    """Analyse ``path`` with its family if it is not the default family's traffic: that
+    family's analysis (True for traffic of no family, or none at all); False leaves it to the
+    default family's analyser.
+
+    A capture with no byte either way (a program that died at once) is reported as empty,
+    whatever family the bytes would have been. ``as_json``: the text goes to stderr and the
+    analysis's findings document (the shape GVE's ``--json`` prints) to stdout."""
+    def echo(text: str) -> None:
+        click.echo(text, err=as_json)
+
+    d, empty = _detect_or_empty(path, variant)
+    if empty:
+        echo(f"{path}: empty capture: no byte either way (the program sent nothing and "
+             "nothing came back); nothing to analyse")
+        if as_json:
+            _echo_json({"capture": path, "variant": None, "findings": [],
+                        "metrics": {"bytes_host": 0, "bytes_unit": 0, "streaming_method": "none"},
+                        "notes": ["empty capture"], "empty": True})
+        return True
     if d is None:
         return False
     if d.family == "unknown":
-        click.echo(f"{path}: protocol unknown ({d.why}); not analysed as traffic of "
-                   f"{' or '.join(family_names())}")
+        echo(f"{path}: protocol unknown ({d.why}); not analysed as traffic of "
+             f"{' or '.join(family_names())}")
+        if as_json:
+            _echo_json({"capture": path, "variant": None, "findings": [], "metrics": {},
+                        "notes": [f"protocol unknown: {d.why}"]})
         return True
     fam = family(d.family)
-    click.echo(f"{path}: protocol family {d.family} ({d.why})")
+    echo(f"{path}: protocol family {d.family} ({d.why})")
     a = fam.analyze(path, variant=variant if variant and d.family == fam.name else None,
                     detected=d.why)
     for line in a.summary_lines():
-        click.echo(line)
+        echo(line)
+    paths = {}
     if report_dir:
-        paths = a.write_report(report_dir)
-        click.echo(f"report: {paths['html']}")
+        paths["report"] = str(a.write_report(report_dir)["html"])
+        echo(f"report: {paths['report']}")
     if parquet_dir:
         a.write_tables(parquet_dir)
-        click.echo(f"tables: {parquet_dir}")
+        paths["parquet"] = parquet_dir
+        echo(f"tables: {parquet_dir}")
+    if as_json:
+        document = getattr(a, "findings_document", None)
+        _echo_json((document() if document else {"capture": path, "family": d.family,
+                                                 "summary": a.summary_lines()}) | paths)
     return a
+
+
+def _detect_or_empty(path: str, variant: str | None) -> tuple[Detection | None, bool]:
+    """The family of a capture other than the default one (None: the default family's), and
+    whether it holds no traffic at all."""
+    if variant:
+        return divert(b"", b"", {}, variant), False
+    try:
+        host, unit, meta = peek_capture(path)
+    except Exception:  # noqa: BLE001 - not ours to report: the default path says what is wrong
+        return None, False
+    if not host and not unit and not meta.get("variant"):
+        return None, True
+    return divert(host, unit, meta, variant), False
+
+
+def _echo_json(doc: dict[str, Any]) -> None:
+    from conform.cli.params import echo_json
+
+    echo_json(doc)

@@ -33,11 +33,22 @@ class GrblFamily(Family):
                             "".join(v.axes), f"rx {v.rx_buffer} B, planner {v.planner_blocks}",
                             f"line {v.line_max} chars") for v in spec.variants.values()]
 
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+    def make_unit(self, variant: str, *, t0: float = 0.0, mutant: str | None = None,
+                  **options: Any) -> Any:
+        """The reference unit, or the deviant unit ``mutant`` (conformance/mutants.py)."""
         from conform.families.grbl.unit.model import GrblUnit
 
         spec = self.load_tables()
+        if mutant is not None:
+            from conform.families.grbl.conformance.mutants import mutant as named
+
+            return named(mutant).make(spec, variant, t0=t0, **options)
         return GrblUnit(spec.variant(variant), spec, t0=t0, **options)
+
+    def mutant_fault(self, name: str) -> str:
+        from conform.families.grbl.conformance.mutants import mutant
+
+        return mutant(name).fault
 
     def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
                allow_motion: bool = False, allow_eeprom: bool = False, **_: Any) -> Any:
@@ -52,10 +63,31 @@ class GrblFamily(Family):
 
     def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
-        from conform.families.grbl.conformance.checks import generate, select
+        """The checks of the tables; ``machine=False`` leaves the random sequences out."""
+        from conform.families.grbl.conformance.checks import SEQUENCES, generate, select
 
         spec = self.load_tables()
-        return select(generate(spec, variant), patterns)
+        checks = [c for c in generate(spec, variant) if machine or not c.id.endswith(SEQUENCES)]
+        return select(checks, patterns)
+
+    def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
+                    progress: Any = None) -> list[dict[str, Any]]:
+        """Every deviant unit through the checks, and whether a check meant for it caught it
+        (conformance/mutants.py)."""
+        from conform.families.grbl.conformance.checks import run_checks
+        from conform.families.grbl.conformance.mutants import run_mutants
+
+        spec = self.load_tables()
+        report: list[dict[str, Any]] = []
+        for vid in variants:
+            part, _ = run_mutants(spec, vid, lambda target, vid: run_checks(
+                target, vid, profile=profile, spec=spec, sequences=False))
+            for m in part:
+                if progress is not None:
+                    progress(f"mutant {m['name']} on {vid}: "
+                             + (f"killed by {len(m['caught_by'])} checks" if m["killed"] else "SURVIVED"))
+            report += part
+        return report
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
@@ -102,6 +134,11 @@ class GrblFamily(Family):
         from conform.families.grbl.conformance.portprobe import probe
 
         return probe(device, baud=baud, timeout=timeout)
+
+    def mutants(self) -> Sequence[str]:
+        from conform.families.grbl.conformance.mutants import MUTANTS
+
+        return tuple(MUTANTS)
 
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         from conform.families.grbl.protocol.codec import detect

@@ -49,6 +49,7 @@ class Exchange:
     lines_in_flight: int = 0
     bytes_in_flight: int = 0
     t_gone: float | None = None     # unanswered, flushed from grbl's buffer by a reset
+    after_realtime: bool = False    # an empty line right after a realtime byte ("?\n")
 
 
 @dataclass
@@ -70,6 +71,14 @@ class GrblAnalysis:
 
     def hazards(self) -> list[Finding]:
         return [f for f in self.findings if f.severity == "hazard"]
+
+    def findings_document(self) -> dict[str, Any]:
+        """``conform analyze --json``: the document GVE's analysis prints (capture, variant,
+        findings with kind and severity, metrics, notes; conform.analysis.report)."""
+        return {"capture": self.path, "variant": self.variant,
+                "findings": [{k: v for k, v in asdict(f).items() if k != "extra"} | f.extra
+                             for f in self.findings],
+                "metrics": self.metrics, "notes": self.notes}
 
     def to_json(self) -> dict[str, Any]:
         return {"format": "conform-grbl-analysis/1", "path": self.path, "family": self.family,
@@ -169,7 +178,9 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         return t - t0
 
     # pair answers with lines, in order
-    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end])
+    rt_at = {r.offset for r in realtime}
+    exchanges = [Exchange(i, ln.data.decode("latin-1"), ln.size, ht[ln.end],
+                          after_realtime=not ln.data and ln.end - 1 in rt_at)
                  for i, ln in enumerate(lines)]
     answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error", "banner")]
     k = 0
@@ -260,10 +271,22 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                 + (f"; {flushed} of them were flushed by a reset" if flushed else ""),
                 "interface.md §Grbl Response Messages", count=len(unanswered), flushed=flushed)
 
-    # streaming method
+    # streaming method, from what the sender awaits: a send-response sender writes each job
+    # line (g-code, a jog) only after an answer came since its previous one; a counting one
+    # writes several back to back while the buffer has room. Empty lines (stream.py's wake-up,
+    # a sync) and '$' queries a polling thread sends ($G, $#) take buffer room, counted above
+    # for the hazard, but are not the job; their answers still count as answers (a sender that
+    # takes a $G's ok for a job line's is still sending one line per answer). Realtime bytes
+    # ('?') are no lines at all.
     max_lines = max((e.lines_in_flight for e in exchanges), default=0)
     max_bytes = max((e.bytes_in_flight for e in exchanges), default=0)
     over = sum(1 for e in exchanges if e.bytes_in_flight > limit)
+    job_at = np.fromiter((i for i, e in enumerate(exchanges) if is_job_line(e.text)), np.int64)
+    job = [exchanges[i] for i in job_at.tolist()]
+    job_done = np.sort(np.fromiter((_done_at(e) for e in job), float, len(job)))
+    job_sent = np.fromiter((e.t_sent for e in job), float, len(job))
+    job_in_flight = np.arange(1, len(job) + 1) - np.searchsorted(job_done, job_sent, "left")
+    max_job_lines = int(job_in_flight.max()) if len(job) else 0
     # a sender that counts waits for an answer before it sends more once the buffer is full:
     # most of its lines follow an answer that came after its previous line. One that does not
     # count sends in bursts, whatever comes back. (Counting bytes in flight alone would
@@ -272,9 +295,12 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     n_done = np.searchsorted(t_done, t_sent, side="right")
     paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
     share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
-    if not exchanges:
+    back_to_back = _lines_beyond_answers(n_done[job_at])
+    if not hb and not ub:
+        method = "empty"
+    elif not job:
         method = "none"
-    elif max_lines <= 1:
+    elif back_to_back == 0:
         method = "send-response"
     elif share >= 0.5:
         method = "character-counting"
@@ -313,7 +339,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "alarms": out.counts.get("alarm", 0), "duration_s": duration,
         "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
         "streaming_method": method, "paced_share": round(share, 3),
-        "max_lines_in_flight": max_lines,
+        "max_lines_in_flight": max_lines, "max_job_lines_in_flight": max_job_lines,
+        "job_lines_back_to_back": back_to_back,
         "max_bytes_in_flight": max_bytes, "rx_buffer": limit, "planner_blocks": v.planner_blocks,
         "realtime_bytes": rt_counts, "status_polls": len(polls), "status_reports": len(reports),
         "poll_rate_hz": rate,
@@ -323,6 +350,31 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     }
     return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
                         realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports)
+
+
+def is_job_line(text: str) -> bool:
+    """A line the sender streams as part of a job (g-code, a jog), not an empty line or a
+    ``$`` command/query (``$G``, ``$#``, ``$X``, ``$10=2``...)."""
+    return bool(text) and (not text.startswith("$") or text.upper().startswith("$J="))
+
+
+def _lines_beyond_answers(answered_before: Any) -> int:
+    """How many job lines went out beyond one per answer: the lines sent after the same
+    number of answers form a group, and a group may hold as many lines as answers came since
+    the group before (the first line needs none). A send-response sender stays at 0 even when
+    two answers arrive in one read; a counting one fills the buffer in a burst."""
+    import numpy as np
+
+    if len(answered_before) < 2:
+        return 0
+    values, sizes = np.unique(answered_before, return_counts=True)
+    gain = np.diff(values, prepend=values[0] - 1)
+    return int(np.maximum(sizes - gain, 0).sum())
+
+
+def _done_at(e: Exchange) -> float:
+    t = e.t_answer if e.t_answer is not None else e.t_gone
+    return float("inf") if t is None else t
 
 
 _AXIS_WORD = re.compile(r"[XYZ][-+.\d]")

@@ -6,8 +6,9 @@ summary.md, junit.xml) for grbl as for GVE. A check id reads
 ``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
 
 Groups: ``example`` (the documented exchanges, grbl/spec/tables/examples.toml), ``error`` (every
-code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x accepts its
-default and prints it back), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
+code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x at each
+documented edge: lo, lo-1, hi, hi+1, a fraction, a stray letter, no number;
+:func:`setting_edges`), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
 ``buffer`` (the line limit and the receive ring), ``state`` (check mode, unlock, sleep).
 
 A real unit is driven only as far as it is allowed: checks that move the machine need
@@ -30,7 +31,7 @@ from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRu
 from conform.conformance.runner import Estimate, Runner, RunOptions
 from conform.conformance.target import HarnessError
 from conform.families.grbl.protocol.codec import split_unit
-from conform.families.grbl.spec.load import GrblSpec, Variant, load_grbl
+from conform.families.grbl.spec.load import GrblSpec, Setting, Variant, load_grbl
 
 STOP = (b"!", b"\x18")
 _SETTING = re.compile(r"^\$(\d+)=(.*)$")
@@ -151,6 +152,9 @@ def _count(lines: list[str], spec: GrblSpec) -> dict[str, int]:
     return out
 
 
+SEQUENCES = "/interface/sequences/random"
+ALARM_DELAY = 0.5    # report.c report_alarm_message: delay_ms(500) after every ALARM:N
+REALTIME_GAP = 0.02  # protocol.c handles all pending realtime flags in one pass: keep them apart
 Outcome = tuple[bool | None, str, str]     # passed (None: not applicable), expected, actual
 
 
@@ -204,11 +208,45 @@ def _setting(number: int, text: str) -> Callable[[Session], Outcome]:
     return run
 
 
-def _negative(number: int) -> Callable[[Session], Outcome]:
+def _edge(number: int, send: str, want: str, setup: Sequence[bytes]) -> Callable[[Session],
+                                                                               Outcome]:
+    """``$n=send`` answers ``want`` (``ok`` then ``$n=shown`` in ``$$``, or ``error:N``)."""
     def run(s: Session) -> Outcome:
-        got = s.talk(f"${number}=-1\n".encode())
-        return got.lines[-1:] == ["error:4"], "error:4", " | ".join(got.lines)
+        _setup(s, setup)
+        a = s.talk(f"${number}={send}\n".encode())
+        if not want.startswith("$"):
+            return a.lines[-1:] == [want], want, " | ".join(a.lines) or "(silence)"
+        row = next((x for x in s.talk(b"$$\n").lines if x.startswith(f"${number}=")),
+                   "(missing)")
+        return (a.lines[-1:] == ["ok"] and row == want, f"ok, then {want} in $$",
+                f"{' | '.join(a.lines)}; {row}")
     return run
+
+
+def setting_edges(st: Setting) -> list[tuple[str, str, str]]:
+    """(edge, value sent, what grbl answers) at every documented edge of one setting, from
+    its table row: lo, lo - 1 (``below`` or 4 when negative), hi and hi + 1 for the integer
+    kinds (kept as a truncated uint8_t, settings.c), a fraction (truncated, or kept to
+    ``decimals`` places), a value with a stray letter after it (error:3, system.c) and no
+    number at all (error:2, read_float)."""
+    def expect(value: float) -> str:
+        if value < 0:
+            return "error:4"
+        if st.type != "float" and (int(value) & 0xFF) < st.lo:
+            return f"error:{st.below}"
+        return f"${st.number}={st.text(st.coerce(value))}"
+
+    def text(value: float) -> str:
+        return f"{value:.{st.decimals}f}" if st.type == "float" else f"{value:g}"
+
+    out = [("min", text(st.lo), expect(st.lo)), ("min-1", text(st.lo - 1), expect(st.lo - 1))]
+    if st.type != "float":          # a float setting has no documented maximum
+        out += [("max", text(st.hi), expect(st.hi)), ("max+1", text(st.hi + 1), expect(st.hi + 1))]
+    frac = st.lo + 1.75
+    out += [("fraction", f"{frac:.2f}", expect(frac)),
+            ("trailing-letter", f"{text(st.default)}x", "error:3"),
+            ("not-a-number", "x", "error:2")]
+    return out
 
 
 def _status_has(s: Session, *, timeout: float = 0.5) -> str:
@@ -252,6 +290,7 @@ def _rt_feed_override(s: Session) -> Outcome:
     s.talk(b"?")
     s.talk(b"?")   # WCO: then Ov: after a reset; now the counters are running
     s.target.send(b"\x91")
+    s.wait(REALTIME_GAP)   # two realtime bytes in one main-loop pass: the report would go first
     report = _status_has(s)
     ov = next((f for f in report.strip("<>").split("|") if f.startswith("Ov:")), "(no Ov:)")
     return ov == "Ov:110,100,100", "Ov:110,100,100 in the next report", ov
@@ -321,21 +360,53 @@ def _sleep(s: Session) -> Outcome:
 
 
 def _alarm_soft_limit(s: Session) -> Outcome:
+    """ALARM:2, half a second of silence (report.c report_alarm_message delay_ms(500)), then
+    [MSG:Reset to continue]; the critical loop takes nothing but a reset (protocol.c), and the
+    G0 line grbl was inside is answered ok after the reset, before the banner."""
     _setup(s, [b"$22=1\n", b"$20=1\n", b"\x18", b"$X\n"])
-    got = s.talk(b"G0X10\n", answers=0, timeout=0.5, linger=0.2)
+    first = s.talk(b"G0X10\n", answers=0, timeout=ALARM_DELAY / 2, linger=ALARM_DELAY / 2)
+    later = s.wait(ALARM_DELAY + 0.5)
+    got = Talk(first.lines + later, first.t)
     after = _status_has(s)
-    s.talk(b"\x18")
+    reset = s.talk(b"\x18", timeout=2.0)
     s.talk(b"$X\n")
     s.talk(b"$20=0\n")
     s.talk(b"$22=0\n")
     want = ["ALARM:2", "[MSG:Reset to continue]"]
-    return got.lines == want and after == "(no status report)", " | ".join(want) + "; '?' ignored", \
-        " | ".join(got.lines) + f"; {after}"
+    want_reset = ["ok", "", s.v.banner]
+    ok = (first.lines == want[:1] and got.lines == want and after == "(no status report)"
+          and reset.lines[:3] == want_reset)
+    return ok, "ALARM:2 | (0.5 s) " + want[1] + "; '?' ignored; " + " | ".join(want_reset), \
+        " | ".join(got.lines) + f"; {after}; " + " | ".join(reset.lines[:3])
 
 
 def _alarm_probe(s: Session) -> Outcome:
-    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0)
-    return got.lines == ["ALARM:5", "ok"], "ALARM:5 | ok", " | ".join(got.lines)
+    """ALARM:5, then (after report.c's 0.5 s) [PRB:…:0] with the last probe position kept
+    (motion_control.c mc_probe_cycle, MESSAGE_PROBE_COORDINATES), then the line's ok."""
+    before = next((x for x in s.talk(b"$#\n").lines if x.startswith("[PRB:")), "(no PRB)")
+    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0 + ALARM_DELAY)
+    kept = before[:-3] + ":0]" if before.startswith("[PRB:") else "[PRB:…:0]"
+    want = ["ALARM:5", kept, "ok"]
+    return got.lines == want, " | ".join(want), " | ".join(got.lines)
+
+
+def _sequences(s: Session) -> Outcome:
+    """Random sequences drawn from the tables, on the target and on the reference unit side
+    by side (:mod:`.machine`); a difference is shrunk and given as its replay."""
+    from conform.conformance.target import EmuTarget
+    from conform.families.grbl.conformance.machine import replay_text, run_sequences
+    from conform.families.grbl.unit.model import GrblUnit
+
+    reference = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}")
+    try:
+        out = run_sequences(s, Session(reference, s.spec, s.v), s.spec, s.v,
+                            emulated=s.target.emulated)
+    finally:
+        reference.close()
+    want = "every answer as the reference unit's"
+    if not out.steps:
+        return True, want, f"{out.examples} random sequences agreed"
+    return False, want, f"{out.why}; replay: {replay_text(out.steps)}"
 
 
 def _crlf(s: Session) -> Outcome:
@@ -373,8 +444,11 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
         out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}", st.cite,
                              f"${n} ({st.name}) takes its default", _setting(n, st.text(st.default)),
                              eeprom=True))
-        out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}/negative", st.cite,
-                             f"${n}=-1 is error:4", _negative(n), eeprom=True))
+        setup = tuple(f"${k}=1\n".encode() for k in st.needs)
+        for edge, send, want in setting_edges(st):
+            out.append(GrblCheck(f"{vid}/setting_codes/setting/{n}/{edge}", st.cite,
+                                 f"${n}={send} at its {edge} edge: {want}",
+                                 _edge(n, send, want, setup), eeprom=True))
     rt = {r.effect: r.cite for r in spec.realtime.values()}
     out += [
         GrblCheck(f"{vid}/realtime_cmds/realtime/status", rt["status"],
@@ -397,12 +471,18 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
                   "locked after a reset from sleep; error:9; $X unlocks", _alarm_unlock),
         GrblCheck(f"{vid}/commands/state/sleep", spec.commands["$SLP"].cite,
                   "$SLP sleeps; a reset wakes into Alarm", _sleep),
+        GrblCheck(f"{vid}{SEQUENCES}", "src:gcode.c gc_execute_line; "
+                  "protocol.c; system.c; settings.c (the reference unit models them)",
+                  "random lines, $ commands, settings and realtime bytes agree with the "
+                  "reference unit", _sequences, motion=True, eeprom=True),
     ]
     return out
 
 
 def _src(cite: str) -> str:
     head = cite.split(";")[0].split("§")[0].strip()
+    if head.startswith("src:"):                      # src:gcode.c:783 ... -> gcode.c
+        return head[4:].split(":")[0].split()[0]
     return {"iface": "interface", "guide": "guide", "rt": "realtime_cmds", "cmds": "commands",
             "jog": "jogging"}.get(head, head.rsplit("/", 1)[-1].split("#")[0].removesuffix(".csv")
                                   .removesuffix(".md") or "grbl")
@@ -470,9 +550,11 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
-               announce: Callable[[str], None] | None = None) -> TargetRun:
+               announce: Callable[[str], None] | None = None, sequences: bool = True
+               ) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
-    interrupted run comes back with ``aborted`` saying what was sent to stop the unit."""
+    interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
+    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's)."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
@@ -480,7 +562,9 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                         options=RunOptions(profile=profile, notes=list(notes or []),
                                            announce=announce))
     try:
-        return runner.run(select(generate(runner.spec, vid), patterns), progress)
+        checks = [c for c in generate(runner.spec, vid)
+                  if sequences or not c.id.endswith(SEQUENCES)]
+        return runner.run(select(checks, patterns), progress)
     except RunAborted as exc:
         return exc.run
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 AXES = "XYZ"
@@ -148,244 +149,335 @@ def strip_line(raw: bytes) -> tuple[str, bool]:
     return "".join(out), paren
 
 
-def words(line: str) -> list[tuple[str, float, str]]:
-    """(letter, value, value text) for each word; raises GcodeError 1 or 2."""
-    out = []
-    i = 0
+def read_float(line: str, i: int) -> tuple[float, int] | None:
+    """grbl's ``read_float`` (nuts_bolts.c): an optional sign, digits with at most one '.';
+    digits past the eighth only scale the value (MAX_INT_DIGITS 8). None when no digit is read
+    (error 2); else the value and the index after it."""
+    j = i
+    neg = False
+    if j < len(line) and line[j] in "+-":
+        neg = line[j] == "-"
+        j += 1
+    intval = exp = ndigit = 0
+    decimal = False
+    while j < len(line):
+        c = line[j]
+        if "0" <= c <= "9":
+            ndigit += 1
+            if ndigit <= 8:
+                exp -= decimal
+                intval = intval * 10 + (ord(c) - 48)
+            elif not decimal:
+                exp += 1
+        elif c == "." and not decimal:
+            decimal = True
+        else:
+            break
+        j += 1
+    if not ndigit:
+        return None
+    value = intval * 10.0 ** exp
+    return (-value if neg else value), j
+
+
+def iter_words(line: str, start: int = 0) -> Iterator[tuple[str, float, str]]:
+    """(letter, value, value text) for each word, read lazily as gcode.c STEP 2 reads them:
+    GcodeError 1 or 2 is raised when the bad word is reached, after the words before it."""
+    i = start
     while i < len(line):
         letter = line[i]
         if not "A" <= letter <= "Z":
             raise _fail(1)
-        m = _NUMBER.match(line, i + 1)
-        if m is None:
+        got = read_float(line, i + 1)
+        if got is None:
             raise _fail(2)
-        out.append((letter, float(m.group(0)), m.group(0)))
-        i = m.end()
-    return out
+        yield letter, got[0], line[i + 1:got[1]]
+        i = got[1]
 
 
-def _gcode_key(value: float) -> tuple[str, int]:
-    """G word value → ('38.2', mantissa) with grbl's rounding of the fraction to 1/100."""
-    whole = int(math.trunc(value))
-    mantissa = int(round(100 * (value - whole)))
-    key = f"{whole}.{mantissa // 10}" if mantissa else str(whole)
-    return key, mantissa
+def words(line: str, start: int = 0) -> list[tuple[str, float, str]]:
+    """Every word of ``line``; raises GcodeError 1 or 2."""
+    return list(iter_words(line, start))
+
+
+# STEP 2 of gc_execute_line (gcode.c): G words by their whole part; the group each belongs to
+_G_MOTION = {0, 1, 2, 3, 38, 80}
+_G_SIMPLE = {17: "plane", 18: "plane", 19: "plane", 93: "feed_mode", 94: "feed_mode",
+             20: "units", 21: "units", 40: "cutter", 54: "coord", 55: "coord", 56: "coord",
+             57: "coord", 58: "coord", 59: "coord"}
+
+
+def _g_word(value: float, axis_command: str | None) -> tuple[str, str, str | None]:
+    """One G word as gcode.c STEP 2 reads it: (group, key, axis command after it), raising the
+    code gcode.c fails with, in its order: 24 (an axis command twice), 20 (unsupported, also
+    G28.2, G38.1, G43, G61.1, G90.1, G92.2), then 23 (a fraction left over: G1.5, G59.1)."""
+    whole = int(math.trunc(value)) & 0xFF          # int_value is a uint8_t
+    mantissa = int(round(100 * (value - math.trunc(value))))
+    if whole in (10, 28, 30, 92, 4, 53):
+        if whole in (10, 28, 30, 92) and mantissa == 0:
+            if axis_command is not None:
+                raise _fail(24)
+            axis_command = "nonmodal"
+        key = str(whole)
+        if whole in (28, 30, 92):
+            if mantissa not in (0, 10):
+                raise _fail(20)
+            key, mantissa = (f"{whole}.1" if mantissa else key), 0
+        group = "nonmodal"
+    elif whole in _G_MOTION:
+        if whole != 80:
+            if axis_command is not None:
+                raise _fail(24)
+            axis_command = "motion"
+        key = str(whole)
+        if whole == 38:
+            if mantissa not in (20, 30, 40, 50):
+                raise _fail(20)
+            key, mantissa = f"38.{mantissa // 10}", 0
+        group = "motion"
+    elif whole in (90, 91):
+        if mantissa == 0:
+            group, key = "distance", str(whole)
+        else:
+            if mantissa != 10 or whole == 90:
+                raise _fail(20)
+            group, key, mantissa = "arc_distance", "91.1", 0
+    elif whole in (43, 49):
+        if axis_command is not None:
+            raise _fail(24)
+        axis_command = "tlo"
+        if whole == 49:
+            key = "49"
+        elif mantissa == 10:
+            key = "43.1"
+        else:
+            raise _fail(20)
+        group, mantissa = "tlo", 0
+    elif whole == 61:
+        if mantissa:
+            raise _fail(20)
+        group, key = "path", "61"
+    elif whole in _G_SIMPLE:
+        group, key = _G_SIMPLE[whole], str(whole)
+    else:
+        raise _fail(20)
+    if mantissa > 0:
+        raise _fail(23)
+    return group, key, axis_command
+
+
+def _m_word(value: float, mist: bool) -> tuple[str, int]:
+    """One M word (gcode.c STEP 2): 23 for a fraction first, then 20 for an unsupported code
+    (M7 without the ENABLE_M7 build option, config.h: off by default)."""
+    whole = int(math.trunc(value)) & 0xFF
+    if int(round(100 * (value - math.trunc(value)))) > 0:
+        raise _fail(23)
+    if whole in (0, 1, 2, 30):
+        return "program", whole
+    if whole in (3, 4, 5):
+        return "spindle", whole
+    if whole in (8, 9) or (whole == 7 and mist):
+        return "coolant", whole
+    raise _fail(20)
 
 
 def parse(line: str, state: Modal, position: list[float], *, jog: bool = False,
-          tool_max: int = 255, line_number_max: int = 9999999) -> Block:
-    """Check one stripped, non-empty line against ``state``; raises GcodeError(code)."""
-    ws = words(line)
+          tool_max: int = 255, line_number_max: int = 10000000, mist: bool = False) -> Block:
+    """Check one stripped line against ``state`` in gc_execute_line's order; raises
+    GcodeError(code). ``jog``: ``line`` is the part after ``$J=``."""
     groups: dict[str, str] = {}
     m_groups: dict[str, int] = {}
     values: dict[str, float] = {}
     axis_command: str | None = None
-    for letter, value, _text in ws:
+    for letter, value, _text in iter_words(line):   # STEP 2: each word checked as read
         if letter == "G":
-            key, mantissa = _gcode_key(value)
-            if key in G_GROUPS:
-                group = G_GROUPS[key]
-            elif str(int(value)) in G_GROUPS and mantissa:
-                raise _fail(23)           # e.g. G1.5, G59.1: known code, fraction not allowed
-            else:
-                raise _fail(20)
-            if key in AXIS_COMMANDS:
-                if axis_command is not None:
-                    raise _fail(24)
-                axis_command = key
+            group, key, axis_command = _g_word(value, axis_command)
             if group in groups:
                 raise _fail(21)
             groups[group] = key
         elif letter == "M":
-            if value != int(value):
-                raise _fail(23)
-            code = int(value)
-            if code not in M_GROUPS:
-                raise _fail(20)
-            group = M_GROUPS[code]
+            group, code = _m_word(value, mist)
             if group in m_groups:
                 raise _fail(21)
             m_groups[group] = code
         else:
             if letter not in VALUE_LETTERS:
                 raise _fail(20)
+            if letter == "T" and value > tool_max:
+                raise _fail(38)            # checked as T is read, before the repeat check
             if letter in values:
                 raise _fail(25)
             if letter in "FNPST" and value < 0:
                 raise _fail(4)
-            if letter == "T" and value > tool_max:
-                raise _fail(38)
             values[letter] = value
     return _check(groups, m_groups, values, axis_command, state, position, jog,
                   line_number_max)
 
 
-def _jog_words(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, float]
-               ) -> None:
-    """A jog carries only G20/G21, G90/G91, G53, N, F and axis words (jogging.md)."""
-    allowed = {"distance", "units", "nonmodal"}
-    if m_groups or any(g not in allowed for g in groups) or (
-            "nonmodal" in groups and groups["nonmodal"] != "53"):
-        raise _fail(16)
-    if set(values) - set("FNXYZ"):
-        raise _fail(16)
-
-
 def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, float],
            axis_command: str | None, state: Modal, position: list[float], jog: bool,
            line_number_max: int) -> Block:
+    """gc_execute_line STEP 3 (error checks in its numbered order [0]..[21], then unused
+    words) and the jog checks at the start of STEP 4."""
     new = state.copy()
     axis_words = {a: values[a] for a in AXES if a in values}
-    used = set("NFST") | set(AXES)
-    if "N" in values:
-        if values["N"] > line_number_max:
-            raise _fail(27)
-        new.line_number = int(values["N"])
+    used = set("NF") if jog else set("NFST")   # single-meaning words; a jog has no S or T
     if axis_words and axis_command is None:
-        axis_command = "motion"
-    elif axis_command in ("0", "1", "2", "3", "38.2", "38.3", "38.4", "38.5"):
-        axis_command = "motion"
-    motion = groups.get("motion", state.motion)
-    if jog:
-        motion = "1"
+        axis_command = "motion"                # [0] implicit motion mode
+    if "N" in values and math.trunc(values["N"]) > line_number_max:
+        raise _fail(27)                        # [0] MAX_LINE_NUMBER with '>' (gcode.c:27, :376)
+    new.line_number = int(math.trunc(values.get("N", 0.0)))
+    motion = "1" if jog else state.motion
+    motion = groups.get("motion", motion)
     new.units = groups.get("units", state.units)
     scale = MM_PER_INCH if new.units == "20" else 1.0
-    new.feed_mode = groups.get("feed_mode", state.feed_mode)
-    inverse = new.feed_mode == "93" and not jog
-    # feed rate
-    feed = state.feed
+    new.feed_mode = "94" if jog else groups.get("feed_mode", state.feed_mode)
+    inverse = new.feed_mode == "93"
+    # [2]/[3] feed rate mode and feed rate
     if jog:
         if "F" not in values:
-            raise _fail(22)       # gcode.c checks the jog's F before its words
-        _jog_words(groups, m_groups, values)
+            raise _fail(22)
         feed = values["F"] * scale
     elif inverse:
         if axis_command == "motion" and motion not in ("0", "80") and "F" not in values:
             raise _fail(22)
         feed = values.get("F", 0.0)
-    elif "F" in values:
-        feed = values["F"] * scale
-    if not jog:
-        new.feed = feed if not inverse else state.feed
-    if "S" in values:
-        new.speed = values["S"]
-    if "T" in values:
-        new.tool = int(values["T"])
-    if "spindle" in m_groups:
-        new.spindle = m_groups["spindle"]
-    if "coolant" in m_groups:
-        c = m_groups["coolant"]
-        new.coolant = frozenset() if c == 9 else (new.coolant | {8} if c == 8 else new.coolant)
-    block = Block(new)
+    elif state.feed_mode == "94":
+        feed = values["F"] * scale if "F" in values else state.feed
+    else:
+        feed = values.get("F", 0.0)      # G93 -> G94: the F word as given, else undefined
+    # [4] spindle speed, [5] tool: T is only tracked, and a block without T sets it to 0
+    speed = values.get("S", state.speed) if not jog else state.speed
+    tool = int(math.trunc(values.get("T", 0.0))) if not jog else state.tool
     nonmodal = groups.get("nonmodal")
-    if nonmodal == "4":
+    block = Block(new)
+    if nonmodal == "4":                        # [10] dwell
         if "P" not in values:
             raise _fail(28)
         block.kind, block.dwell, block.sync = "dwell", values["P"], True
         used.add("P")
     new.plane = groups.get("plane", state.plane)
-    if groups.get("tlo") == "43.1":
-        if set(axis_words) != {"Z"}:
-            raise _fail(37)
-        new.tlo = axis_words["Z"] * scale
-        axis_words = {}
-        axis_command = None if axis_command == "motion" and "motion" not in groups else axis_command
-    elif groups.get("tlo") == "49":
-        new.tlo = 0.0
-    if "coord" in groups:
-        new.coord = int(groups["coord"]) - 54
+    a0, a1, _lin = PLANES[new.plane]
+    tlo_key = groups.get("tlo")
+    if axis_command == "tlo" and tlo_key == "43.1" and set(axis_words) != {"Z"}:
+        raise _fail(37)                        # [14]
+    new.coord = int(groups["coord"]) - 54 if "coord" in groups else state.coord
     new.distance = groups.get("distance", state.distance)
+    block_coords = new.coords[new.coord]
+    # [19] non-modal commands that use axis words
+    target = list(position)
     if nonmodal == "10":
         if not axis_words:
             raise _fail(26)
         if "P" not in values and "L" not in values:
             raise _fail(28)
-        p = int(values.get("P", 0))
-        if p > 6:
+        p = int(math.trunc(values.get("P", 0.0))) & 0xFF
+        if p > len(new.coords):
             raise _fail(29)
-        l_value = int(values.get("L", 0))
-        if l_value not in (2, 20) or (l_value == 2 and "R" in values):
+        l_value = int(math.trunc(values.get("L", 0.0))) & 0xFF
+        if l_value != 20 and (l_value != 2 or "R" in values):
             raise _fail(20)
-        idx = state.coord if p == 0 else p - 1
+        used |= {"P", "L"}
+        idx = p - 1 if p > 0 else new.coord
         row = list(new.coords[idx])
-        for i, a in enumerate(AXES):
+        for k, a in enumerate(AXES):
             if a in axis_words:
                 v = axis_words[a] * scale
-                if l_value == 20:
-                    # make the current position read v in that system
-                    row[i] = position[i] - new.g92[i] - (new.tlo if i == 2 else 0.0) - v
-                else:
-                    row[i] = v
+                row[k] = v if l_value == 2 else (
+                    position[k] - state.g92[k] - v - (state.tlo if k == 2 else 0.0))
         new.coords[idx] = row
-        used |= {"P", "L"}
-        block.sync = block.coord_write = True
-        axis_command = "nonmodal"
-    elif nonmodal in ("28.1", "30.1"):
-        (new.g28 if nonmodal == "28.1" else new.g30)[:] = list(position)
         block.sync = block.coord_write = True
     elif nonmodal == "92":
         if not axis_words:
             raise _fail(26)
-        for i, a in enumerate(AXES):
+        for k, a in enumerate(AXES):
             if a in axis_words:
-                new.g92[i] = position[i] - new.coords[new.coord][i] - (
-                    new.tlo if i == 2 else 0.0) - axis_words[a] * scale
+                new.g92[k] = position[k] - block_coords[k] - axis_words[a] * scale - (
+                    state.tlo if k == 2 else 0.0)
         block.sync = True
-        axis_command = "nonmodal"
-    elif nonmodal == "92.1":
-        new.g92 = [0.0] * 3
-        block.sync = True
-    elif nonmodal == "53" and motion not in ("0", "1"):
-        raise _fail(30)
-    if nonmodal in ("28", "30"):
-        via = None
-        if axis_words:
-            via = _target(axis_words, new, position, scale, nonmodal == "53")
-        block.kind, block.via, block.rapid = ("home28" if nonmodal == "28" else "home30"), via, True
-        block.target = list(new.g28 if nonmodal == "28" else new.g30)
-        axis_command = "nonmodal"
-    new.motion = state.motion if jog else motion
-    # motion modes
-    if motion == "80":
-        if axis_words and axis_command == "motion":
-            raise _fail(31)
-    elif axis_command == "motion":
-        target = _target(axis_words, new, position, scale, nonmodal == "53")
-        if motion == "0":
-            if axis_words:
-                block.kind, block.target, block.rapid = "line", target, True
-        else:
-            f_eff = feed if not inverse else values.get("F", 0.0)
-            if f_eff == 0.0:
-                raise _fail(22)
-            if motion == "1":
-                if axis_words:
-                    block.kind, block.target, block.feed = "line", target, f_eff
-            elif motion in ("2", "3"):
-                _arc(block, motion, new, axis_words, values, position, target, scale, used)
-                block.feed = f_eff
+    else:
+        if axis_command != "tlo" and axis_words:
+            target = _target(axis_words, new, state, position, scale, nonmodal == "53")
+        if nonmodal in ("28", "30"):
+            home = list(new.g28 if nonmodal == "28" else new.g30)
+            if axis_words:                     # only the axes named go home, via the target
+                home = [home[k] if a in axis_words else position[k] for k, a in enumerate(AXES)]
+                block.via = target
             else:
-                if target == list(position):
-                    raise _fail(33)
-                block.kind, block.target, block.feed, block.probe = "probe", target, f_eff, motion
-                block.sync = True
-            block.inverse_time = inverse
-    prog = m_groups.get("program")
-    if prog is not None:
-        block.sync = True
-        if prog in (0, 1):
-            block.pause = True
+                axis_command = None
+            block.kind, block.target, block.rapid = ("home28" if nonmodal == "28" else
+                                                     "home30"), home, True
+        elif nonmodal in ("28.1", "30.1"):
+            (new.g28 if nonmodal == "28.1" else new.g30)[:] = list(position)
+            block.sync = block.coord_write = True
+        elif nonmodal == "92.1":
+            new.g92 = [0.0] * 3
+            block.sync = True
+        elif nonmodal == "53" and motion not in ("0", "1"):
+            raise _fail(30)
+    # [20] motion modes
+    if motion == "80":
+        if axis_words:
+            raise _fail(31)                    # strict: even for G10/G28/G92/G43.1 words
+    elif axis_command == "motion":
+        if motion != "0" and feed == 0.0:
+            raise _fail(22)
+        if motion in ("0", "1"):
+            if axis_words:
+                block.kind, block.target, block.rapid = "line", target, motion == "0"
+        elif motion in ("2", "3"):
+            if not axis_words:
+                raise _fail(26)
+            if AXES[a0] not in axis_words and AXES[a1] not in axis_words:
+                raise _fail(32)
+            _arc(block, motion, new, values, position, target, scale, used)
         else:
-            block.program_end = True
-    unused = set(values) - used
-    if unused:
+            if not axis_words:
+                raise _fail(26)
+            if target == list(position):
+                raise _fail(33)
+            block.kind, block.target, block.probe = "probe", target, motion
+            block.sync = True
+        block.feed = feed
+        block.inverse_time = inverse
+    # [0] unused words (gcode.c: N F S T removed, axis words when an axis command used them)
+    if axis_command is not None:
+        used |= set(AXES)
+    if set(values) - used:
         raise _fail(36)
+    if jog:                                    # STEP 4: only G20/21, G90/91, G53 in a jog
+        if m_groups or set(groups) - {"distance", "units", "nonmodal"} or nonmodal not in (
+                None, "53"):
+            raise _fail(16)
+        new.motion = state.motion
+        block.kind = "line" if block.target is not None else "none"
+        return block
+    new.motion = motion
+    new.feed = feed                          # gc_state.feed_rate = gc_block.values.f, always
+    new.speed, new.tool = speed, tool
+    if tlo_key == "49":
+        new.tlo = 0.0
+    elif tlo_key == "43.1":
+        new.tlo = axis_words["Z"] * scale
+    if "spindle" in m_groups:
+        new.spindle = m_groups["spindle"]
+    if "coolant" in m_groups:
+        c = m_groups["coolant"]
+        new.coolant = frozenset() if c == 9 else new.coolant | {c}
+    prog = m_groups.get("program")
+    if prog is not None and prog != 1:         # M1 (optional stop) is ignored
+        block.sync = True
+        block.pause = prog == 0
+        block.program_end = prog != 0
     return block
 
 
-def _target(axis_words: dict[str, float], m: Modal, position: list[float], scale: float,
-            absolute_machine: bool) -> list[float]:
-    wco = m.wco()
+def _target(axis_words: dict[str, float], new: Modal, state: Modal, position: list[float],
+            scale: float, absolute_machine: bool) -> list[float]:
+    """gcode.c [19] default: the axis words as machine coordinates: G53 as given, G91 added to
+    the position, G90 plus the block's coordinate system, the G92 offset and (Z) the tool
+    length offset of the state."""
+    coords = new.coords[new.coord]
     out = list(position)
     for i, a in enumerate(AXES):
         if a not in axis_words:
@@ -393,19 +485,18 @@ def _target(axis_words: dict[str, float], m: Modal, position: list[float], scale
         v = axis_words[a] * scale
         if absolute_machine:
             out[i] = v
-        elif m.distance == "91":
+        elif new.distance == "91":
             out[i] = position[i] + v
         else:
-            out[i] = v + wco[i]
+            out[i] = v + coords[i] + state.g92[i] + (state.tlo if i == 2 else 0.0)
     return out
 
 
-def _arc(block: Block, motion: str, m: Modal, axis_words: dict[str, float],
-         values: dict[str, float], position: list[float], target: list[float], scale: float,
-         used: set[str]) -> None:
+def _arc(block: Block, motion: str, m: Modal, values: dict[str, float], position: list[float],
+         target: list[float], scale: float, used: set[str]) -> None:
+    """gcode.c [20] G2/G3: radius mode (33 same point, 34 radius too small) or offset mode
+    (35 no offset in the plane, 33 the two radii differ)."""
     a0, a1, _lin = PLANES[m.plane]
-    if AXES[a0] not in axis_words and AXES[a1] not in axis_words:
-        raise _fail(32)
     x = target[a0] - position[a0]
     y = target[a1] - position[a1]
     ijk = "IJK"

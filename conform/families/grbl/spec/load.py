@@ -48,6 +48,8 @@ class Setting:
     cite: str
     decimals: int = 3
     bits: int = 8
+    below: int = 4      # the error for a value below ``lo`` (a negative one is always 4)
+    needs: tuple[int, ...] = ()   # settings that must be 1 for a non-zero value ($20: $22)
 
     def text(self, value: float) -> str:
         """The value as ``$$`` prints it."""
@@ -59,7 +61,7 @@ class Setting:
         """What grbl stores for ``value`` (integers truncated, booleans 0/1)."""
         if self.type == "float":
             return float(value)
-        n = int(value)
+        n = int(value) & 0xFF if self.bits <= 8 else int(value)   # settings.c: uint8 int_value
         if self.type == "bool":
             return 1 if n else 0
         return n & ((1 << self.bits) - 1)
@@ -122,7 +124,13 @@ class Variant:
     coord_systems: int
     crlf_is_two_lines: bool
     cite: dict[str, str]
+    build_options: dict[str, Any] = field(default_factory=dict)
     family: str = "grbl"
+
+    def option(self, name: str) -> Any:
+        """A config.h build option the variant assumes (``build_options``): its value, or
+        False when the table leaves it out (commented out in config.h)."""
+        return self.build_options.get(name, False)
 
     @property
     def banner(self) -> str:
@@ -238,7 +246,9 @@ def _setting(rows: _Rows, row: str, number: int, d: dict[str, Any], prefix: str 
         raise rows.fail(row, f"default {default} is outside {lo}..{hi}")
     return Setting(number, prefix + rows.get(row, d, "name", str), rows.get(row, d, "unit", str),
                    kind, float(lo), float(hi), float(default), rows.get(row, d, "cite", str),
-                   int(rows.get(row, d, "decimals", int, 3)), int(rows.get(row, d, "bits", int, 8)))
+                   int(rows.get(row, d, "decimals", int, 3)), int(rows.get(row, d, "bits", int, 8)),
+                   int(rows.get(row, d, "below", int, 4)),
+                   tuple(int(x) for x in rows.get(row, d, "needs", list, [])))
 
 
 def _settings(rows: _Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[int, Setting]:
@@ -268,7 +278,10 @@ def _variant(rows: _Rows, vid: str, d: dict[str, Any]) -> Variant:
                 g(row, d, "options", str), g(row, d, "tool_max", int),
                 g(row, d, "line_number_max", int), g(row, d, "n_startup_lines", int),
                 g(row, d, "coord_systems", int), g(row, d, "crlf_is_two_lines", bool),
-                dict(g(row, d, "cite", dict, {})))
+                dict(g(row, d, "cite", dict, {})), dict(g(row, d, "build_options", dict, {})))
+    for key, value in v.build_options.items():
+        if not isinstance(value, (bool, int)) or not key.isupper():
+            raise rows.fail(row, f"build_options.{key}: expected a config.h NAME = true/false/number")
     for name in ("rx_buffer", "line_max", "planner_blocks", "baud"):
         if getattr(v, name) <= 0:
             raise rows.fail(row, f"field {name!r} must be positive")

@@ -49,10 +49,13 @@ def set_input(u: GrblUnit, name: str, on: bool, t: float) -> None:
         return
     if name.startswith("limit-"):
         if on and u.settings[21] and u.state not in ("Alarm", "Home"):
+            inside_line = u._pending is not None or u._busy is not None
             u._hard_stop(t)
             u.state = "Alarm"
             u._critical = True
-            u._say(t, "ALARM:1", rp.MSG["reset"])
+            u._owed = inside_line     # that line's ok comes after the reset, before the banner
+            u._alarm(t, 1)
+            u._say(t, rp.MSG["reset"])
     elif name == "probe":
         _probe_edge(u, on, t)
     elif name == "door":

@@ -29,6 +29,7 @@ from conform.families.grbl.unit import replies as rp
 from conform.families.grbl.unit.planner import Move, Planner
 
 INF = math.inf
+ALARM_DELAY = 0.5   # report.c report_alarm_message: delay_ms(500)
 MOVING = ("Run", "Jog", "Home")
 
 
@@ -58,6 +59,8 @@ class GrblUnit:
         # ground truth (``truth=True``, for check-sender): [line as the parser took it, answer]
         self.taken: list[list[Any]] | None = [] if truth else None
         self._n_coded = 0
+        self._quiet_until = -INF   # report.c report_alarm_message: delay_ms(500) after ALARM:N
+        self._owed = False         # a line whose answer waits for a reset (critical alarm)
         self.state = "Alarm" if self.settings[22] else "Idle"
         self._reset(self._now, power_up=True)
 
@@ -156,6 +159,7 @@ class GrblUnit:
 
     # ============================================================ output
     def _emit(self, t: float, data: bytes) -> None:
+        t = max(t, self._quiet_until)
         if self._out and self._out[-1][0] > t:
             t = self._out[-1][0]
         self._out.append((t, data))
@@ -163,6 +167,18 @@ class GrblUnit:
     def _say(self, t: float, *texts: str) -> None:
         for text in texts:
             self._emit(t, rp.line(text))
+
+    def _alarm(self, t: float, code: int) -> None:
+        """``ALARM:N``, then grbl sits in report.c's delay_ms(500): nothing else is sent or
+        parsed for half a second (report_alarm_message)."""
+        self._say(t, f"ALARM:{code}")
+        self._quiet_until = t + ALARM_DELAY
+        self._parser_free = max(self._parser_free, self._quiet_until)
+
+    def parse(self, text: str, *, jog: bool = False) -> Block:
+        """gc_execute_line's checks for ``text`` against the parser state (raises GcodeError)."""
+        return parse(text, self.modal, self.parser_position(), jog=jog, tool_max=self.v.tool_max,
+                     line_number_max=self.v.line_number_max, mist=self.v.option("ENABLE_M7"))
 
     def _answer(self, t: float, code: int) -> None:
         self.lines_done += 1
@@ -231,8 +247,7 @@ class GrblUnit:
 
     def _gcode(self, text: str, t: float, *, jog: bool = False) -> None:
         try:
-            block = parse(text, self.modal, self.parser_position(), jog=jog,
-                          tool_max=self.v.tool_max, line_number_max=self.v.line_number_max)
+            block = self.parse(text, jog=jog)
         except GcodeError as exc:
             self._answer(t, exc.code)
             return
@@ -280,7 +295,9 @@ class GrblUnit:
         self._hard_stop(t)
         self.state = "Alarm"
         self._critical = True
-        self._say(t, "ALARM:2", rp.MSG["reset"])
+        self._owed = True     # mc_line waits in the critical loop; the line's ok comes at reset
+        self._alarm(t, 2)
+        self._say(t, rp.MSG["reset"])
 
     def _try_pending(self, t: float) -> None:
         kind, block, jog, startup = self._pending
@@ -309,7 +326,7 @@ class GrblUnit:
 
             if probe_blocks_start(self, block.probe):   # probe already in its end state
                 self.state = "Alarm"
-                self._say(t, "ALARM:4")
+                self._alarm(t, 4)          # no [PRB:] (motion_control.c mc_probe_cycle)
                 self._finish(t, 0, startup)
                 return
             self._plan(block, t, False)
@@ -412,15 +429,21 @@ class GrblUnit:
             self.state = "Idle"
 
     def _probe_done(self, t: float, move: Move) -> None:
+        """The probe move ended without the probe changing (motion_control.c mc_probe_cycle):
+        G38.2/.4 raise ALARM:5 and keep the last probe position; G38.3/.5 take the position
+        reached. Either way [PRB:…:0] follows (MESSAGE_PROBE_COORDINATES), then the ok."""
         block = move.tag
         busy = self._busy
         self._busy = None
-        self.prb = list(move.end)
         self.prb_ok = False
         startup = busy[1] if busy else None
         if isinstance(block, Block) and block.probe in ("38.2", "38.4"):
             self.state = "Alarm"
-            self._say(t, "ALARM:5")
+            self._alarm(t, 5)
+        else:
+            self.prb = list(move.end)
+        if self.v.option("MESSAGE_PROBE_COORDINATES"):
+            self._say(t, f"[PRB:{rp.axes(self.prb, bool(self.settings[13]))}:0]")
         self._finish(t, 0, startup)
 
     def _store_coords(self) -> None:
@@ -434,6 +457,8 @@ class GrblUnit:
         m = self.modal
         m.motion, m.plane, m.distance, m.feed_mode, m.coord = "1", "17", "90", "94", 0
         m.spindle, m.coolant, m.program = 5, frozenset(), None
+        if self.v.option("RESTORE_OVERRIDES_AFTER_PROGRAM_END"):
+            self.ov_feed = self.ov_rapid = self.ov_spindle = 100
         self._say(t, rp.MSG["pgm_end"])
 
     # ============================================================ realtime bytes
@@ -525,9 +550,16 @@ class GrblUnit:
     def _soft_reset(self, t: float) -> None:
         moving = self.state in MOVING or (self.state in ("Hold", "Door") and self.hold_sub != 0)
         if moving:
-            code = 6 if self.state == "Home" else 3
-            self._say(t, f"ALARM:{code}")
+            self._alarm(t, 6 if self.state == "Home" else 3)
             self.state = "Alarm"
+        if self._owed or self._pending is not None or self._busy is not None:
+            # the line grbl was inside returns once sys.abort is set and is answered ok
+            # before protocol_main_loop exits to print the banner (protocol.c, main.c)
+            busy = self._busy
+            startup = (self._pending[3] if self._pending is not None else
+                       busy[1] if busy and busy[0] in ("dwell", "probe") else None)
+            self._finish(max(t, self._quiet_until), 0, startup)
+        self._owed = False
         self._reset(t)
 
     def power_cycle(self, t: float, boot: float = 0.0) -> None:
@@ -584,8 +616,7 @@ class GrblUnit:
         for text in self.startup:
             if text:
                 try:
-                    block = parse(text, self.modal, self.parser_position(),
-                                  tool_max=self.v.tool_max)
+                    block = self.parse(text)
                 except GcodeError as exc:
                     self._say(t, f">{text}:error:{exc.code}")
                     continue

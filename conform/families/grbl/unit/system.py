@@ -3,16 +3,16 @@ which state each is allowed in, what it prints before its ``ok``, and its error 
 
 from __future__ import annotations
 
+import math
 import re
 from typing import TYPE_CHECKING
 
-from conform.families.grbl.protocol.gcode import GcodeError, parse
+from conform.families.grbl.protocol.gcode import GcodeError, read_float
 from conform.families.grbl.unit import replies as rp
 
 if TYPE_CHECKING:
     from conform.families.grbl.unit.model import GrblUnit
 
-_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)")
 IDLE_OR_ALARM = ("Idle", "Alarm")
 
 
@@ -35,13 +35,10 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
         if rest[1:2] != "=":
             return 3
         body = rest[2:]
-        try:
-            block = parse(body, u.modal, u.parser_position(), jog=True,
-                          tool_max=u.v.tool_max) if body else None
+        try:      # gc_execute_line reads the words after "$J=" (system.c case 'J')
+            block = u.parse(body, jog=True)
         except GcodeError as exc:
             return exc.code
-        if block is None:
-            return 16
         u._execute(block, t, jog=True)
         return None
     if head in "$GCX":
@@ -80,11 +77,11 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             return 3
         u._say(t, *rp.params_lines(u.modal, u.prb, u.prb_ok, bool(u.settings[13])))
         return 0
-    if head == "H":
-        if rest[1:]:
-            return 3
+    if head == "H":     # system.c: homing enabled (5), then the rest of the line (3)
         if not u.settings[22]:
             return 5
+        if rest[1:] and not (u.v.option("HOMING_SINGLE_AXIS_COMMANDS") and rest[1:] in "XYZ"):
+            return 3
         return _home(u, t)
     if head == "S":
         if rest != "SLP":
@@ -116,45 +113,65 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
         if rest == "N":
             u._say(t, *(f"$N{i}={s}" for i, s in enumerate(u.startup)))
             return 0
-        m = re.fullmatch(r"N(\d+)=(.*)", rest)
-        if not m:
-            return 2 if not _FLOAT.match(rest, 1) else 3
-        if u.state != "Idle":
+        if u.state != "Idle":   # system.c: storing a startup line needs Idle (Alarm is not)
             return 8
-        n = int(m.group(1))
-        if n >= len(u.startup):
+        got = read_float(rest, 1)
+        if got is None:
+            return 2
+        number, end = got
+        if rest[end:end + 1] != "=":
             return 3
-        line = m.group(2)
-        if line:
-            try:
-                parse(line, u.modal.copy(), u.parser_position(), tool_max=u.v.tool_max)
-            except GcodeError as exc:
-                return exc.code
-        u.startup[n] = line
+        line = rest[end + 1:]
+        try:      # gc_execute_line checks the block (and grbl runs it: its modes stay)
+            block = u.parse(line)
+        except GcodeError as exc:
+            return exc.code
+        u.modal = block.modal
+        n = int(number)
+        if 0 <= n < len(u.startup):   # settings_store_startup_line has no bounds check
+            u.startup[n] = line
         return 0
     return _setting(u, rest)
 
 
 def _setting(u: GrblUnit, rest: str) -> int:
-    m = _FLOAT.match(rest)
-    if m is None:
+    """``$x=value``: system.c reads the number (2), '=' (3), the value (2), nothing after it
+    and x <= 255 (3); then settings.c settings_store_global_setting checks in its order."""
+    got = read_float(rest, 0)
+    if got is None:
         return 2
-    if rest[m.end():m.end() + 1] != "=":
+    parameter, end = got
+    if rest[end:end + 1] != "=":
         return 3
-    value_text = rest[m.end() + 1:]
-    v = _FLOAT.fullmatch(value_text)
-    if v is None:
+    got = read_float(rest, end + 1)
+    if got is None:
         return 2
-    number, value = int(float(m.group(0))), float(value_text)
+    value, end = got
+    if end != len(rest) or parameter > 255:
+        return 3
+    return store_setting(u, int(parameter) & 0xFF, value)
+
+
+def store_setting(u: GrblUnit, number: int, value: float) -> int:
+    """settings.c settings_store_global_setting: negative 4; an axis setting (100 and up) is
+    100 + 10 * kind + axis, anything else there 3; $0 below 3 is 6 (on the truncated uint8
+    value); $20 without homing 10; an unknown number 3."""
+    if value < 0:
+        return 4
     setting = u.spec.settings.get(number)
     if setting is None:
         return 3
-    if value < 0:
-        return 4
-    if number == 0 and value < 3:
-        return 6
-    if number == 20 and value and not u.settings[22]:
-        return 10
+    step_rate = u.v.option("MAX_STEP_RATE_HZ")
+    if step_rate and number >= 100 and number < 120:
+        other = u.settings[number + 10] if number < 110 else u.settings[number - 10]
+        if value * other > step_rate * 60.0:
+            return 12
+    if setting.type != "float":
+        as_uint8 = int(math.trunc(value)) & 0xFF
+        if as_uint8 < setting.lo:
+            return setting.below            # $0: int_value < 3 is 6 (settings.c case 0)
+        if as_uint8 and any(not u.settings[k] for k in setting.needs):
+            return 10                       # $20 without homing (settings.c case 20)
     u.settings[number] = setting.coerce(value)
     _apply(u)
     return 0

@@ -1,0 +1,84 @@
+"""grbl mutants: the reference unit with one firmware bug each (issue: 15 bug classes, one per
+fact the real firmware showed, plus a setting range widened at its documented minimum).
+Every one must be killed by the check meant for it, not merely by some check."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from conform.families.grbl.conformance.checks import run_checks
+from conform.families.grbl.conformance.mutants import MUTANTS, run_mutants
+from conform.families.grbl.spec.load import load_grbl
+
+G = load_grbl()
+
+
+def test_there_are_at_least_fifteen_bug_classes():
+    assert len(MUTANTS) >= 15
+    assert "setting-0-widened" in MUTANTS
+
+
+@pytest.fixture(scope="module")
+def report():
+    rep, _ = run_mutants(G, "grbl-1.1f", lambda target, vid: run_checks(target, vid, spec=G,
+                                                                          sequences=False))
+    return {m["name"]: m for m in rep}
+
+
+@pytest.mark.parametrize("name", list(MUTANTS))
+def test_each_mutant_is_killed_by_the_check_meant_for_it(report, name):
+    m = report[name]
+    assert m["killed"], m
+    assert m["expected_hit"], (m["catches"], m["caught_by"])
+
+
+def test_conform_run_mutants_and_a_mutant_target(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "conform", "run", "--mutants", "--variant",
+                        "grbl-1.1f", "--json", "--report", str(tmp_path / "all")],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    doc = json.loads(p.stdout)
+    assert len(doc["mutants"]) == len(MUTANTS) and all(m["killed"] for m in doc["mutants"])
+    q = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
+                        "emu:grbl-1.1f:m7-built", "--report", str(tmp_path / "one")],
+                       capture_output=True, text=True, timeout=300)
+    assert q.returncode == 1
+    assert "FAIL grbl-1.1f/gcode.c/example/m7-not-built" in q.stdout
+    r = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
+                        "emu:grbl-1.1f:no-such-bug"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "no mutant 'no-such-bug'" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("name", ["jog-checked-first", "m7-built", "fraction-is-23"])
+def test_random_sequences_find_a_mutant_and_shrink_it_to_its_replay(name):
+    """The hypothesis machine drives the mutant and the reference side by side and shrinks
+    the first difference to the shortest sequence: one line for these bugs."""
+    from conform.conformance.target import EmuTarget
+
+    m = MUTANTS[name]
+    target = EmuTarget(lambda: m.make(G, "grbl-1.1f"), f"emu:grbl-1.1f:{name}")
+    try:
+        run = run_checks(target, "grbl-1.1f", spec=G, patterns=["*/sequences/*"])
+    finally:
+        target.close()
+    (c,) = run.checks
+    assert c.grade.name == "FAIL"
+    replay = c.actual.split("replay: ")[1]
+    assert replay.count("\\n") == 1, replay          # shrunk to one line
+
+
+def test_random_sequences_agree_on_the_reference():
+    from conform.conformance.target import EmuTarget
+    from conform.families.grbl.unit.model import GrblUnit
+
+    target = EmuTarget(lambda: GrblUnit(G.variant("grbl-1.1f"), G), "emu:grbl-1.1f")
+    try:
+        (c,) = run_checks(target, "grbl-1.1f", spec=G, patterns=["*/sequences/*"]).checks
+    finally:
+        target.close()
+    assert c.grade.name == "PASS" and "random sequences agreed" in c.actual
