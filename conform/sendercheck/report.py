@@ -17,11 +17,13 @@ from conform.sendercheck.grade import CheckResults
 _HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender</title>
 <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}
 td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
-.FAIL{background:#f8c8c8}.WARN{background:#fbe7b0}.PASS{background:#d4f0d4}
+.FAIL{background:#f8c8c8}.DEVIATION{background:#fbe7b0}.PASS{background:#d4f0d4}
 .ERROR{background:#e0c0f0}.NOT-APPLICABLE{color:#999}</style></head><body>
 <h1>check-sender: {{ r.command }}</h1>
 <p>variant {{ r.variant }} ({{ r.family }}), {{ "%.1f"|format(r.duration) }} s, exit status
 {{ r.exit_code }}; {% for g, n in counts.items() %}{{ g }} {{ n }}{% if not loop.last %}, {% endif %}{% endfor %}</p>
+{% if r.interrupted %}<p class="ERROR"><b>{{ r.interrupted }}</b>: the results cover the finished
+scenarios only</p>{% endif %}
 <h2>Rules × scenarios</h2><table><tr><th>rule</th><th>level</th><th>clause</th>
 {% for s in r.scenarios %}<th>{{ s.name }}</th>{% endfor %}</tr>
 {% for rule, cells in matrix %}<tr><td>{{ rule.rule }}<br><small>{{ rule.title }}</small></td>
@@ -53,7 +55,7 @@ def _matrix(r: CheckResults) -> list:
 
 def render_html(r: CheckResults) -> str:
     env = jinja2.Environment(autoescape=True)
-    counts = {g: r.counts().get(g, 0) for g in GRADES}
+    counts = {g.value: r.counts().get(g.value, 0) for g in GRADES}
     return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r),
                                          shown=(FAIL, ERROR, WARN, "PASS"))
 
@@ -61,13 +63,16 @@ def render_html(r: CheckResults) -> str:
 def render_markdown(r: CheckResults) -> str:
     out = ["# check-sender summary", "", f"`{' '.join(r.command)}`", "",
            f"variant {r.variant}, {r.duration:.1f} s, exit status {r.exit_code}", "",
+           *([f"**{r.interrupted}**: the results cover the finished scenarios only", ""]
+             if r.interrupted else []),
            "| rule | level | clause | " + " | ".join(s.name for s in r.scenarios) + " |",
            "|---|---|---|" + "---|" * len(r.scenarios)]
     for _v, cells in _matrix(r):
         c = cells[0]
         out.append(f"| {c.rule} | {c.level} | {c.clause} | "
-                   + " | ".join("—" if v.grade == NA else v.grade for v in cells) + " |")
-    out += ["", "| scenario | time (s) | exit | vectors |", "|---|---|---|---|"]
+                   + " | ".join("—" if v.grade == NA else v.grade.value for v in cells) + " |")
+    out += ["", "| scenario | time (s) | exit | job against the ground truth |",
+            "|---|---|---|---|"]
     for s in r.scenarios:
         ss = s.session
         out.append(f"| {s.name} | {ss.duration:.2f} | {ss.exit_code}"
@@ -77,7 +82,7 @@ def render_markdown(r: CheckResults) -> str:
     if bad:
         out += ["", "## Not passed", ""]
         for v in bad:
-            out.append(f"- **{v.grade}** {v.scenario} / {v.rule} ({v.level}, {v.clause}): "
+            out.append(f"- **{v.grade.value}** {v.scenario} / {v.rule} ({v.level}, {v.clause}): "
                        f"{v.detail}")
     return "\n".join(out) + "\n"
 
@@ -102,7 +107,7 @@ def render_junit(r: CheckResults) -> str:
             elif v.grade == NA:
                 ET.SubElement(case, "skipped", message=v.detail)
             elif v.grade == WARN:
-                ET.SubElement(case, "system-out").text = f"WARN {text}"
+                ET.SubElement(case, "system-out").text = f"{WARN.value} {text}"
     ET.indent(suites)
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode")
 
