@@ -18,9 +18,9 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
+import conform.link.pty
 from conform.conformance.results import Grade
 from conform.families import Family, family_for_variant
-from conform.sendercheck import session as supervisor
 from conform.sendercheck.family import Family as Shapes
 from conform.sendercheck.grade import check
 from conform.sendercheck.report import render_junit, write_reports
@@ -49,7 +49,7 @@ def test_a_harness_failure_is_an_error_in_every_family(tmp_path, monkeypatch, va
     def no_pty(*_a, **_k):
         raise OSError("out of ptys")
 
-    monkeypatch.setattr(supervisor, "PtyEndpoint", no_pty)
+    monkeypatch.setattr(conform.link.pty, "PtyEndpoint", no_pty)
     r = check([sys.executable, "-c", "pass"], variant=variant, names=[first],
               directory=tmp_path / "r", timeout=10)
     shapes = family_for_variant(variant).check_sender
@@ -133,3 +133,30 @@ def test_a_job_that_is_not_ascii_is_one_line(tmp_path, capsys, variant):
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1, err
     assert f"{job}: line 2, column 9: not ASCII" in err
+
+
+def test_ctrl_c_on_the_command_writes_the_report_of_the_finished_scenarios(tmp_path):
+    """`conform check-sender` itself, sent SIGINT while its second scenario runs: exit 130, the
+    report written for the first scenario, and the program gone."""
+    import subprocess
+    import time
+
+    variant, first, second = FAMILIES[1]
+    rep = tmp_path / "rep"
+    pid_file = rep / second / "job.gcode.pid"
+    p = subprocess.Popen([sys.executable, "-m", "conform", "check-sender", "--variant", variant,
+                          "--scenario", f"{first},{second}", "--report", str(rep), "--",
+                          sys.executable, "-c", SLEEPER, first],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (pid_file.exists() and pid_file.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, out + err
+    assert "Traceback" not in err and "interrupted (SIGINT)" in err
+    res = json.loads((rep / "results.json").read_text())
+    assert [s["scenario"] for s in res["scenarios"]] == [first]
+    assert (rep / "junit.xml").exists() and (rep / "index.html").exists()
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(pid_file.read_text()), 0)

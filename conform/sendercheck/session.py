@@ -27,9 +27,9 @@ from typing import Any
 
 from conform.capture.session import wire_time
 from conform.emulator.control import LocalControl
+from conform.emulator.launch import open_endpoint
 from conform.errors import UserError
 from conform.link.faults import FaultConfig
-from conform.link.pty import PtyEndpoint
 from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
 
@@ -184,11 +184,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
         else:
             cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
             faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
-        endpoint = PtyEndpoint(link=str(link))
-
-        def reopen_plain() -> Any:
-            return PtyEndpoint(link=str(link))
-
+        endpoint, reopen_plain = open_endpoint(None, str(link))
         reopen = family.reopen(reopen_plain, unit, faults, truth) if family.reopen else \
             reopen_plain
         recorder = Recorder(s.capture, {
