@@ -135,6 +135,9 @@ class Family:
     facts: Callable[[Any], Any] = lambda s: s  # session -> what the rules read
     end_counts: Callable[[Any], dict[str, Any]] = lambda _unit: {}  # capture's closing counts
     decode: bool = True  # decode frames while recording (the family's live decoder)
+    # the recording dates an answer's first byte a wire time before the emulator wrote it (as
+    # on a line); False: when it was written (what the family's analyser and rules expect)
+    backdate: bool = True
     linger: float = 0.0  # s the emulator keeps serving (and recording) after the program ended
     fast: tuple[str, ...] = ()  # scenarios for a quick run
     prepare: Callable[[Any, Scenario, float], None] = _nothing  # (unit, scn, t0) before the run

@@ -81,7 +81,8 @@ class PtyStamps:
     """The recorder as the emulator on a pty should use it: a host chunk's first byte is dated
     when it was read (the program wrote it at once), a unit chunk's a wire time before it was
     written (the emulator writes an answer once its last byte would have left the line), never
-    before the last chunk either way (an answer cannot begin before the command was read)."""
+    before the last chunk either way (an answer cannot begin before the command was read).
+    With ``baud`` 0 every chunk is dated when it was read or written."""
 
     def __init__(self, recorder: Any, baud: int) -> None:
         self.recorder = recorder
@@ -191,7 +192,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
             "capture_method": "check-sender", "family": family.name, "variant": variant.id,
             "baud": baud, "unit_port": str(link), "scenario": scn.name, "seed": seed,
             "faults": scn.faults}, decode=family.decode, backdate=False)
-        stamps = PtyStamps(recorder, baud)
+        stamps = PtyStamps(recorder, baud if family.backdate else 0)
         control = LocalControl()
         emulator = Emulator(unit, endpoint, baud=baud, injector=faults, recorder=stamps,
                             control=control, reopen=reopen,

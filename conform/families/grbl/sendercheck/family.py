@@ -95,6 +95,8 @@ def _rule(rid: str, title: str, clause: str, level: str, check: Any) -> Rule:
     return Rule(rid, title, clause, MUST if level == MUST else SHOULD, graded)
 
 
+# recorded raw (lines are paired when analysed), each answer dated when the emulator wrote it:
+# whether the sender "went on" after an answer is judged against the answer complete
 GRBL = Family(
     name="grbl", default_variant="grbl-1.1f", scenarios=scenarios.SCENARIOS,
     rules=tuple(_rule(*row) for row in rules.RULES), job=scenarios.scenario_job_for,
@@ -102,6 +104,6 @@ GRBL = Family(
     observe=lambda unit, _t0: GrblTruth(unit), taken=lambda truth: len(truth.unit.taken or ()),
     settle=_settle, analyze=_analyze, truth_findings=_truth_findings, job_name="job.gcode",
     steps=scenarios.steps, injector=_injector, reopen=_reopen, facts=sender_run,
-    end_counts=lambda unit: {"bytes_lost": unit.lost}, decode=False, linger=0.2,
+    end_counts=lambda unit: {"bytes_lost": unit.lost}, decode=False, backdate=False, linger=0.2,
     fast=("stream", "lost-answers"),
 )
