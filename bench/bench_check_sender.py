@@ -1,8 +1,9 @@
-"""What a `conform check-sender` run costs: every scenario for the careful test sender, wall
-time per scenario and in all, and the process CPU time, against a target of 60 s for the full
-matrix (a check a user runs often must stay short).
+"""What a `conform check-sender` run costs: every scenario for the family's careful test sender
+(GVE: tests/senders/careful.py; grbl: tests/senders/grbl_counting.py good), wall time per
+scenario and in all, and the process CPU time, against a target of 60 s for the full matrix (a
+check a user runs often must stay short).
 
-    python bench/bench_check_sender.py [--repeat N]
+    python bench/bench_check_sender.py [--repeat N] [--variant V]
 
 Most of the time is the program's own (its timeouts, the unit's motion); the median of N runs
 is reported because the machine may be shared.
@@ -19,11 +20,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from conform.families.gve.sendercheck.family import GVE
+from conform.families import default_variant, family_for_variant
 from conform.sendercheck.grade import check
 
 TARGET_S = 60.0
-SENDER = Path(__file__).resolve().parents[1] / "tests" / "senders" / "careful.py"
+SENDERS = Path(__file__).resolve().parents[1] / "tests" / "senders"
+# the test sender that passes every MUST rule, per family: (script, arguments after {job})
+CAREFUL = {"gve": ("careful.py", ()), "grbl": ("grbl_counting.py", ("good",))}
 
 
 def cpu() -> float:
@@ -34,14 +37,21 @@ def cpu() -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=1, help="runs of the whole matrix")
-    repeat = ap.parse_args().repeat
+    ap.add_argument("--variant", default=None, help="the unit (default: the default family's)")
+    args = ap.parse_args()
+    repeat, variant = args.repeat, args.variant or default_variant()
     if repeat < 1:
         ap.error("--repeat must be at least 1")
-    totals, per, cpus = [], {n: [] for n in GVE.scenarios}, []
+    family = family_for_variant(variant)
+    if family.name not in CAREFUL:
+        ap.error(f"--variant {variant}: no careful test sender for the {family.name} family")
+    script, extra = CAREFUL[family.name]
+    command = [sys.executable, str(SENDERS / script), "{port}", "{job}", *extra]
+    totals, per, cpus = [], {n: [] for n in family.check_sender.scenarios}, []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as d:
             c0, t0 = cpu(), time.perf_counter()
-            r = check([sys.executable, str(SENDER), "{port}", "{job}"], directory=Path(d))
+            r = check(command, variant=variant, directory=Path(d))
             totals.append(time.perf_counter() - t0)
             cpus.append(cpu() - c0)
         for s in r.scenarios:
@@ -55,7 +65,7 @@ def main() -> None:
     ratio = total / TARGET_S
     print(f"full matrix: {total:.1f} s wall (median of {repeat}), {cpu_s:.1f} s "
           f"CPU; target {TARGET_S:.0f} s, ratio {ratio:.2f}")
-    print(json.dumps({"total_s": round(total, 2), "cpu_s": round(cpu_s, 2), "repeat": repeat,
+    print(json.dumps({"variant": variant, "total_s": round(total, 2), "cpu_s": round(cpu_s, 2), "repeat": repeat,
                       "exit_code": r.exit_code,
                       "target_s": TARGET_S, "ratio": round(ratio, 3),
                       "scenarios_s": {n: round(statistics.median(t), 2) for n, t in per.items()}}))

@@ -123,8 +123,8 @@ class Family:
     whose tables a folder holds."""
 
     check_sender: Any = None
-    """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), or
-    None when it judges senders its own way (``check_sender_cli``)."""
+    """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), run
+    by the engine's supervisor (conform.sendercheck); None: this family judges no senders."""
 
     # -- tables ---------------------------------------------------------------------------
     def load_tables(self, root: str | None = None) -> Any:
@@ -317,10 +317,6 @@ class Family:
         serve``, ...); their values reach this family's hook for that command and are refused
         when the command addresses another family's unit."""
         return ()
-
-    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
-        """``conform check-sender`` for a family with no ``check_sender`` shapes."""
-        raise self.lacks("check-sender")
 
     # -- helpers ------------------------------------------------------------------------------
     def lacks(self, what: str) -> UserError:

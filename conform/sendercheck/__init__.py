@@ -1,12 +1,14 @@
-"""Judge a user's sender program: run it against the reference unit under scenarios, record
-each session through the proxy, and grade it per rule and manual clause.
+"""Judge a user's sender program, for every family: run it against the family's reference
+unit under scenarios, record each session, and grade it per rule and clause.
 
-    families/gve/sendercheck/scenarios.py   what each GVE scenario does to the link and the unit
-    families/gve/sendercheck/rules.py       the GVE rules, each citing its clause
-    family.py      a protocol family: its scenarios, rules and job format, in one object
+    family.py      the shapes a family hands check-sender (``Family.check_sender``): its
+                   scenarios (``params`` for its own knobs), rules, job, unit, ground truth
+    session.py     the supervisor: one run of the program against the emulator on a pty,
+                   templating, timeouts, the scenario's timed actions, the recording
     faults.py      fault injection scripted by the scenario (lost answers, a dead line)
-    compare.py     the job against what the unit accepted: double moves and lost vectors
-    session.py     one run of the program: emulator, proxy, recording, ground truth
-    grade.py       sessions -> verdicts -> results (exit code)
+    grade.py       sessions -> verdicts (the engine's Grade) -> results (exit code); Ctrl-C
     report.py      index.html, summary.md, junit.xml, results.json
+    options.py     the command's option checks
+
+A family's own scenarios and rules live in its package (``families/<name>/sendercheck/``).
 """

@@ -1,34 +1,38 @@
-"""The family-agnostic shapes of check-sender: scenarios, rules, verdicts, a family.
+"""The family-agnostic shapes of check-sender: scenarios, rules, verdicts, a family's hooks.
 
-A protocol family (GVE today, grbl next) supplies one :class:`Family` (``check_sender`` of
-its ``conform.families`` entry): its scenarios (what is done to the link and the unit, and the
-job the program streams), its rules (each citing its manual clause), how to set a unit up for
-a scenario, and what it knows afterwards — the ground truth of what the unit accepted, the job
-compared with it, the capture analysed. The session runner, the grading and the reports only
-use these shapes.
+A protocol family supplies one :class:`Family` (``check_sender`` of its ``conform.families``
+entry): its scenarios (what is done to the link and the unit, and the job the program streams),
+its rules (each citing its clause), how to build and set up its unit for a scenario, and what it
+knows afterwards — the ground truth of what the unit took, the job compared with it, the capture
+analysed. The supervisor (session.py), the grading (grade.py) and the reports (report.py) only
+use these shapes; what a family's scenario needs beyond them goes in ``Scenario.params``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+from conform.conformance.results import Grade
 
 MUST = "MUST"
 SHOULD = "SHOULD"
 
-PASS, FAIL, WARN, NA, ERROR = "PASS", "FAIL", "WARN", "NOT-APPLICABLE", "ERROR"
+# the engine's grades (conform.conformance.results.Grade); a SHOULD rule not met is a DEVIATION
+PASS, FAIL, WARN, NA, ERROR = (Grade.PASS, Grade.FAIL, Grade.DEVIATION, Grade.NOT_APPLICABLE,
+                               Grade.ERROR)
 GRADES = (FAIL, ERROR, WARN, PASS, NA)
 
 
 @dataclass(frozen=True)
 class Action:
-    """Something the scenario does during the run, once a share of the job's vectors has
-    been accepted: ``stop`` (press the stop input, release it ``hold`` s later) or ``link``
-    (the line is dead for ``hold`` s)."""
+    """Something the scenario does during the run, once a share ``at`` of the job's units
+    (``Family.units``) has been taken by the unit; the family turns it into timed control
+    requests (``Family.steps``). ``hold``: how long it lasts, in seconds."""
 
     kind: str
-    at: float  # share of the job's vectors accepted, 0..1
+    at: float  # share of the job's units taken by the unit, 0..1
     hold: float
 
 
@@ -38,72 +42,102 @@ class Scenario:
     title: str
     faults: str = ""  # conform.link.faults spec applied by the emulator
     lose: float = 0.0  # probability that a whole answer is lost
-    vectors: int = 60  # job length; ``over_queue`` makes it the queue size plus this
-    over_queue: int | None = None
-    pulses: int = 100
-    head: int = 0  # pulses of one long first vector (the queue fills while it runs)
-    speed: int = 20000
     timeout: float = 30.0
     actions: tuple[Action, ...] = ()
-    tags: frozenset[str] = frozenset()  # what the rules look for: noise, stop, link, ...
+    tags: frozenset[str] = frozenset()  # what the rules look for
+    params: Mapping[str, Any] = field(default_factory=dict)  # the family's own knobs
+
+    def __hash__(self) -> int:
+        return hash(self.name)
 
 
 @dataclass
 class Verdict:
     rule: str
     scenario: str
-    grade: str
+    grade: Grade
     clause: str
     level: str
     title: str
     detail: str = ""
     evidence: list[str] = field(default_factory=list)
+    expected: str = ""
 
     def to_json(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+        d = dict(self.__dict__)
+        d["grade"] = self.grade.value
+        return d
 
 
 @dataclass(frozen=True)
 class Rule:
-    """One graded rule: ``check(session)`` returns (grade, detail, evidence); ``applies`` says
-    whether it is graded in a scenario (else NOT-APPLICABLE)."""
+    """One graded rule: ``check(facts)`` returns (grade, detail, evidence) or (grade, detail,
+    evidence, expected), the grade a :class:`Grade` or its text; ``applies`` says whether it is
+    graded in a scenario (else NOT-APPLICABLE). ``facts`` is what ``Family.facts`` makes of a
+    session (the session itself by default)."""
 
     id: str
     title: str
     clause: str
     level: str
-    check: Callable[[Any], tuple[str, str, list[str]]]
+    check: Callable[[Any], tuple[Any, ...]]
     applies: Callable[[Scenario], bool] = lambda _s: True
 
-    def grade(self, session: Any) -> Verdict:
-        scn = session.scenario
+    def grade(self, facts: Any, scn: Scenario) -> Verdict:
         if not self.applies(scn):
             return Verdict(self.id, scn.name, NA, self.clause, self.level, self.title,
                            "not graded in this scenario")
-        grade, detail, evidence = self.check(session)
-        if grade == FAIL and self.level == SHOULD:
+        grade, detail, evidence, *expected = self.check(facts)
+        grade = Grade(grade)
+        if grade is FAIL and self.level == SHOULD:
             grade = WARN
         return Verdict(self.id, scn.name, grade, self.clause, self.level, self.title, detail,
-                       evidence)
+                       list(evidence), expected[0] if expected else "")
+
+
+def _no_steps(action: Action, variant: Any) -> list[tuple[float, str]]:
+    raise ValueError(f"action {action.kind!r}: this family has no such action")
+
+
+def _nothing(*_args: Any) -> None:
+    return None
 
 
 @dataclass
 class Family:
+    """What a family hands check-sender. Hooks with a default are optional."""
+
     name: str
     default_variant: str
     scenarios: dict[str, Scenario]
     rules: Sequence[Rule]
-    job: Callable[[Scenario, Any], list[str]]  # (scenario, variant) -> job lines
-    vectors: Callable[[list[str]], list[tuple[str, tuple[int, ...]]]]  # job lines -> vectors
-    prepare: Callable[[Any, Scenario, float], None]  # (unit, scenario, t) before the run
-    make_unit: Callable[[Any, Any, float], Any]  # (variant, dialect, t0) -> sans-I/O unit
-    control_line: Callable[[str, bool, Any], str]  # (action kind, on, variant) -> control request
-    commands: Callable[[Any, str, float], str]  # the emulator's control commands (emulator.control)
-    variant: Callable[[str], tuple[Any, Any]]  # variant id -> (variant, dialect); UserError if unknown
-    observe: Callable[[Any, float], Any]  # (unit, t0) -> its ground truth (``accepted``, ``to_dict()``)
+    # (scenario, variant, the user's --job lines or None) -> the job's lines
+    job: Callable[[Scenario, Any, list[str] | None], list[str]]
+    variant: Callable[[str], tuple[Any, Any]]  # variant id -> (variant with .id, family context)
+    make_unit: Callable[[Any, Any, float, Scenario], Any]  # (variant, context, t0, scn) -> unit
+    control: Callable[[Any], Any]  # the fault injector -> the emulator's control handler
+    observe: Callable[[Any, float], Any]  # (unit, t0) -> its ground-truth recorder
+    taken: Callable[[Any], int]  # ground-truth recorder -> job units the unit has taken so far
     # (session, unit, ground truth) after the program: run the unit out, set ``truth`` (and
-    # write truth.json) and ``comparison`` (the job against what the unit accepted)
+    # write truth.json) and ``comparison`` (the job against what the unit took: ``summary()``)
     settle: Callable[[Any, Any, Any], None]
     analyze: Callable[[Any, str], Any]  # (capture path, variant id) -> the capture's analysis
     truth_findings: Callable[[Any], list[dict[str, Any]]]  # session -> ground-truth findings
+    units: Callable[[list[str]], list[Any]] = list  # job lines -> the units actions count
+    job_name: str = "job.txt"  # the job file's name in each scenario's folder
+    # (action, variant) -> [(seconds after it fires, control request)]; the engine itself
+    # answers ``link dead SECONDS`` and ``link back`` (a dead line, both ways)
+    steps: Callable[[Action, Any], list[tuple[float, str]]] = _no_steps
+    # (scenario, seed, t0) -> the emulator's fault injector; None: the engine's ScriptedFaults
+    injector: Callable[[Scenario, int, float], Any] | None = None
+    # (reopen, unit, injector, ground truth) -> what the emulator calls to reopen the port
+    reopen: Callable[[Callable[[], Any], Any, Any, Any], Callable[[], Any]] | None = None
+    facts: Callable[[Any], Any] = lambda s: s  # session -> what the rules read
+    end_counts: Callable[[Any], dict[str, Any]] = lambda _unit: {}  # capture's closing counts
+    decode: bool = True  # decode frames while recording (the family's live decoder)
+    # the recording dates an answer's first byte a wire time before the emulator wrote it (as
+    # on a line); False: when it was written (what the family's analyser and rules expect)
+    backdate: bool = True
+    linger: float = 0.0  # s the emulator keeps serving (and recording) after the program ended
     fast: tuple[str, ...] = ()  # scenarios for a quick run
+    prepare: Callable[[Any, Scenario, float], None] = _nothing  # (unit, scn, t0) before the run

@@ -45,7 +45,13 @@ def read_job(job_file: str | None) -> list[str] | None:
     """The non-blank lines of ``--job`` (None without one)."""
     if job_file is None:
         return None
-    lines = [x for x in read_user_text(job_file).splitlines() if x.strip()]
+    text = read_user_text(job_file)
+    for n, line in enumerate(text.splitlines(), 1):
+        if not line.isascii():
+            col = next(i for i, c in enumerate(line) if not c.isascii()) + 1
+            raise UserError(f"{job_file}: line {n}, column {col}: not ASCII (a unit's job is "
+                            "plain ASCII)")
+    lines = [x for x in text.splitlines() if x.strip()]
     if not lines:
         raise UserError(f"{job_file}: no job lines in the file")
     return lines

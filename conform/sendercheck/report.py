@@ -18,7 +18,7 @@ from conform.sendercheck.grade import CheckResults
 _HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender {{ verdict }}: {{ command }}</title>
 <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}
 td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
-.FAIL{background:#f8c8c8}.WARN{background:#fbe7b0}.PASS{background:#d4f0d4}
+.FAIL{background:#f8c8c8}.DEVIATION{background:#fbe7b0}.PASS{background:#d4f0d4}
 .ERROR{background:#e0c0f0}.NOT-APPLICABLE{color:#999}.INCOMPLETE{background:#ffe5e5}
 .badge{padding:0 .4em;border-radius:3px}</style></head><body>
 <h1>check-sender <span class="{{ verdict }} badge">{{ verdict }}</span></h1>
@@ -57,7 +57,7 @@ def _matrix(r: CheckResults) -> list:
 
 def render_html(r: CheckResults) -> str:
     env = jinja2.Environment(autoescape=True)
-    counts = {g: r.counts().get(g, 0) for g in GRADES}
+    counts = {g.value: r.counts().get(g.value, 0) for g in GRADES}
     return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r),
                                          shown=(FAIL, ERROR, WARN, "PASS"), verdict=verdict(r),
                                          command=shlex.join(r.command))
@@ -79,8 +79,9 @@ def render_markdown(r: CheckResults) -> str:
     for _v, cells in _matrix(r):
         c = cells[0]
         out.append(f"| {c.rule} | {c.level} | {c.clause} | "
-                   + " | ".join("—" if v.grade == NA else v.grade for v in cells) + " |")
-    out += ["", "| scenario | time (s) | exit | vectors |", "|---|---|---|---|"]
+                   + " | ".join("—" if v.grade == NA else v.grade.value for v in cells) + " |")
+    out += ["", "| scenario | time (s) | exit | job against the ground truth |",
+            "|---|---|---|---|"]
     for s in r.scenarios:
         ss = s.session
         out.append(f"| {s.name} | {ss.duration:.2f} | {ss.exit_code}"
@@ -90,7 +91,7 @@ def render_markdown(r: CheckResults) -> str:
     if bad:
         out += ["", "## Not passed", ""]
         for v in bad:
-            out.append(f"- **{v.grade}** {v.scenario} / {v.rule} ({v.level}, {v.clause}): "
+            out.append(f"- **{v.grade.value}** {v.scenario} / {v.rule} ({v.level}, {v.clause}): "
                        f"{v.detail}")
     return "\n".join(out) + "\n"
 
@@ -115,7 +116,7 @@ def render_junit(r: CheckResults) -> str:
             elif v.grade == NA:
                 ET.SubElement(case, "skipped", message=v.detail)
             elif v.grade == WARN:
-                ET.SubElement(case, "system-out").text = f"WARN {text}"
+                ET.SubElement(case, "system-out").text = f"{WARN.value} {text}"
     ET.indent(suites)
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode")
 

@@ -1,14 +1,17 @@
-"""One run of the user's program in one scenario, on a real pty, on the wall clock.
+"""One run of the user's program in one scenario, on a real pty, on the wall clock: the
+supervisor every family's check-sender runs through.
 
-    emulator thread (reference unit + scripted faults, ground truth)  <- its pty ->
-    proxy (conform proxy's Forwarder + Recorder: the capture)          <- its pty ->
-    the program (any language), given the proxy's pty as {port} / CONFORM_PORT
+    emulator thread (the family's reference unit + fault injector, ground truth, recording)
+        <- its pty, reached through the symlink DIR/port ->  the program (any language)
 
-The scenario's actions (press stop, kill the link) fire when a share of the job's vectors
-has been accepted. A program still running at the timeout is stopped (SIGTERM, then
-SIGKILL to its process group). Afterwards the unit's remaining queue is run out in virtual
-time, the ground truth is written beside the capture, and the capture is analysed — each by
-the family's hooks (``observe``, ``settle``, ``analyze``: conform.sendercheck.family).
+The program gets the port as ``{port}`` / ``CONFORM_PORT`` (a symlink made again when the
+emulator reopens the port) and the job as ``{job}`` / ``CONFORM_JOB``. The scenario's actions
+fire when a share of the job's units has been taken by the unit (the family's ``steps`` turn
+each into timed control requests). A program still running at the timeout is stopped (SIGTERM,
+then SIGKILL to its process group); so is one still running when the run is interrupted. Afterwards
+the family's hooks run the unit out and write the ground truth (``settle``), and analyse the
+capture (``analyze``). A failure of the harness (not of the program) is kept in ``error``: every
+rule of that scenario is then graded ERROR.
 """
 
 from __future__ import annotations
@@ -22,21 +25,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.capture.live import ProxyCapture
+from conform.capture.session import wire_time
 from conform.emulator.control import LocalControl
-from conform.emulator.serve import Emulator
+from conform.emulator.launch import open_endpoint
+from conform.errors import UserError
 from conform.link.faults import FaultConfig
-from conform.link.pty import PtyEndpoint
 from conform.sendercheck.family import Family, Scenario
 from conform.sendercheck.faults import ScriptedFaults
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL
+BAUD = 115200  # the emulator's pacing
 
 
 @dataclass
 class Session:
-    """Everything the rules look at for one scenario."""
+    """Everything the rules look at for one scenario (through the family's ``facts``)."""
 
     scenario: Scenario
     family: Family
@@ -45,19 +49,20 @@ class Session:
     directory: Path
     capture: Path
     job_lines: list[str]
-    job: list[tuple[str, tuple[int, ...]]]
+    job: list[Any]  # the job's units (the family's ``units`` of its lines)
     exit_code: int | None = None
     hung: bool = False
     duration: float = 0.0
     timeout: float = 0.0
-    truth: dict[str, Any] = field(default_factory=dict)
-    events: list[dict[str, Any]] = field(default_factory=list)
+    truth: Any = field(default_factory=dict)  # the ground truth as written to truth.json
+    events: list[dict[str, Any]] = field(default_factory=list)  # the scenario's requests
     analysis: Any = None
     analysis_error: str = ""
     comparison: Any = None  # the family's job-against-truth comparison (``summary()``)
     faults: dict[str, int] = field(default_factory=dict)
     error: str = ""  # the harness failed (not the program)
     started: float = 0.0  # monotonic time the program was started
+    port: str = ""  # the path the program was given
 
     @property
     def findings(self) -> list[Any]:
@@ -72,7 +77,33 @@ class Session:
         return [f for f in self.findings if f.kind == kind]
 
 
-def _argv(command: list[str], port: str, job: Path, variant: str) -> list[str]:
+class PtyStamps:
+    """The recorder as the emulator on a pty should use it: a host chunk's first byte is dated
+    when it was read (the program wrote it at once), a unit chunk's a wire time before it was
+    written (the emulator writes an answer once its last byte would have left the line), never
+    before the last chunk either way (an answer cannot begin before the command was read).
+    With ``baud`` 0 every chunk is dated when it was read or written."""
+
+    def __init__(self, recorder: Any, baud: int) -> None:
+        self.recorder = recorder
+        self.baud = baud
+        self._last = float("-inf")
+
+    def chunk(self, direction: str, data: bytes, t_read: float | None = None,
+              t_first: float | None = None) -> None:
+        t = self.recorder.now() if t_read is None else t_read
+        if t_first is None:
+            t_first = t if direction == "host" else \
+                max(t - wire_time(len(data), self.baud), min(self._last, t))
+        self._last = t
+        self.recorder.chunk(direction, data, t, t_first)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.recorder, name)
+
+
+def argv_for(command: list[str], port: str, job: Path, variant: str) -> list[str]:
+    """``{port}``, ``{job}`` and ``{variant}`` in the program's arguments filled in."""
     subst = {"{port}": port, "{job}": str(job), "{variant}": variant}
     out = []
     for arg in command:
@@ -82,7 +113,8 @@ def _argv(command: list[str], port: str, job: Path, variant: str) -> list[str]:
     return out
 
 
-def _stop(proc: subprocess.Popen) -> None:
+def stop_program(proc: subprocess.Popen) -> None:
+    """SIGTERM to its process group, SIGKILL after ``KILL_GRACE`` s."""
     for sig, wait in ((signal.SIGTERM, KILL_GRACE), (signal.SIGKILL, 5.0)):
         try:
             os.killpg(proc.pid, sig)
@@ -95,28 +127,82 @@ def _stop(proc: subprocess.Popen) -> None:
             continue
 
 
-def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
+class _Control:
+    """The emulator's control handler for a session: ``link dead S`` / ``link back`` (the
+    engine's dead line, recorded as a disconnect and a reconnect), else the family's."""
+
+    def __init__(self, family_handler: Any, faults: Any, recorder: Any) -> None:
+        self.family_handler = family_handler
+        self.faults = faults
+        self.recorder = recorder
+
+    def __call__(self, unit: Any, line: str, t: float) -> str:
+        words = line.split()
+        if words[:2] == ["link", "dead"] and len(words) == 3:
+            if not hasattr(self.faults, "kill_link"):
+                return "error: this scenario's faults cannot kill the line"
+            hold = float(words[2])
+            self.faults.kill_link(t, hold)
+            self.recorder.link_event("disconnect", f"check-sender: line dead for {hold:g} s",
+                                     side="unit")
+            return "ok"
+        if words == ["link", "back"]:
+            self.recorder.link_event("reconnect", "check-sender: line back", side="unit")
+            return "ok"
+        if self.family_handler is None:
+            return f"error: unknown request {line!r}"
+        return self.family_handler(unit, line, t)
+
+
+def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
                 command: list[str], directory: Path, *, timeout: float | None = None,
-                seed: int = 1, baud: int = 115200, job_lines: list[str] | None = None
+                seed: int = 1, baud: int = BAUD, job_lines: list[str] | None = None
                 ) -> Session:
-    """Run ``command`` once against the reference unit in scenario ``scn``."""
-    directory.mkdir(parents=True, exist_ok=True)
-    lines = job_lines if job_lines is not None else family.job(scn, variant)
-    job_path = directory / "job.txt"
+    """Run ``command`` once against the family's reference unit in scenario ``scn``."""
+    from conform.capture import Recorder
+    from conform.emulator.serve import Emulator
+
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"{directory}: cannot create: {exc.strerror or exc}") from None
+    lines = family.job(scn, variant, job_lines)
+    job_path = directory / family.job_name
     job_path.write_text("\n".join(lines) + "\n", encoding="ascii")
-    s = Session(scn, family, variant, list(command), directory, directory / "session.mcap", lines,
-                family.vectors(lines), timeout=timeout if timeout is not None else scn.timeout)
+    link = directory / "port"
+    s = Session(scn, family, variant, list(command), directory, directory / "session.mcap",
+                lines, family.units(lines),
+                timeout=timeout if timeout is not None else scn.timeout, port=str(link))
     t0 = time.monotonic()
-    unit = family.make_unit(variant, dialect, t0)
-    truth = family.observe(unit, t0)
-    family.prepare(unit, scn, t0)
-    cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
-    faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
-    control = LocalControl()
-    endpoint = PtyEndpoint()
-    emulator = Emulator(unit, endpoint, baud=baud, injector=faults, control=control,
-                        control_handler=family.commands)
+    unit = truth = faults = endpoint = recorder = None
     died: list[str] = []
+    try:
+        unit = family.make_unit(variant, context, t0, scn)
+        truth = family.observe(unit, t0)
+        family.prepare(unit, scn, t0)
+        if family.injector is not None:
+            faults = family.injector(scn, seed, t0)
+        else:
+            cfg = FaultConfig.parse(scn.faults) if scn.faults else FaultConfig()
+            faults = ScriptedFaults(cfg, seed, t0, lose=scn.lose)
+        endpoint, reopen_plain = open_endpoint(None, str(link))
+        reopen = family.reopen(reopen_plain, unit, faults, truth) if family.reopen else \
+            reopen_plain
+        recorder = Recorder(s.capture, {
+            "capture_method": "check-sender", "family": family.name, "variant": variant.id,
+            "baud": baud, "unit_port": str(link), "scenario": scn.name, "seed": seed,
+            "faults": scn.faults}, decode=family.decode, backdate=False)
+        stamps = PtyStamps(recorder, baud if family.backdate else 0)
+        control = LocalControl()
+        emulator = Emulator(unit, endpoint, baud=baud, injector=faults, recorder=stamps,
+                            control=control, reopen=reopen,
+                            control_handler=_Control(family.control(faults), faults, recorder))
+    except Exception as exc:  # noqa: BLE001 - the harness failing is graded ERROR, not a crash
+        s.error = f"{type(exc).__name__}: {exc}"
+        for opened in (endpoint, recorder):
+            if opened is not None:
+                opened.close()
+        return s
 
     def serve() -> None:
         try:
@@ -126,23 +212,28 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
 
     thread = threading.Thread(target=serve, name="check-sender-unit", daemon=True)
     thread.start()
-    proxy = None
     try:
-        proxy = ProxyCapture(endpoint.path, s.capture, baud=baud, variant=variant.id)
-        proxy.recorder.log("info", f"check-sender scenario {scn.name}: {scn.title}")
-        _run_program(s, proxy, control, faults, truth, job_path)
+        recorder.log("info", f"check-sender scenario {scn.name}: {scn.title}")
+        _run_program(s, recorder, control, truth, job_path)
+        if family.linger:
+            time.sleep(family.linger)
     except Exception as exc:  # noqa: BLE001 - the harness failing is graded ERROR, not a crash
-        s.error = f"{type(exc).__name__}: {exc}"
+        s.error = s.error or f"{type(exc).__name__}: {exc}"
     finally:
-        if proxy is not None:
-            proxy.stop()
-            proxy.close()
         emulator.stop()
         thread.join(5.0)
+        try:
+            recorder.close({"bytes_in": emulator.bytes_in, "bytes_out": emulator.bytes_out,
+                            **family.end_counts(unit)})
+        except Exception as exc:  # noqa: BLE001 - a capture that could not be closed is an ERROR
+            s.error = s.error or f"the recording failed: {type(exc).__name__}: {exc}"
     if died and not s.error:
         s.error = died[0]
-    s.faults = dict(faults.counts)
-    family.settle(s, unit, truth)
+    s.faults = dict(getattr(faults, "counts", {}))
+    try:
+        family.settle(s, unit, truth)
+    except Exception as exc:  # noqa: BLE001 - no ground truth: the harness failed
+        s.error = s.error or f"the ground truth failed: {type(exc).__name__}: {exc}"
     if s.capture.exists():
         try:
             s.analysis = family.analyze(s.capture, variant.id)
@@ -151,15 +242,15 @@ def run_session(family: Family, scn: Scenario, variant: Any, dialect: Any,
     return s
 
 
-def _run_program(s: Session, proxy: ProxyCapture, control: LocalControl, faults: ScriptedFaults,
-                 truth: Any, job_path: Path) -> None:
+def _run_program(s: Session, recorder: Any, control: LocalControl, truth: Any,
+                 job_path: Path) -> None:
     scn = s.scenario
-    env = dict(os.environ, CONFORM_PORT=proxy.host_path, CONFORM_JOB=str(job_path),
+    env = dict(os.environ, CONFORM_PORT=s.port, CONFORM_JOB=str(job_path),
                CONFORM_VARIANT=s.variant.id, CONFORM_SCENARIO=scn.name)
-    argv = _argv(s.command, proxy.host_path, job_path, s.variant.id)
+    argv = argv_for(s.command, s.port, job_path, s.variant.id)
     n_job = max(1, len(s.job))
     pending = sorted(scn.actions, key=lambda a: a.at)
-    undo: list[tuple[float, str]] = []
+    due: list[tuple[float, str]] = []  # (monotonic time, control request)
     start = s.started = time.monotonic()
     with open(s.directory / "program.out", "wb") as out, \
             open(s.directory / "program.err", "wb") as err:
@@ -170,55 +261,35 @@ def _run_program(s: Session, proxy: ProxyCapture, control: LocalControl, faults:
             s.error = f"cannot start {argv[0]!r}: {exc.strerror or exc}"
             return
         try:
-            _supervise(s, proc, start, truth, n_job, pending, undo, control, faults, proxy)
-        except BaseException:   # check-sender itself stopped (Ctrl-C, SIGTERM): so is the program
-            _stop(proc)
-            raise
-    for _t, kind in undo:
-        _act(s, kind, False, time.monotonic(), control, faults, proxy, 0.0)
-    s.duration = time.monotonic() - start
+            while True:
+                try:
+                    s.exit_code = proc.wait(POLL)
+                    break
+                except subprocess.TimeoutExpired:
+                    pass
+                now = time.monotonic()
+                if now - start > s.timeout:
+                    s.hung = True
+                    stop_program(proc)
+                    s.exit_code = proc.returncode
+                    break
+                while pending and s.family.taken(truth) >= pending[0].at * n_job:
+                    act = pending.pop(0)
+                    due += [(now + dt, req) for dt, req in s.family.steps(act, s.variant)]
+                    due.sort(key=lambda x: x[0])
+                while due and due[0][0] <= now:
+                    _ask(s, control, recorder, due.pop(0)[1], start)
+        finally:  # an interrupted run (Ctrl-C) leaves no program behind
+            if proc.poll() is None:
+                stop_program(proc)
+                s.exit_code = proc.returncode
+            s.duration = time.monotonic() - start
 
 
-def _supervise(s: Session, proc: subprocess.Popen, start: float, truth: Any, n_job: int,
-               pending: list, undo: list[tuple[float, str]], control: LocalControl,
-               faults: ScriptedFaults, proxy: ProxyCapture) -> None:
-    """Wait for the program, firing the scenario's actions as the job progresses."""
-    while True:
-        try:
-            s.exit_code = proc.wait(POLL)
-            return
-        except subprocess.TimeoutExpired:
-            pass
-        now = time.monotonic()
-        if now - start > s.timeout:
-            s.hung = True
-            _stop(proc)
-            s.exit_code = proc.returncode
-            return
-        done = len(truth.accepted) / n_job
-        while pending and done >= pending[0].at:
-            act = pending.pop(0)
-            undo.append((now + act.hold, act.kind))
-            _act(s, act.kind, True, now, control, faults, proxy, act.hold)
-        for item in [u for u in undo if u[0] <= now]:
-            undo.remove(item)
-            _act(s, item[1], False, now, control, faults, proxy, 0.0)
-
-
-def _act(s: Session, kind: str, on: bool, now: float, control: LocalControl,
-         faults: ScriptedFaults, proxy: ProxyCapture, hold: float) -> None:
-    t = round(now - s.started, 6)
-    if kind == "stop":
-        reply = control.ask(s.family.control_line(kind, on, s.variant))
-        if not reply.startswith("ok") and not s.error:
-            s.error = f"the scenario's input could not be set: {reply}"
-        what = "stop input pressed" if on else "stop input released"
-    else:
-        if on:
-            faults.kill_link(now, hold)
-        reply = "ok"
-        what = f"line dead for {hold:g} s" if on else "line back"
-        proxy.recorder.link_event("disconnect" if on else "reconnect",
-                                  f"check-sender: {what}", side="unit")
-    proxy.recorder.log("info", f"check-sender: {what} ({reply})")
-    s.events.append({"t_abs": now, "t": t, "event": what, "reply": reply})
+def _ask(s: Session, control: LocalControl, recorder: Any, request: str, start: float) -> None:
+    reply = control.ask(request)
+    s.events.append({"t": recorder.now(), "t_run": round(time.monotonic() - start, 3),
+                     "request": request, "reply": reply})
+    recorder.log("info", f"check-sender: {request} ({reply})")
+    if not reply.startswith("ok") and not s.error:
+        s.error = f"the scenario's request {request!r} was refused: {reply}"

@@ -104,13 +104,13 @@ class GrblFamily(Family):
         FleetColumn("hazards", "hazards", total=True, flag=True, summary=True),
         FleetColumn("starvations", "starvations", total=True, summary=True),
     )
-    check_sender = None   # its senders are judged by sendercheck.run_cli (conform check-sender)
 
-    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
-        """``conform check-sender --variant grbl-…``: this family's scenarios and rules."""
-        from conform.families.grbl.sendercheck.scenarios import run_cli
+    @property
+    def check_sender(self) -> Any:
+        """check-sender's grbl scenarios, rules and hooks (sendercheck/family.py)."""
+        from conform.families.grbl.sendercheck.family import GRBL
 
-        return run_cli(*args, **kw)
+        return GRBL
 
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
                      echo: Any = print, **_options: Any) -> None:

@@ -68,10 +68,14 @@ def _truth_findings(s: Any) -> list[dict[str, Any]]:
     return out
 
 
+def _taken(truth: Any) -> int:
+    return len(truth.accepted)
+
+
 GVE = Family(
     name="gve", default_variant="gve64-v19", scenarios=scenarios.SCENARIOS, rules=rules.RULES,
-    job=scenarios.make_job, vectors=scenarios.job_vectors, prepare=scenarios.prepare_unit,
-    make_unit=scenarios.make_unit, control_line=scenarios.control_line,
-    commands=run_control, variant=_variant, observe=_observe, settle=_settle,
-    analyze=_analyze, truth_findings=_truth_findings, fast=scenarios.FAST,
+    job=scenarios.make_job, units=scenarios.job_vectors, prepare=scenarios.prepare_unit,
+    make_unit=scenarios.make_unit, steps=scenarios.steps, control=lambda _faults: run_control,
+    variant=_variant, observe=_observe, taken=_taken, settle=_settle, analyze=_analyze,
+    truth_findings=_truth_findings, fast=scenarios.FAST,
 )

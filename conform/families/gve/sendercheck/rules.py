@@ -3,8 +3,8 @@
 Each rule is a small function of a :class:`conform.sendercheck.session.Session` (the
 analysed capture, the emulator's ground truth, the job, the program's exit) returning
 (grade, detail, evidence). MUST rules decide the exit code; a SHOULD rule that fails is a
-WARN. The analyser's findings are the evidence on the wire; double moves and lost vectors
-are graded from the ground truth alone.
+DEVIATION (the engine's grade). The analyser's findings are the evidence on the wire; double
+moves and lost vectors are graded from the ground truth alone.
 """
 
 from __future__ import annotations

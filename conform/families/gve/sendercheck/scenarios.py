@@ -21,23 +21,35 @@ from typing import Any
 
 from conform.sendercheck.family import Action, Scenario
 
+
+def _scenario(name: str, title: str, *, vectors: int = 60, pulses: int = 100,
+              over_queue: int | None = None, head: int = 0, speed: int = 20000,
+              **common: Any) -> Scenario:
+    """A scenario with its job's shape in ``params``: ``vectors`` (job length; with
+    ``over_queue`` the queue size plus that many), ``pulses`` per vector, ``head`` (pulses of
+    one long first vector: the queue fills while it runs) and ``speed`` (V)."""
+    return Scenario(name, title, params={"vectors": vectors, "pulses": pulses,
+                                         "over_queue": over_queue, "head": head,
+                                         "speed": speed}, **common)
+
+
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
-    Scenario("clean", "clean line", vectors=60, pulses=300, tags=frozenset({"fed"})),
-    Scenario("noisy", "noisy line: bit errors both ways, garbled answers",
-             faults="corrupt=0.002,garble=0.03", vectors=80, tags=frozenset({"noise"})),
-    Scenario("lost-answers", "lost answers: 5 % of the answers never arrive", lose=0.05,
-             vectors=80),
-    Scenario("slow-unit", "slow unit: a job longer than the queue (queue full, code 1)",
-             over_queue=40, head=120000, pulses=100, speed=20000,
-             tags=frozenset({"full", "fed"})),
-    Scenario("usb-latency", "USB-converter latency 1-16 ms each way", faults="latency=1-16",
-             vectors=80, tags=frozenset({"fed"})),
-    Scenario("stop", "stop input pressed mid-job, released 0.3 s later", vectors=120,
-             pulses=200, speed=10000, actions=(Action("stop", 0.3, 0.3),),
-             tags=frozenset({"stop"})),
-    Scenario("link-loss", "link lost for 1 s mid-job, then back (disconnect and reconnect)",
-             vectors=80, pulses=200, speed=10000, actions=(Action("link", 0.3, 1.0),),
-             tags=frozenset({"link"})),
+    _scenario("clean", "clean line", vectors=60, pulses=300, tags=frozenset({"fed"})),
+    _scenario("noisy", "noisy line: bit errors both ways, garbled answers",
+              faults="corrupt=0.002,garble=0.03", vectors=80, tags=frozenset({"noise"})),
+    _scenario("lost-answers", "lost answers: 5 % of the answers never arrive", lose=0.05,
+              vectors=80),
+    _scenario("slow-unit", "slow unit: a job longer than the queue (queue full, code 1)",
+              over_queue=40, head=120000, pulses=100, speed=20000,
+              tags=frozenset({"full", "fed"})),
+    _scenario("usb-latency", "USB-converter latency 1-16 ms each way", faults="latency=1-16",
+              vectors=80, tags=frozenset({"fed"})),
+    _scenario("stop", "stop input pressed mid-job, released 0.3 s later", vectors=120,
+              pulses=200, speed=10000, actions=(Action("stop", 0.3, 0.3),),
+              tags=frozenset({"stop"})),
+    _scenario("link-loss", "link lost for 1 s mid-job, then back (disconnect and reconnect)",
+              vectors=80, pulses=200, speed=10000, actions=(Action("link", 0.3, 1.0),),
+              tags=frozenset({"link"})),
 )}
 
 FAST = ("clean", "lost-answers")
@@ -56,26 +68,36 @@ def stop_input(variant: Any) -> tuple[int, int]:
     return STOP_INPUT if STOP_INPUT[1] in bits else (1, max(bits))
 
 
-def control_line(kind: str, on: bool, variant: Any) -> str:
-    """The emulator control request for a scenario action (``stop`` only)."""
-    port, bit = stop_input(variant)
-    return f"{'press' if on else 'release'} {port}.{bit}"
+def steps(action: Action, variant: Any) -> list[tuple[float, str]]:
+    """A scenario action as timed emulator control requests: ``stop`` presses the stop input
+    and releases it ``hold`` s later; ``link`` is the engine's dead line."""
+    if action.kind == "stop":
+        port, bit = stop_input(variant)
+        return [(0.0, f"press {port}.{bit}"), (action.hold, f"release {port}.{bit}")]
+    if action.kind == "link":
+        return [(0.0, f"link dead {action.hold:g}"), (action.hold, "link back")]
+    raise ValueError(f"action {action.kind!r}: not a GVE scenario action (stop, link)")
 
 
 def job_length(scn: Scenario, variant: Any) -> int:
-    return variant.queue + scn.over_queue if scn.over_queue is not None else scn.vectors
+    over = scn.params["over_queue"]
+    return variant.queue + over if over is not None else scn.params["vectors"]
 
 
-def make_job(scn: Scenario, variant: Any) -> list[str]:
-    """The vector file the program streams for ``scn`` on ``variant``."""
+def make_job(scn: Scenario, variant: Any, given: list[str] | None = None) -> list[str]:
+    """The vector file the program streams for ``scn`` on ``variant`` (``given``: the user's
+    own, used as it is)."""
+    if given is not None:
+        return list(given)
     n = job_length(scn, variant)
     naxes = len(variant.axes)
-    lines = ["A200", f"V{scn.speed}"]
-    if scn.head:
-        lines.append("C" + ",".join(str(x) for x in ((scn.head,) + (0,) * naxes)[:naxes]))
+    p = scn.params
+    lines = ["A200", f"V{p['speed']}"]
+    if p["head"]:
+        lines.append("C" + ",".join(str(x) for x in ((p["head"],) + (0,) * naxes)[:naxes]))
         n -= 1
     for k in range(n):
-        d = tuple(x * scn.pulses for x in _PATTERN[k % len(_PATTERN)]) + (0,) * naxes
+        d = tuple(x * p["pulses"] for x in _PATTERN[k % len(_PATTERN)]) + (0,) * naxes
         lines.append("C" + ",".join(str(x) for x in d[:naxes]))
     return lines
 
@@ -103,7 +125,7 @@ def prepare_unit(unit: Any, scn: Scenario, t: float) -> None:
         unit.handlers["SW"]((0, 1 << stop_input(unit.variant)[1]), t)
 
 
-def make_unit(variant: Any, dialect: Any, t0: float) -> Any:
+def make_unit(variant: Any, dialect: Any, t0: float, _scn: Scenario | None = None) -> Any:
     """The GVE reference unit (sans-I/O, on the emulator's wall clock)."""
     from conform.families.gve.unit.model import Unit
 
