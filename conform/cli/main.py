@@ -27,6 +27,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "sniff",
     "capture",
     "analyze",
+    "diagnose",
     "send",
     "check-sender",
     "ports",

@@ -127,6 +127,28 @@ class Family(Protocol):
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
 
+    # -- the diagnosis (conform.diagnosis): optional; a family without them is diagnosed as
+    # -- "not available" (the defaults below), the engine reaching them through getattr
+
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None) -> Any:
+        """``conform diagnose``: a capture already read (``conform.analysis.rawread``) as
+        neutral ``conform.diagnosis.facts.Facts`` — lines sent and answered, bytes in flight
+        against the receive buffer, the unit's alarms, errors, noise, starvation, holds —
+        or None when this family has no diagnosis (the default)."""
+        return None
+
+    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+        """The host's lines as the unit would have read them (its receive buffer, line
+        assembly, length limits, checksums): a list of ``conform.diagnosis.facts.ParsedLine``
+        for every line not read intact, or None when it has no model (the default)."""
+        return None
+
+    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+        """Where a stopped job can resume: a ``conform.diagnosis.facts.ResumePoint`` (last line
+        executed, last acknowledged, the uncertain ones, the modal preamble), or None (the
+        default)."""
+        return None
+
 
 SPECS_ENV = "CONFORM_SPECS"
 

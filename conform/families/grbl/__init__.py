@@ -102,6 +102,23 @@ class GrblFamily:
 
         return analyze_capture(path, **options)
 
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None) -> Any:
+        from conform.families.grbl.diagnosis import facts
+
+        return facts(raw, path, variant=variant)
+
+    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+        """The receive ring (128 bytes, silent drops) and line reader replayed on the host's
+        bytes, the answers as the clock (diagnosis.py)."""
+        from conform.families.grbl.diagnosis import reception
+
+        return reception(raw, variant=variant)
+
+    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+        from conform.families.grbl.diagnosis import resume_state
+
+        return resume_state(raw, facts, variant=variant)
+
     def serve(self, variant: str, **options: Any) -> None:
         from conform.families.grbl.serve import serve
 

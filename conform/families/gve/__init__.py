@@ -123,5 +123,16 @@ class GveFamily:
 
         return analyze(path, **options)
 
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None) -> Any:
+        from conform.families.gve.diagnosis.facts import facts
+
+        return facts(raw, path, variant=variant)
+
+    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+        return None
+
+    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+        return None
+
 
 FAMILY = GveFamily()

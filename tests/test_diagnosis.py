@@ -1,0 +1,187 @@
+"""``conform diagnose``: captures where the cause of trouble is known because it was injected
+(tests/diag_sessions.py drives the reference units with the fault) put that cause first; the
+grbl overflow's lines as the unit parsed them match what the emulator's parser really took;
+the resume point of a held job matches the emulator's planner."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from diag_sessions import (
+    Faults,
+    drive,
+    grbl_job,
+    grbl_sender,
+    grbl_unit,
+    gve_job,
+    gve_sender,
+    gve_unit,
+    record,
+)
+
+from conform.analysis.rawread import read_raw
+from conform.diagnosis import diagnose
+from conform.families.grbl.analysis import is_motion
+from conform.families.grbl.diagnosis import reception
+
+REPO = Path(__file__).resolve().parents[1]
+GRBL, GVE = "grbl-1.1f", "gve64-v19"
+
+
+def first(path: Path) -> dict:
+    d = diagnose(str(path))
+    doc = d.to_json()
+    assert doc["causes"], d.headline()
+    return doc
+
+
+def test_sender_killed_mid_job(tmp_path):
+    ses = drive(grbl_unit(), grbl_job(80), grbl_sender(poll=(0.2, b"?")),
+                Faults(kill_after=40), tail=3.0)
+    doc = first(record(tmp_path / "k.mcap", ses, GRBL))
+    c = doc["causes"][0]
+    assert c["kind"] == "sender-stopped" and c["confidence"] >= 0.85
+    assert any("status polls" in e for e in c["evidence"])
+    assert doc["headline"].startswith("Most likely sender-stopped")
+    # the resume point: everything acknowledged ran; go on with the next line of the job
+    r = doc["resume"]
+    assert r["last_acknowledged"] == r["last_executed"] == 39 and r["uncertain"] == []   # 40 sent
+    assert r["resume_from"] == 40 and "F3000" in r["preamble"]
+
+
+def test_sender_closing_its_port_is_named(tmp_path):
+    ses = drive(gve_unit(), gve_job(30), gve_sender(), Faults(kill_after=20), tail=2.0)
+    path = record(tmp_path / "c.mcap", ses, GVE, sender_closed=ses.host[-1][0] + 0.01)
+    c = first(path)["causes"][0]
+    assert c["kind"] == "sender-stopped" and c["confidence"] >= 0.95
+    assert any("closed its port" in e for e in c["evidence"])
+
+
+def test_unit_stops_answering(tmp_path):
+    ses = drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0)
+    c = first(record(tmp_path / "s.mcap", ses, GVE))["causes"][0]
+    assert c["kind"] == "unit-silent" and c["confidence"] >= 0.8
+    assert "never came" in c["summary"]
+
+
+@pytest.mark.parametrize("events", [True, False], ids=["link-events", "sniffed"])
+def test_line_cut_for_two_seconds(tmp_path, events):
+    ses = drive(gve_unit(), gve_job(300), gve_sender(timeout=0.3),
+                Faults(cut=(0.1, 2.1), cut_events=events), tail=1.0)
+    doc = first(record(tmp_path / "cut.mcap", ses, GVE))
+    c = doc["causes"][0]
+    assert c["kind"] == "link-lost"
+    assert 1.9 < c["t_end"] - c["t_start"] < 2.3      # the two dead seconds
+    assert c["confidence"] >= (0.9 if events else 0.7)
+
+
+def overflow_session():
+    """An unbounded sender (no counting, no waiting) against a fast-accelerating grbl: the
+    128-byte ring overflows again and again, each answer letting a few bytes of whatever is
+    on the wire in."""
+    job = [b"G21G90G54F3000\n"] + [b"G1X%gY%g\n" % ((i % 10) * 0.5, (i % 7) * 0.25)
+                                   for i in range(600)]
+    unit = grbl_unit(settings={120: 2000.0, 121: 2000.0, 122: 2000.0})
+    return drive(unit, job, grbl_sender(window=10**9), tail=1.0)
+
+
+def test_overflow_is_first_and_the_parsed_lines_are_what_grbl_took(tmp_path):
+    ses = overflow_session()
+    path = record(tmp_path / "o.mcap", ses, GRBL)
+    doc = first(path)
+    assert doc["causes"][0]["kind"] == "buffer-overflow"
+    parsed = reception(read_raw(str(path)))
+    sent = [line.decode().strip() for line in ses.sent]
+    truth = ses.unit_model.taken          # [line as the parser took it, its answer code]
+    assert ses.unit_model.lost > 0
+    # every line the emulator's parser took that no host line is, in order, is in the list
+    odd = [text for text, _code in truth if text not in sent]
+    assert odd and [p.parsed for p in parsed if p.fate in
+                    ("damaged", "damaged-valid", "merged")] == odd
+    # the damaged-but-valid ones: grbl answered ok (executed them), next to the host lines
+    codes = {text: code for text, code in truth}
+    valid = [p for p in parsed if p.fate == "damaged-valid"]
+    assert valid and all(codes[p.parsed] == 0 for p in valid)
+    for p in valid:
+        assert p.sent == " | ".join(sent[i] for i in p.host) and p.parsed not in p.sent
+    assert any(p.fate == "dropped" for p in parsed)
+    rec = doc["reception"]
+    assert any(x["fate"] == "damaged-valid" and x["sent"] != x["parsed"] for x in rec)
+
+
+def test_noise_burst(tmp_path):
+    ses = drive(gve_unit(), gve_job(200, checksums=True), gve_sender(),
+                Faults(noise=(0.3, 0.6)), tail=0.5)
+    c = first(record(tmp_path / "n.mcap", ses, GVE))["causes"][0]
+    assert c["kind"] == "noise"
+    assert any("damaged on the way" in e for e in c["evidence"])
+
+
+def test_starved_planner(tmp_path):
+    ses = drive(grbl_unit(), grbl_job(12), grbl_sender(gap=0.6, poll=(0.2, b"?")), tail=0.5)
+    c = first(record(tmp_path / "st.mcap", ses, GRBL))["causes"][0]
+    assert c["kind"] == "starvation" and "ran dry" in c["summary"]
+
+
+def test_alarm(tmp_path):
+    job = grbl_job(30)
+    job.insert(12, b"G38.2Z-5F100\n")      # a probe that never touches: ALARM:5
+    ses = drive(grbl_unit(), job, grbl_sender(poll=(0.2, b"?"),
+                                              stop_on=lambda a: a.startswith(b"error")),
+                tail=3.0)
+    doc = first(record(tmp_path / "a.mcap", ses, GRBL))
+    c = doc["causes"][0]
+    assert c["kind"] == "unit-alarm" and "ALARM:5" in c["summary"]
+    assert any("$X" in e for e in doc["resume"]["evidence"])
+
+
+def test_feed_hold_deadlock_and_resume_against_the_planner(tmp_path):
+    unit = grbl_unit()
+    ses = drive(unit, grbl_job(80), grbl_sender(poll=(0.2, b"?")),
+                Faults(realtime={0.6: b"!"}), tail=3.0, t_max=6.0)
+    doc = first(record(tmp_path / "d.mcap", ses, GRBL))
+    assert doc["causes"][0]["kind"] == "deadlock"
+    # ground truth: the motion lines grbl acknowledged, less the blocks still in its planner
+    truth = [text for text, code in unit.taken if code == 0]
+    motion = [i for i, line in enumerate(ses.sent) if is_motion(line.decode())
+              and line.decode().strip() in truth]
+    done = len(motion) - len(unit.planner.blocks)
+    r = doc["resume"]
+    assert r["last_executed"] == motion[done - 1] and r["resume_from"] == motion[done]
+    assert r["last_acknowledged"] == motion[-1]
+    assert r["uncertain"] == list(range(motion[done], motion[-1] + 1))
+    assert r["state"]["distance"] == "G90" and r["state"]["feed"] == 3000
+
+
+def test_misuse(tmp_path):
+    ses = drive(gve_unit(), gve_job(100), gve_sender(window=40), tail=1.0)
+    c = first(record(tmp_path / "m.mcap", ses, GVE))["causes"][0]
+    assert c["kind"] == "protocol-misuse" and "before the answer" in c["summary"]
+
+
+@pytest.mark.slow
+def test_cli_json_and_first_screen(tmp_path):
+    ses = drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0)
+    path = record(tmp_path / "s.mcap", ses, GVE)
+    run = [sys.executable, "-m", "conform", "diagnose", str(path)]
+    p = subprocess.run([*run, "--json"], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert [set(c) >= {"kind", "confidence", "t_start", "t_end", "evidence", "advice"}
+            for c in doc["causes"]] == [True] * len(doc["causes"])
+    assert doc["causes"][0]["kind"] == "unit-silent"
+    conf = [c["confidence"] for c in doc["causes"]]
+    assert conf == sorted(conf, reverse=True)
+    p = subprocess.run(run, capture_output=True, text=True, timeout=120, cwd=REPO)
+    head = p.stdout.splitlines()[0]
+    assert head.startswith("Most likely unit-silent") and head.endswith(".")
+    bad = tmp_path / "not.mcap"
+    bad.write_bytes(b"hello")
+    p = subprocess.run([sys.executable, "-m", "conform", "diagnose", str(bad)],
+                       capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert p.returncode != 0 and "Traceback" not in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and str(bad) in p.stderr
