@@ -29,6 +29,10 @@ class Faults:
     cut_events: bool = True                  # the emulator records the drop and the return
     noise: tuple[float, float] | None = None  # one bit flipped in each host line sent then
     realtime: dict[float, bytes] = field(default_factory=dict)   # bytes a pendant injects
+    alter: dict[int, bytes] = field(default_factory=dict)   # the unit gets these instead of
+    # the n-th line written (counting resends)
+    pause: dict[int, float] = field(default_factory=dict)   # the n-th line written in two
+    # halves this many seconds apart (a converter that holds bytes back)
     seed: int = 1
 
 
@@ -85,7 +89,7 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
     def down(at: float) -> bool:
         return f.cut is not None and f.cut[0] <= at < f.cut[1]
 
-    def write(data: bytes, at: float) -> None:
+    def write(data: bytes, at: float, arrives: bytes | None = None) -> None:
         nonlocal wire_free
         start = max(at, wire_free)
         end = start + len(data) * byte_t
@@ -93,6 +97,8 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
         host.append((end, data))
         if down(end):
             return
+        if arrives is not None:
+            data = arrives
         if f.noise and f.noise[0] <= end < f.noise[1] and len(data) > 3:
             k = rng.randrange(1, len(data) - 1)
             data = data[:k] + bytes([data[k] ^ (1 << rng.randrange(7))]) + data[k + 1:]
@@ -144,7 +150,14 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
             line = lines[i]
             room = s.window is None or sum(in_flight) + len(line) <= s.window
             if room:
-                write(line, t)
+                k = len(sent)
+                if k in f.pause:
+                    half = len(line) // 2
+                    write(line[:half], t)
+                    wire_free += f.pause[k]
+                    write(line[half:], t)
+                else:
+                    write(line, t, f.alter.get(k))
                 sent.append(line)
                 i += 1
                 if s.window is None:

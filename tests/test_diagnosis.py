@@ -185,3 +185,29 @@ def test_cli_json_and_first_screen(tmp_path):
                        capture_output=True, text=True, timeout=60, cwd=REPO)
     assert p.returncode != 0 and "Traceback" not in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and str(bad) in p.stderr
+
+
+def test_gve_line_changed_on_the_way_shows_in_the_echo(tmp_path):
+    job = [b"!0V5000\r", b"!0A50\r", b"!0C400,200,0,0\r", b"!0>\r", b"!0C-400,200,0,0\r",
+           b"!0>\r"]
+    unit = gve_unit()
+    # no checksums: a flipped bit turns 400 into 500, still a valid vector
+    ses = drive(unit, job, gve_sender(), Faults(alter={4: b"!0C-500,200,0,0\r"}), tail=1.0)
+    path = record(tmp_path / "e.mcap", ses, GVE)
+    rec = first(path)["reception"]
+    assert rec == [{"fate": "damaged-valid", "host": [4], "sent": "!0C-400,200,0,0",
+                    "parsed": "!0C-500,200,0,0", "t": rec[0]["t"], "why": rec[0]["why"],
+                    "echo": "!0C-500,200,0,0"}]
+    # the unit did move by what it received: its position once the motion ended says so
+    unit.receive(b"!0P4\r", 30.0)
+    assert b"".join(d for _t, d in unit.poll(31.0)) == b"0,-100,400,0,0\r"
+
+
+def test_gve_line_held_back_past_the_watchdog_is_truncated(tmp_path):
+    job = [b"!0V5000\r", b"!0C400,200,0,0\r", b"!0C-400,200,0,0\r"]
+    ses = drive(gve_unit(), job, gve_sender(), Faults(pause={1: 0.25}), tail=1.0)
+    path = record(tmp_path / "w.mcap", ses, GVE)
+    rec = first(path)["reception"]
+    assert [(r["fate"], r["host"]) for r in rec] == [("truncated", [1])]
+    assert "watchdog" in rec[0]["why"]
+    assert b"2\r" in b"".join(d for _t, d in ses.unit)      # the unit did answer 2

@@ -129,7 +129,11 @@ class GveFamily:
         return facts(raw, path, variant=variant)
 
     def reception(self, raw: Any, *, variant: str | None = None) -> Any:
-        return None
+        """Line assembly, the A13 watchdog, checksum mode and the `>` echoes
+        (diagnosis/reception.py)."""
+        from conform.families.gve.diagnosis.reception import reception
+
+        return reception(raw, variant=variant)
 
     def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
         return None

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from conform.diagnosis.facts import Event, Exchange, Facts
+from conform.families.gve.analysis.frames import CS_BAD, CS_MISSING
 
 EVENT_OF = {  # GVE finding kind -> neutral event kind
     "checksum-error": "noise", "garbled-answer": "noise", "garbage-sent": "noise",
@@ -35,6 +36,7 @@ def analysis_facts(a: Any, path: str) -> Facts:
     else:
         cols = {c: ex_df[c].to_numpy() for c in ("frame", "name", "status", "answer_frame",
                                                  "answer_kind", "code", "inta", "t_cmd_last",
+                                                 "answer_checksum",
                                                  "t_ans_last", "cmd_bytes")}
         in_inta = False
         for r in range(len(ex_df)):
@@ -51,7 +53,9 @@ def analysis_facts(a: Any, path: str) -> Facts:
                          answer, (clean and code == 0) if answered else None,
                          name in MOTION, int(cols["cmd_bytes"][r]))
             exchanges.append(e)
-            inta = bool(cols["inta"][r]) and clean
+            # a damaged answer's digit says nothing: its checksum must hold where there is one
+            inta = bool(cols["inta"][r]) and clean and \
+                int(cols["answer_checksum"][r]) not in (CS_BAD, CS_MISSING)
             if inta and not in_inta and name != "H":
                 events.append(Event(e.t_answer or e.t_sent, "alarm",
                                     f"the unit answered `{answer}` to `{text}`: INTA, an "
