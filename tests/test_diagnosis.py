@@ -211,3 +211,36 @@ def test_gve_line_held_back_past_the_watchdog_is_truncated(tmp_path):
     assert [(r["fate"], r["host"]) for r in rec] == [("truncated", [1])]
     assert "watchdog" in rec[0]["why"]
     assert b"2\r" in b"".join(d for _t, d in ses.unit)      # the unit did answer 2
+
+
+def _between(p, a, b) -> bool:
+    """``p`` on the straight segment from ``a`` to ``b`` (integer pulse counters)."""
+    d = [y - x for x, y in zip(a, b, strict=True)]
+    q = [y - x for x, y in zip(a, p, strict=True)]
+    n2 = sum(x * x for x in d)
+    k = sum(x * y for x, y in zip(q, d, strict=True)) / n2 if n2 else 0.0
+    return 0.0 <= k <= 1.0 and all(abs(x - k * y) <= 1.0 for x, y in zip(q, d, strict=True))
+
+
+def test_gve_resume_point_against_the_unit(tmp_path):
+    """The sender dies with vectors queued; the capture ends while the unit still runs them.
+    The unit's own position at that moment lies on the vector after the last one the
+    diagnosis calls executed."""
+    unit = gve_unit()
+    job = gve_job(60, size=3000)
+    ses = drive(unit, job, gve_sender(), Faults(kill_after=40), tail=3.0)
+    t_end = ses.links[-1][0]
+    path = record(tmp_path / "r.mcap", ses, GVE)
+    r = diagnose(str(path)).to_json()["resume"]
+    unit.receive(b"!0P4\r", t_end)
+    pos = [int(x) for x in b"".join(d for _t, d in unit.poll(t_end))[2:-1].split(b",")]
+    vectors = [i for i, line in enumerate(ses.sent) if line.startswith(b"!0C")]
+    steps = [[int(x) for x in ses.sent[i][3:-1].split(b",")] for i in vectors]
+    ends = [[sum(s[k] for s in steps[:j + 1]) for k in range(4)] for j in range(len(steps))]
+    assert r["last_acknowledged"] == vectors[-1] == 39
+    j = vectors.index(r["last_executed"])
+    assert 0 < j < len(vectors) - 1 and r["uncertain"] == vectors[j + 1:]
+    assert _between(pos, ends[j], ends[j + 1]), (pos, ends[j], ends[j + 1])
+    assert r["resume_from"] == vectors[j + 1]
+    assert r["preamble"] == ["!0V5000", "!0A50", "!0P4"]
+    assert r["state"]["position_counters"] == ends[j]

@@ -77,6 +77,7 @@ class Facts:
     queue_unit: str = "blocks"
     answer_time: float = 0.5            # an answer later than this is a wait, not a reply
     notes: list[str] = field(default_factory=list)
+    family_data: Any = None             # the family's own analysis, for its other hooks
 
 
 @dataclass(slots=True)

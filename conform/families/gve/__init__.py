@@ -136,7 +136,10 @@ class GveFamily:
         return reception(raw, variant=variant)
 
     def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
-        return None
+        """From the queue replay and position read-backs (diagnosis/resume.py)."""
+        from conform.families.gve.diagnosis.resume import resume_state
+
+        return resume_state(facts.family_data, facts)
 
 
 FAMILY = GveFamily()

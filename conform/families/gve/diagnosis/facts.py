@@ -80,7 +80,7 @@ def analysis_facts(a: Any, path: str) -> Facts:
     return Facts("gve", a.variant.id, path, float(a.metrics["duration_s"]), exchanges, events,
                  t0=t0, rx_capacity=None, queue_capacity=int(q.get("capacity") or
                                                              a.variant.queue),
-                 queue_unit="vectors", answer_time=0.5, notes=notes)
+                 queue_unit="vectors", answer_time=0.5, notes=notes, family_data=a)
 
 
 def facts(raw: Any, path: str, *, variant: str | None = None) -> Facts:
