@@ -244,3 +244,52 @@ def test_gve_resume_point_against_the_unit(tmp_path):
     assert r["resume_from"] == vectors[j + 1]
     assert r["preamble"] == ["!0V5000", "!0A50", "!0P4"]
     assert r["state"]["position_counters"] == ends[j]
+
+
+def test_bundle_round_trips_through_analyze(tmp_path):
+    import socket
+    import zipfile
+
+    from click.testing import CliRunner
+
+    from conform.capture.reader import open_capture
+    from conform.cli.main import cli
+
+    ses = drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0)
+    cap = record(tmp_path / "silent.mcap", ses, GVE)
+    out = tmp_path / "support.zip"
+    runner = CliRunner()
+    res = runner.invoke(cli, ["bundle", str(cap), "-o", str(out), "--redact"])
+    assert res.exit_code == 0, res.output
+    with zipfile.ZipFile(out) as z:
+        names = set(z.namelist())
+        assert {"manifest.json", "captures/silent.mcap", "diagnosis/silent.json",
+                "diagnosis/silent.txt", "analysis/silent/index.html",
+                "analysis/silent/findings.json", "tables/silent/exchanges.parquet"} <= names
+        manifest = json.loads(z.read("manifest.json"))
+        texts = b"".join(z.read(n) for n in names if not n.endswith((".mcap", ".parquet")))
+        (tmp_path / "x").mkdir()
+        z.extract("captures/silent.mcap", tmp_path / "x")
+    assert manifest["format"] == "conform-bundle/1" and manifest["redacted"] is True
+    assert manifest["python"] == sys.version.split()[0] and manifest["conform_version"]
+    assert manifest["captures"][0]["headline"].startswith("Most likely unit-silent")
+    host = socket.gethostname().encode()
+    assert host not in texts and str(tmp_path).encode() not in texts
+    packed = open_capture(tmp_path / "x" / "captures" / "silent.mcap")
+    assert packed.metadata["conform.session"]["hostname"] == "<host>"
+    original = open_capture(cap)
+    for d in ("host", "unit"):       # the traffic is as recorded
+        assert packed.stream(d) == original.stream(d)
+    res = runner.invoke(cli, ["analyze", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "bundle of 1 capture(s)" in res.output and "Most likely unit-silent" in res.output
+    assert "exchanges in" in res.output            # the capture analysed again
+    # the output exists: not overwritten without --force; a zip that is no bundle is named
+    res = runner.invoke(cli, ["bundle", str(cap), "-o", str(out)])
+    assert res.exit_code != 0 and "exists" in str(res.exception or res.output)
+    bad = tmp_path / "bad.zip"
+    with zipfile.ZipFile(bad, "w") as z:
+        z.writestr("manifest.json", "{\"format\": \"conform-bundle/1\"}")
+    p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(bad)],
+                       capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert p.returncode == 2 and p.stderr.strip() == f"conform: {bad}: the bundle holds no capture"

@@ -59,6 +59,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
       conform analyze captures/usb-latency.mcap --report out/ --parquet out/tables/
       conform analyze captures/good-rs232.mcap --json | jq .metrics.exchanges
       conform analyze captures/ --report fleet/     # every capture in the folder
+      conform analyze support.zip                   # the captures of a conform bundle
     """
     from conform.analysis import analyze
     from conform.analysis.report import findings_document, write_report
@@ -66,6 +67,9 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
 
+    from conform.diagnosis.bundle import expand_bundles
+
+    files = expand_bundles(files, echo)  # a support bundle (conform bundle): its captures
     if len(files) > 1 or os.path.isdir(files[0]):
         with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
             bar.task(f"analysing {len(files)} inputs" if len(files) > 1 else

@@ -28,6 +28,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "capture",
     "analyze",
     "diagnose",
+    "bundle",
     "send",
     "check-sender",
     "ports",
