@@ -293,3 +293,95 @@ def test_bundle_round_trips_through_analyze(tmp_path):
     p = subprocess.run([sys.executable, "-m", "conform", "analyze", str(bad)],
                        capture_output=True, text=True, timeout=120, cwd=REPO)
     assert p.returncode == 2 and p.stderr.strip() == f"conform: {bad}: the bundle holds no capture"
+
+
+def test_hostile_captures_are_diagnosed_or_named_never_a_traceback(tmp_path):
+    from hostile_captures import corpus
+
+    from conform.errors import UserError
+
+    crashed = []
+    for path in corpus(tmp_path / "corpus", bomb_bytes=1 << 20, count=2):
+        try:
+            diagnose(str(path)).to_json()
+        except UserError as exc:
+            assert "\n" not in str(exc)
+        except Exception as exc:  # noqa: BLE001 - what the test looks for
+            crashed.append(f"{path.name}: {type(exc).__name__}: {exc}")
+    assert not crashed, "\n".join(crashed)
+
+
+@pytest.mark.slow
+def test_live_view_runs_under_a_terminal(tmp_path):
+    """``conform proxy --live`` with its stderr on a real pty (a terminal): the view draws
+    the lines, the bytes in flight against grbl's buffer and the diagnosis so far while a
+    sender streams through it to ``conform emulate``, and the capture is whole."""
+    import fcntl
+    import os
+    import pty
+    import select
+    import signal
+    import struct
+    import termios
+    import threading
+    import time
+
+    import serial
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), TERM="xterm-256color")
+    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", GRBL],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=REPO)
+    proxy = None
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
+    screen = bytearray()
+    done = threading.Event()
+
+    def read_screen() -> None:
+        while not done.is_set():
+            if select.select([master], [], [], 0.1)[0]:
+                try:
+                    screen.extend(os.read(master, 65536))
+                except OSError:
+                    return
+
+    reader = threading.Thread(target=read_screen, daemon=True)
+    reader.start()
+    out = tmp_path / "live.mcap"
+    try:
+        emu_path = emu.stdout.readline().decode().strip()
+        proxy = subprocess.Popen([sys.executable, "-m", "conform", "proxy", "--unit", emu_path,
+                                  "-o", str(out), "--variant", GRBL, "--live"],
+                                 stdout=subprocess.PIPE, stderr=slave, env=env, cwd=REPO)
+        host_path = proxy.stdout.readline().decode().strip()
+        assert host_path, "the proxy printed no pty"
+        with serial.serial_for_url(host_path, 115200, timeout=0.05) as port:
+            got = b""
+            for i in range(30):
+                port.write(b"G1X%dF3000\n" % (i % 5))
+                deadline = time.monotonic() + 3
+                while got.count(b"ok") <= i and time.monotonic() < deadline:
+                    got += port.read(64)
+            port.write(b"?")
+            import re
+
+            deadline = time.monotonic() + 10
+            text = ""
+            while "30 sent, 30 answered" not in text and time.monotonic() < deadline:
+                time.sleep(0.25)      # the view draws four times a second
+                text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", screen.decode("utf-8", "replace"))
+        assert got.count(b"ok") == 30
+        last = text[text.rfind("recording"):]
+        assert "30 sent, 30 answered" in last and "/ 128 bytes" in last, last
+        assert "so far" in text and "family" in text and "grbl" in text
+        proxy.send_signal(signal.SIGINT)
+        assert proxy.wait(20) == 0
+    finally:
+        done.set()
+        for p in (proxy, emu):
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                p.wait(10)
+        os.close(slave)
+        os.close(master)
+    assert diagnose(str(out)).facts.exchanges[-1].answer == "ok"

@@ -63,6 +63,8 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     """
     from conform.analysis import analyze
     from conform.analysis.report import findings_document, write_report
+    from conform.diagnosis import headline_for
+    from conform.families import DEFAULT_FAMILY
 
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
@@ -98,6 +100,9 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                     step=lambda name: task.update(step=name), whatif_replays=not no_whatif,
                     parquet=parquet_dir)  # the tables are written as the capture streams
         a.time_range = window
+        said: list[str] = []       # the diagnosis, for the first screen and the report's top
+        task.update(step="diagnosis")
+        headline_for(file, a, DEFAULT_FAMILY, said.append)
         paths = {}
         if report_dir:
             task.update(step="writing the report (plots)")
@@ -105,6 +110,8 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         if parquet_dir:
             paths["parquet"] = parquet_dir
     m = a.metrics
+    for line in said:
+        echo(line)
     echo(f"{file}: {m['exchanges']} exchanges in {m['duration_s']:.3f} s "
          f"({m['exchanges_per_s']:.1f}/s), {m['vectors_accepted']} vectors, "
          f"baud {int(m['baud']['used'])}")
@@ -123,7 +130,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     if parquet_dir:
         echo(f"tables: {parquet_dir}")
     if as_json:
-        echo_json(findings_document(a) | paths)
+        echo_json(findings_document(a) | paths | {"diagnosis": getattr(a, "diagnosis", None)})
     if damage:
         raise SystemExit(1)
 

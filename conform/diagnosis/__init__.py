@@ -94,14 +94,17 @@ def _link_events(raw: Any, t0: float) -> list[Event]:
     return out
 
 
-def diagnose(path: str, *, variant: str | None = None) -> Diagnosis:
-    """Diagnose one capture file."""
+def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
+             family: str | None = None) -> Diagnosis:
+    """Diagnose one capture file (``analysis``: its family's analysis, when already made;
+    ``family``: its family's name, when already known)."""
     from conform.analysis.rawread import read_raw
+    from conform.families import family as family_named
 
-    fam = _family_of(path, variant)
+    fam = family_named(family) if family else _family_of(path, variant)
     facts_hook = getattr(fam, "diagnosis_facts", None)
     raw = read_raw(path)
-    facts = facts_hook(raw, path, variant=variant) if facts_hook else None
+    facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook else None
     if facts is None:
         raise UserError(f"{path}: the {fam.name} family gives no diagnosis")
     if not facts.host_times:
@@ -123,3 +126,18 @@ def diagnose(path: str, *, variant: str | None = None) -> Diagnosis:
     if res is not None:
         d.resume = res(raw, facts, variant=facts.variant)
     return d
+
+
+def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:
+    """``conform analyze``: the diagnosis in one sentence first, and kept on the analysis for
+    the top of its report (``analysis.diagnosis``); a capture it cannot judge says why."""
+    try:
+        d = diagnose(path, analysis=analysis, family=family)
+    except UserError as exc:
+        echo(f"diagnosis: none ({exc})")
+        return
+    except Exception as exc:  # noqa: BLE001 - the analysis stands without its diagnosis
+        echo(f"diagnosis: failed ({type(exc).__name__}: {exc}); the analysis follows")
+        return
+    analysis.diagnosis = d.to_json()
+    echo(f"diagnosis: {d.headline()}")

@@ -82,6 +82,9 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     click.echo(f"{path}: protocol family {d.family} ({d.why})")
     a = fam.analyze(path, variant=variant if variant and d.family == fam.name else None,
                     detected=d.why)
+    from conform.diagnosis import headline_for
+
+    headline_for(path, a, fam.name, click.echo)
     for line in a.summary_lines():
         click.echo(line)
     if report_dir:

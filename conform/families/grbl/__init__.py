@@ -102,10 +102,11 @@ class GrblFamily:
 
         return analyze_capture(path, **options)
 
-    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None) -> Any:
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
         from conform.families.grbl.diagnosis import facts
 
-        return facts(raw, path, variant=variant)
+        return facts(raw, path, variant=variant, analysis=analysis)
 
     def reception(self, raw: Any, *, variant: str | None = None) -> Any:
         """The receive ring (128 bytes, silent drops) and line reader replayed on the host's
@@ -113,6 +114,11 @@ class GrblFamily:
         from conform.families.grbl.diagnosis import reception
 
         return reception(raw, variant=variant)
+
+    def live_monitor(self, variant: str | None) -> Any:
+        from conform.families.grbl.live import live_monitor
+
+        return live_monitor(variant)
 
     def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
         from conform.families.grbl.diagnosis import resume_state

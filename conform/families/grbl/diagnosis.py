@@ -51,9 +51,9 @@ def _variant(raw: Any, variant: str | None) -> str:
     return vid if vid in spec.variants else DEFAULT_VARIANT
 
 
-def facts(raw: Any, path: str, *, variant: str | None = None) -> Facts:
-    vid = _variant(raw, variant)
-    a = analyze_raw(raw, path, variant=vid)
+def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = None) -> Facts:
+    vid = analysis.variant if analysis is not None else _variant(raw, variant)
+    a = analysis if analysis is not None else analyze_raw(raw, path, variant=vid)
     t0 = _t0(raw)
     ex = [Exchange(e.line, e.text, e.t_sent - t0,
                    None if e.t_answer is None else e.t_answer - t0, e.answer,

@@ -123,9 +123,12 @@ class GveFamily:
 
         return analyze(path, **options)
 
-    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None) -> Any:
-        from conform.families.gve.diagnosis.facts import facts
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
+        from conform.families.gve.diagnosis.facts import analysis_facts, facts
 
+        if analysis is not None:
+            return analysis_facts(analysis, path)
         return facts(raw, path, variant=variant)
 
     def reception(self, raw: Any, *, variant: str | None = None) -> Any:
@@ -134,6 +137,11 @@ class GveFamily:
         from conform.families.gve.diagnosis.reception import reception
 
         return reception(raw, variant=variant)
+
+    def live_monitor(self, variant: str | None) -> Any:
+        from conform.families.gve.diagnosis.live import live_monitor
+
+        return live_monitor(variant)
 
     def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
         """From the queue replay and position read-backs (diagnosis/resume.py)."""
