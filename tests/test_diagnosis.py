@@ -385,3 +385,26 @@ def test_live_view_runs_under_a_terminal(tmp_path):
         os.close(slave)
         os.close(master)
     assert diagnose(str(out)).facts.exchanges[-1].answer == "ok"
+
+
+def test_analyze_says_the_diagnosis_first_and_its_report_opens_with_it(tmp_path):
+    from click.testing import CliRunner
+
+    from conform.cli.main import cli
+
+    ses = drive(grbl_unit(), grbl_job(80), grbl_sender(poll=(0.2, b"?")),
+                Faults(kill_after=40), tail=3.0)
+    path = record(tmp_path / "k.mcap", ses, GRBL)
+    res = CliRunner().invoke(cli, ["analyze", str(path), "--report", str(tmp_path / "rep")])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert lines[1].startswith("diagnosis: Most likely sender-stopped")   # after the family
+    html = (tmp_path / "rep" / "index.html").read_text()
+    top = html[:html.index("</section>")]
+    assert "<h2>Diagnosis</h2>" in top and "<code>sender-stopped</code>" in top
+    gve = drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0)
+    path = record(tmp_path / "s.mcap", gve, GVE)
+    res = CliRunner().invoke(cli, ["analyze", str(path), "--report", str(tmp_path / "r2")])
+    assert res.exit_code == 0, res.output
+    assert res.output.startswith("diagnosis: Most likely unit-silent")
+    assert "<code>unit-silent</code>" in (tmp_path / "r2" / "index.html").read_text()

@@ -130,7 +130,11 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
 
 def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:
     """``conform analyze``: the diagnosis in one sentence first, and kept on the analysis for
-    the top of its report (``analysis.diagnosis``); a capture it cannot judge says why."""
+    the top of its report (``analysis.diagnosis``); a capture it cannot judge says why.
+    An analysis that streamed its tables (too long to keep) is not read whole again here."""
+    if getattr(analysis, "whole", True) is False:
+        echo(f"diagnosis: not made for a capture this long (`conform diagnose {path}`)")
+        return
     try:
         d = diagnose(path, analysis=analysis, family=family)
     except UserError as exc:
