@@ -408,3 +408,17 @@ def test_analyze_says_the_diagnosis_first_and_its_report_opens_with_it(tmp_path)
     assert res.exit_code == 0, res.output
     assert res.output.startswith("diagnosis: Most likely unit-silent")
     assert "<code>unit-silent</code>" in (tmp_path / "r2" / "index.html").read_text()
+
+
+def test_grbl_echo_shows_a_line_changed_on_the_way(tmp_path):
+    """A build with [echo:] (protocol.c REPORT_ECHO_LINE_RECEIVED) says what it read: noise
+    turned X10 into X18 on one line; nothing overflowed, so only the echo can tell."""
+    host = [(0.0, b"G21G90F600\n"), (0.1, b"G1X10Y2\n"), (0.2, b"G1X12Y2\n")]
+    unit = [(0.01, b"[echo:G21G90F600]\r\nok\r\n"), (0.11, b"[echo:G1X18Y2]\r\nok\r\n"),
+            (0.21, b"[echo:G1X12Y2]\r\nok\r\n")]
+    from diag_sessions import Session
+    path = record(tmp_path / "echo.mcap", Session(host, unit, [(2.0, "close", "session", "")],
+                                                  None, []), GRBL)
+    rec = diagnose(str(path)).to_json()["reception"]
+    assert [(r["fate"], r["host"], r["sent"], r["parsed"]) for r in rec] == [
+        ("damaged-valid", [1], "G1X10Y2", "G1X18Y2")]

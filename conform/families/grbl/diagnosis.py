@@ -246,6 +246,7 @@ def reception(raw: Any, *, variant: str | None = None) -> list[ParsedLine]:
                                   f"bytes lost in the full receive buffer; {why}"))
         if valid is not None and valid:
             modal, position = valid
+    _compare_echoes(taken, ulines, ut, t0, lines, host_line, out, modal_check=(v,))
     for i, ln in enumerate(lines):
         span = range(ln.start, ln.end + 1)
         if i in seen or not any(o in lost for o in span):
@@ -260,6 +261,37 @@ def reception(raw: Any, *, variant: str | None = None) -> list[ParsedLine]:
                                   ht[ln.end] - t0, "its end was lost in the full receive "
                                   "buffer: the unit still waits for the rest of the line"))
     return sorted(out, key=lambda p: (p.host[0] if p.host else 0, p.t))
+
+
+def _compare_echoes(taken: list[_Read], ulines: list[Any], ut: list[float], t0: float,
+                    lines: list[Any], host_line: Any, out: list[ParsedLine],
+                    modal_check: tuple[Any]) -> None:
+    """Where the build echoes (REPORT_ECHO_LINE_RECEIVED: ``[echo:LINE]`` for every line read,
+    filtered, before it runs; protocol.c protocol_main_loop), the k-th echo is the k-th line
+    read: what grbl really got. An echo that is not the host's line (filtered the same way)
+    shows a change on the way the model above cannot see (noise rather than overflow)."""
+    echoes = [(ut[u.end] - t0, u.text[6:-1]) for u in ulines if u.kind == "echo"]
+    if not echoes:
+        return
+    listed = {(tuple(p.host), p.parsed): p for p in out}
+    state: tuple[Modal, list[float]] = (Modal(), [0.0, 0.0, 0.0])
+    for r, (t, echo) in zip(taken, echoes, strict=False):
+        valid, why = _check(echo, *state, modal_check[0])     # grbl's state, line by line
+        if valid:
+            state = valid
+        src = sorted({host_line(o) for o in r.chars if host_line(o) < len(lines)})
+        model = "".join(r.text)
+        p = listed.get((tuple(src), model))
+        if p is not None:
+            p.echo = echo
+        sent = [strip_line(lines[i].data)[0] for i in src]
+        if echo in sent or (p is not None and echo == model):
+            continue
+        out.append(ParsedLine("damaged-valid" if valid else "damaged", src,
+                              " | ".join(lines[i].data.decode("latin-1") for i in src), echo, t,
+                              "grbl's [echo:] shows the line arrived changed"
+                              + ("; still a valid line, executed as received" if valid else
+                                 f"; {why}"), echo))
 
 
 def _check(text: str, modal: Modal, position: list[float], v: Any) -> tuple[Any, str]:
@@ -329,6 +361,8 @@ def resume_state(raw: Any, f: Facts, *, variant: str | None = None) -> ResumePoi
     else:
         evidence.append("no alarm, reset or hold after the last acknowledged line: grbl runs "
                         "every line it acknowledged (planner.c)")
+    evidence.append("the preamble's G0 is one straight rapid: raise Z first if the tool is in "
+                    "the material")
     unacked = [e.n for e in job if last_ack is None or e.n > last_ack.n]
     state_modal, state_pos = ends.get(executed, (Modal(), [0.0, 0.0, 0.0])) \
         if executed is not None else (Modal(), [0.0, 0.0, 0.0])
