@@ -422,3 +422,13 @@ def test_grbl_echo_shows_a_line_changed_on_the_way(tmp_path):
     rec = diagnose(str(path)).to_json()["reception"]
     assert [(r["fate"], r["host"], r["sent"], r["parsed"]) for r in rec] == [
         ("damaged-valid", [1], "G1X10Y2", "G1X18Y2")]
+
+
+def test_grbl_line_cut_while_the_sender_polls(tmp_path):
+    """A counting sender that polls: the lines sent while the line was dead are never
+    answered, yet the unit answers the polls again afterwards: the link, not the unit."""
+    ses = drive(grbl_unit(), grbl_job(80), grbl_sender(poll=(0.2, b"?")),
+                Faults(cut=(1.0, 3.0), cut_events=False), tail=3.0, t_max=8.0)
+    c = first(record(tmp_path / "cut.mcap", ses, GRBL))["causes"][0]
+    assert c["kind"] == "link-lost" and "answered other traffic again" in c["summary"]
+    assert any("no byte from the unit" in e for e in c["evidence"])

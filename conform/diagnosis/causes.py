@@ -150,6 +150,17 @@ def _any_between(times: list[float], lo: float, hi: float) -> bool:
     return k < len(times) and times[k] < hi
 
 
+def _longest_gap(times: list[float], lo: float, hi: float) -> tuple[float, float]:
+    """The longest stretch in [lo, hi] without a time of ``times``: (length, start)."""
+    a, b = bisect.bisect_right(times, lo), bisect.bisect_left(times, hi)
+    edges = [lo, *times[a:b], hi]
+    best = (0.0, lo)
+    for x, y in zip(edges, edges[1:], strict=False):
+        if y - x > best[0]:
+            best = (y - x, x)
+    return best
+
+
 def _last_before(times: list[float], t: float) -> float:
     k = bisect.bisect_left(times, t)
     return times[k - 1] if k else 0.0
@@ -232,6 +243,14 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         if noise:
             add("noise", 0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
                 f"{_line(first)} unanswered.", [], noise)
+        quiet, q_from = _longest_gap(f.unit_times, s.t_start, s.t_end)
+        back = _any_between(f.unit_times, q_from + quiet, s.t_end + 1e-9)
+        if unit_active and back and quiet >= stall_threshold(f) and not real_link:
+            add("link-lost", 0.75, f"The unit went silent for {quiet:.3f} s from "
+                f"{_fmt(q_from)} and then answered other traffic again, never "
+                f"{_line(first)}: what was sent meanwhile was lost on the way.",
+                [f"no byte from the unit from {_fmt(q_from)} to {_fmt(q_from + quiet)}",
+                 f"{len(pending)} line(s) never answered"], [])
         if not unit_active and not s.at_end and answered_later and not real_link:
             add("link-lost", 0.7, f"Both directions went dead from {_fmt(s.t_start)} for "
                 f"{gap:.3f} s: lines sent meanwhile were never answered, later ones were.",
