@@ -432,3 +432,109 @@ def test_grbl_line_cut_while_the_sender_polls(tmp_path):
     c = first(record(tmp_path / "cut.mcap", ses, GRBL))["causes"][0]
     assert c["kind"] == "link-lost" and "answered other traffic again" in c["summary"]
     assert any("no byte from the unit" in e for e in c["evidence"])
+
+
+SENDER = r"""
+import sys, time, serial
+port = serial.serial_for_url(sys.argv[1], 115200, timeout=0.01)
+inflight, i, t_poll, buf = [], 0, 0.0, b""
+while True:
+    line = b"G1X%dY%dF3000\n" % (i % 10, i % 7)
+    if sum(inflight) + len(line) <= 127:
+        port.write(line)
+        inflight.append(len(line))
+        i += 1
+    if time.monotonic() - t_poll > 0.2:
+        port.write(b"?")
+        t_poll = time.monotonic()
+    buf += port.read(256)
+    while b"\n" in buf:
+        got, buf = buf.split(b"\n", 1)
+        if (got.strip() == b"ok" or got.startswith(b"error")) and inflight:
+            inflight.pop(0)
+"""
+
+
+def _conform(*args: str, **kw) -> subprocess.Popen:
+    import os
+
+    return subprocess.Popen([sys.executable, "-m", "conform", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=REPO,
+                            env=dict(os.environ, PYTHONPATH=str(REPO)), **kw)
+
+
+@pytest.mark.slow
+def test_sender_process_killed_through_the_proxy(tmp_path):
+    """Over real ptys: a counting, polling sender streams through ``conform proxy`` to
+    ``conform emulate grbl-1.1f`` and is killed mid-job (SIGKILL); the capture's diagnosis
+    names the sender."""
+    import signal
+    import time
+
+    out = tmp_path / "killed.mcap"
+    emu = _conform("emulate", GRBL)
+    proxy = sender = None
+    try:
+        emu_path = emu.stdout.readline().decode().strip()
+        proxy = _conform("proxy", "-q", "--unit", emu_path, "-o", str(out), "--variant", GRBL)
+        host_path = proxy.stdout.readline().decode().strip()
+        sender = subprocess.Popen([sys.executable, "-c", SENDER, host_path], cwd=REPO)
+        time.sleep(2.0)
+        sender.send_signal(signal.SIGKILL)
+        sender.wait(10)
+        time.sleep(4.0)             # the unit runs out its planner; nobody sends
+        proxy.send_signal(signal.SIGINT)
+        assert proxy.wait(20) == 0, proxy.stderr.read().decode()
+    finally:
+        for p in (sender, proxy, emu):
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                p.wait(10)
+    doc = first(out)
+    c = doc["causes"][0]
+    assert c["kind"] == "sender-stopped" and c["confidence"] >= 0.9, doc["causes"]
+    assert doc["resume"]["last_executed"] == doc["resume"]["last_acknowledged"]
+
+
+@pytest.mark.slow
+def test_emulator_link_fault_is_named(tmp_path):
+    """Over a real pty: ``conform emulate --faults disconnect=…,downtime=2`` drops the line
+    under a simplex sender; the emulator's own recording names the lost link."""
+    import signal
+    import time
+
+    import serial
+
+    rec = tmp_path / "emu.mcap"
+    emu = _conform("emulate", GVE, "--faults", "disconnect=0.4,downtime=2", "--seed", "3",
+                   "--record", str(rec))
+    try:
+        path = emu.stdout.readline().decode().strip()
+        port = serial.serial_for_url(path, 115200, timeout=0.3)
+        t_end = time.monotonic() + 7.0
+        i = 0
+        while time.monotonic() < t_end:
+            try:
+                port.write(b"!0C%d,%d,0,0\r" % (40 if i % 2 else -40, 20))
+                answer = port.read_until(b"\r")
+            except serial.SerialException:      # the line is down: reopen, as senders do
+                port.close()
+                time.sleep(0.2)
+                try:
+                    port = serial.serial_for_url(path, 115200, timeout=0.3)
+                except serial.SerialException:
+                    pass
+                continue
+            if answer[:1] == b"0":
+                i += 1
+        port.close()
+        emu.send_signal(signal.SIGINT)
+        emu.wait(20)
+    finally:
+        if emu.poll() is None:
+            emu.send_signal(signal.SIGTERM)
+            emu.wait(10)
+    doc = first(rec)
+    c = doc["causes"][0]
+    assert c["kind"] == "link-lost", doc["causes"]
+    assert any("fault injection: link dropped" in e for e in c["evidence"])

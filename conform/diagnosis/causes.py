@@ -150,6 +150,13 @@ def _any_between(times: list[float], lo: float, hi: float) -> bool:
     return k < len(times) and times[k] < hi
 
 
+def _polled(f: Facts, t_line: float) -> bool:
+    """The host sent other traffic (status polls) besides its lines in the 3 s up to
+    ``t_line``."""
+    reads = _count_between(f.host_times, t_line - 3.0, t_line + 1e-6)
+    return reads > sum(1 for e in f.exchanges if t_line - 3.0 < e.t_sent <= t_line) + 1
+
+
 def _longest_gap(times: list[float], lo: float, hi: float) -> tuple[float, float]:
     """The longest stretch in [lo, hi] without a time of ``times``: (length, start)."""
     a, b = bisect.bisect_right(times, lo), bisect.bisect_left(times, hi)
@@ -257,6 +264,16 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                 [f"no byte from the unit from {_fmt(unit_quiet_from)} to {_fmt(s.t_end)}",
                  f"{len(pending)} line(s) lost, answers resumed at "
                  f"{_fmt(answered_later[0].t_answer or 0.0)}"], [])
+        t_line = last.t_sent
+        polled = _polled(f, t_line)
+        host_gone = bool(closed) or (
+            polled and not _any_between(f.host_times, t_line + 1e-6, s.t_end))
+        if host_gone:
+            add("sender-stopped", 0.95 if closed else 0.85,
+                f"The sender stopped at {_fmt(t_line)} while it waited on answers: "
+                + ("it closed its port." if closed else "its polls stopped with its lines."),
+                [f"{len(pending)} line(s) still waiting; the host sent nothing after "
+                 f"{_fmt(t_line)}"], closed)
         silent_conf = 0.8 if not unit_active else 0.6
         if answered_later and not unit_active:
             silent_conf = 0.45
@@ -264,6 +281,10 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
             silent_conf = 0.3       # it came, late: a long motion or a full queue, maybe
         if lost or noise:
             silent_conf = min(silent_conf, 0.5)     # explained by what was lost before
+        answered_in = any(e.t_answer is not None and s.t_start < e.t_answer <= s.t_end
+                          for e in ex)
+        if host_gone and answered_in:
+            silent_conf = min(silent_conf, 0.4)     # the unit went on answering a dead host
         add("unit-silent", silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
             f"answer to {_line(first)}, which never came"
             + (" (the unit answered nothing more)." if not unit_active else
@@ -281,8 +302,7 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                f"{_fmt(last.t_answer or last.t_sent)}: the unit was ready",
                f"the host sent {host_reads} read(s) in the stall, no line"]
     t_line = last.t_sent
-    polled = _count_between(f.host_times, t_line - 3.0, t_line + 1e-6) > \
-        sum(1 for e in ex if t_line - 3.0 < e.t_sent <= t_line) + 1
+    polled = _polled(f, t_line)
     silent_after = not _any_between(f.host_times, t_line + 1e-6, s.t_end)
     if s.at_end and polled and silent_after:
         conf = 0.9
