@@ -111,6 +111,11 @@ def test_overflow_is_first_and_the_parsed_lines_are_what_grbl_took(tmp_path):
     assert any(p.fate == "dropped" for p in parsed)
     rec = doc["reception"]
     assert any(x["fate"] == "damaged-valid" and x["sent"] != x["parsed"] for x in rec)
+    # past the first lost byte nothing acknowledged is certain: resume before it
+    first_hit = min(min(p.host) for p in parsed)
+    r = doc["resume"]
+    assert r["resume_from"] <= first_hit and r["last_executed"] < first_hit
+    assert any("do not pair" in e for e in r["evidence"])
 
 
 def test_noise_burst(tmp_path):

@@ -6,6 +6,19 @@ from __future__ import annotations
 from typing import Any
 
 MAX_RECEPTION = 20
+FATE_ORDER = {"damaged-valid": 0, "damaged": 1, "merged": 2, "truncated": 3}
+
+
+def _ranges(numbers: list[int]) -> str:
+    """1,2,3,7 -> "1-3, 7" (at most a dozen ranges, then a count)."""
+    runs: list[list[int]] = []
+    for n in numbers:
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    text = [f"{a}-{b}" if b > a else str(a) for a, b in runs[:12]]
+    return ", ".join(text) + (f", … ({len(runs) - 12} more ranges)" if len(runs) > 12 else "")
 
 
 def text_lines(d: Any) -> list[str]:
@@ -19,12 +32,19 @@ def text_lines(d: Any) -> list[str]:
         out += [f"     - {e}" for e in c.evidence[:6]]
         out.append(f"     next: {c.advice}")
     if d.reception:
-        out += ["", "as the unit read it (host line -> what the unit parsed):"]
-        for p in d.reception[:MAX_RECEPTION]:
+        out += ["", "as the unit read it (host line -> what the unit parsed), what ran wrong "
+                    "first:"]
+        shown = sorted((p for p in d.reception if p.fate != "dropped"),
+                       key=lambda p: (FATE_ORDER.get(p.fate, 9), p.host[:1]))
+        for p in shown[:MAX_RECEPTION]:
             lines = ",".join(str(i + 1) for i in p.host)
             out.append(f"  {p.fate:13} line {lines} {p.sent!r} -> {p.parsed!r}  ({p.why})")
-        if len(d.reception) > MAX_RECEPTION:
-            out.append(f"  … and {len(d.reception) - MAX_RECEPTION} more")
+        if len(shown) > MAX_RECEPTION:
+            out.append(f"  … and {len(shown) - MAX_RECEPTION} more")
+        dropped = sorted(p.host[0] + 1 for p in d.reception if p.fate == "dropped" and p.host)
+        if dropped:
+            out.append(f"  dropped       {len(dropped)} line(s) never reached the parser: "
+                       f"{_ranges(dropped)}")
     elif d.reception is not None:
         out += ["", "as the unit read it: every line intact"]
     r = d.resume

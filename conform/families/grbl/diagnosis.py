@@ -361,6 +361,16 @@ def resume_state(raw: Any, f: Facts, *, variant: str | None = None) -> ResumePoi
     else:
         evidence.append("no alarm, reset or hold after the last acknowledged line: grbl runs "
                         "every line it acknowledged (planner.c)")
+    lost = [ev.line for ev in f.events if ev.kind in ("overflow", "loss") and ev.line is not None]
+    if lost and last_ack is not None and min(lost) <= last_ack.n:
+        # past a lost byte grbl's answers no longer pair with the host's lines one to one
+        first = min(lost)
+        before = [e.n for e in acked if e.n < first]
+        executed = before[-1] if before else None
+        uncertain = [e.n for e in job if first <= e.n <= last_ack.n]
+        evidence.append(f"bytes were lost in the receive buffer from line {first + 1}: from "
+                        "there the answers do not pair with the host's lines one to one, so "
+                        "every acknowledged line after it is uncertain")
     evidence.append("the preamble's G0 is one straight rapid: raise Z first if the tool is in "
                     "the material")
     unacked = [e.n for e in job if last_ack is None or e.n > last_ack.n]
