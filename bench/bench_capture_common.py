@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import os
+import pty
 import subprocess
 import sys
+import threading
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -51,11 +54,32 @@ def stop_unit(proc: subprocess.Popen) -> tuple[int, int]:
     return int(total), int(crc)
 
 
-def start_proxy(unit_path: str, output: Path, *extra: str) -> tuple[subprocess.Popen, str]:
+def start_proxy(unit_path: str, output: Path, *extra: str, stderr: Any = subprocess.PIPE
+                ) -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen([sys.executable, "-m", "conform", "proxy", "--unit", unit_path,
                              "-o", str(output), *extra], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=env(), cwd=REPO)
+                            stderr=stderr, env=env() | {"TERM": "xterm-256color"}, cwd=REPO)
     path = proc.stdout.readline().decode().strip()
     if not path:
         raise SystemExit(f"proxy failed: {proc.stderr.read().decode()}")
     return proc, path
+
+
+def terminal() -> tuple[int, threading.Event]:
+    """A pty to give a process as its terminal (its screen read and dropped by a thread);
+    the slave end, and the event that stops the reading."""
+    master, slave = pty.openpty()
+    stop = threading.Event()
+
+    def drain() -> None:
+        import select
+
+        while not stop.is_set():
+            if select.select([master], [], [], 0.1)[0]:
+                try:
+                    os.read(master, 1 << 16)
+                except OSError:
+                    return
+
+    threading.Thread(target=drain, daemon=True).start()
+    return slave, stop

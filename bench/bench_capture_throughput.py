@@ -23,7 +23,7 @@ import time
 import zlib
 from pathlib import Path
 
-from bench_capture_common import start_proxy, start_unit, stop_unit
+from bench_capture_common import start_proxy, start_unit, stop_unit, terminal
 
 from conform.capture.reader import open_capture
 from conform.capture.recover import capture_info
@@ -55,6 +55,8 @@ def main() -> None:
     ap.add_argument("--rate", type=int, default=TARGET_RATE, help="bytes/s from the sender")
     ap.add_argument("--no-decode", action="store_true", help="record raw bytes only")
     ap.add_argument("--keep", type=Path, default=None, help="keep the capture here")
+    ap.add_argument("--live", action="store_true",
+                    help="the proxy with its live view on, drawn on a pty as on a terminal")
     args = ap.parse_args()
 
     workdir = Path(tempfile.mkdtemp(prefix="bench-capture-"))
@@ -62,7 +64,12 @@ def main() -> None:
     unit, unit_path = start_unit()
     extra = ["--baud", "921600"] + (["--no-decode"] if args.no_decode else
                                     ["--variant", "gve64-v19"])
-    proxy, host_path = start_proxy(unit_path, output, *extra)
+    screen = None
+    if args.live:
+        screen = terminal()
+        proxy, host_path = start_proxy(unit_path, output, *extra, "--live", stderr=screen[0])
+    else:
+        proxy, host_path = start_proxy(unit_path, output, *extra)
     sender = open_port(host_path, 921600, write_timeout=None)
 
     answers = bytearray()
@@ -158,7 +165,10 @@ def main() -> None:
     print(f"stop             complete file {finish:.2f} s after SIGTERM (target <= {TARGET_STOP} s, "
           f"ratio {stop_ratio:.2f})")
     lost = max(lost_to_unit, lost_in_file, 2 * n_lines - unit_len)
+    if screen is not None:
+        screen[1].set()
     print(json.dumps({"seconds": round(elapsed, 2), "decode": not args.no_decode,
+                      "live_view": args.live,
                       "sent_bytes": sent, "lines": n_lines, "lost_bytes": lost, "zero_lost": ok,
                       "sender_rate": round(rate), "target_rate": TARGET_RATE,
                       "rate_ratio": round(rate_ratio, 4),

@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parent.parent
 README = (REPO / "README.md").read_text(encoding="utf-8")
 # files that earlier README commands make (a run, characterize, a recording)
 MADE_BY_THE_README = ("reports/latest/results.json", "unit.toml", "unit-v10.toml",
-                      "session.mcap", "session.mcap.part")
+                      "session.mcap", "session.mcap.part", "support.zip")
 
 
 def _blocks() -> list[str]:

@@ -66,13 +66,19 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
       conform analyze captures/usb-latency.mcap --report out/ --parquet out/tables/
       conform analyze captures/good-rs232.mcap --json | jq .metrics.exchanges
       conform analyze captures/ --report fleet/     # every capture in the folder
+      conform analyze support.zip                   # the captures of a conform bundle
     """
     from conform.analysis import analyze
     from conform.analysis.report import findings_document, write_report
+    from conform.diagnosis import headline_for
+    from conform.families import default_family
 
     def echo(text: str) -> None:
         click.echo(text, err=as_json)
 
+    from conform.diagnosis.bundle import expand_bundles
+
+    files = expand_bundles(files, echo)  # a support bundle (conform bundle): its captures
     if report_dir:   # before the analysis: a folder that cannot be written is one line now
         writable_folder(report_dir, "--report")
     if parquet_dir:
@@ -114,12 +120,17 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                     step=lambda name: task.update(step=name), whatif_replays=not no_whatif,
                     parquet=parquet_dir)  # the tables are written as the capture streams
         a.time_range = window
+        said: list[str] = []       # the diagnosis, for the first screen and the report's top
+        task.update(step="diagnosis")
+        headline_for(file, a, default_family().name, said.append)
         paths = {}
         if report_dir:
             task.update(step="writing the report (plots)")
             paths["report"] = str(write_report(a, report_dir)["html"])
         if parquet_dir:
             paths["parquet"] = parquet_dir
+    for line in said:
+        echo(line)
     for line in a.summary_lines():
         echo(line)
     damage = a.raw.status.describe()
@@ -128,7 +139,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     if parquet_dir:
         echo(f"tables: {parquet_dir}")
     if as_json:
-        echo_json(findings_document(a) | paths)
+        echo_json(findings_document(a) | paths | {"diagnosis": getattr(a, "diagnosis", None)})
     if damage:
         raise SystemExit(1)
     _fail(a.findings, fail_on)

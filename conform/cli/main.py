@@ -29,6 +29,8 @@ SUBCOMMANDS: tuple[str, ...] = (
     "sniff",
     "capture",
     "analyze",
+    "diagnose",
+    "bundle",
     "check-sender",
     "ports",
 )

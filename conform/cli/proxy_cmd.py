@@ -33,8 +33,12 @@ from conform.stops import STOP_SIGNALS
               help="Also make this symlink to the sender's pty (a stable name).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 @force_option("the -o file")
+@click.option("--live", is_flag=True,
+              help="A terminal view on stderr that updates while it records: bytes in flight "
+                   "against the receive buffer, answer latency, errors and events, and the "
+                   "diagnosis so far.")
 def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: bool,
-        reconnect: bool, link: str | None, quiet: bool, force: bool) -> None:
+        reconnect: bool, link: str | None, quiet: bool, force: bool, live: bool) -> None:
     """Create a pty for the sender, forward it to the unit and record until SIGINT/SIGTERM.
 
     The first line on stdout is the pty's device path; stderr shows the bytes recorded.
@@ -59,11 +63,20 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
     # moment the path is out, SIGINT/SIGTERM end the recording cleanly
     for sig in STOP_SIGNALS:
         signal.signal(sig, lambda _signum, _frame: proxy.stop())
-    with progress("conform proxy", quiet=quiet) as bar:
-        recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")
+    if live:
+        from conform.diagnosis.live import LiveView, watching
+
+        # the view taps the recorder before the sender learns the pty: it sees every line
+        view = LiveView(proxy.recorder, variant, title=f"proxy {proxy.host_path} ⇄ {unit_url}")
         sys.stdout.write(proxy.host_path + "\n")
         sys.stdout.flush()
-        failure = run_until_signal(proxy)
+        failure = watching(proxy, view)
+    else:
+        with progress("conform proxy", quiet=quiet) as bar:
+            recording(bar, proxy.recorder, f"{proxy.host_path} ⇄ {unit_url}")
+            sys.stdout.write(proxy.host_path + "\n")
+            sys.stdout.flush()
+            failure = run_until_signal(proxy)
     click.echo(f"conform proxy: recorded {proxy.recorder.path}", err=True)
     if failure:
         raise LinkError(f"{failure} (recording finished cleanly in {proxy.recorder.path})",

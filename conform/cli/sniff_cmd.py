@@ -28,8 +28,10 @@ from conform.errors import LinkError, UserError
               help="If an adapter vanishes, wait for it to come back and go on.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 @force_option("the -o file")
+@click.option("--live", is_flag=True,
+              help="A terminal view on stderr that updates while it records (as proxy --live).")
 def cli(host_port: str, unit_port: str, output: str, baud: int, variant: str | None,
-        no_decode: bool, reconnect: bool, quiet: bool, force: bool) -> None:
+        no_decode: bool, reconnect: bool, quiet: bool, force: bool, live: bool) -> None:
     """Record both directions of a live link without sending a byte, until SIGINT/SIGTERM.
 
     \b
@@ -43,9 +45,15 @@ def cli(host_port: str, unit_port: str, output: str, baud: int, variant: str | N
     tap = SniffCapture(host_port, unit_port, output, baud=baud, variant=variant,
                        decode=not no_decode, reconnect=reconnect)
     click.echo(f"conform sniff: recording {host_port} + {unit_port} to {output}", err=True)
-    with progress("conform sniff", quiet=quiet) as bar:
-        recording(bar, tap.recorder, f"{host_port} + {unit_port}")
-        failure = run_until_signal(tap)
+    if live:
+        from conform.diagnosis.live import LiveView, watching
+
+        failure = watching(tap, LiveView(tap.recorder, variant,
+                                         title=f"sniff {host_port} + {unit_port}"))
+    else:
+        with progress("conform sniff", quiet=quiet) as bar:
+            recording(bar, tap.recorder, f"{host_port} + {unit_port}")
+            failure = run_until_signal(tap)
     click.echo(f"conform sniff: recorded {tap.recorder.path}", err=True)
     if failure:
         raise LinkError(f"{failure} (recording finished cleanly in {tap.recorder.path})",

@@ -307,6 +307,36 @@ class Family:
     fleet_columns: Sequence[FleetColumn] = ()
     """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
+    # -- the diagnosis (conform.diagnosis): optional; a family without them is diagnosed as
+    # -- "not available" (the defaults below), the engine reaching them through getattr
+
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
+        """``conform diagnose``: a capture already read (``conform.analysis.rawread``) as
+        neutral ``conform.diagnosis.facts.Facts`` — lines sent and answered, bytes in flight
+        against the receive buffer, the unit's alarms, errors, noise, starvation, holds —
+        or None when this family has no diagnosis (the default). ``analysis``: this family's
+        own analysis of the capture when the caller has it already (``conform analyze``)."""
+        return None
+
+    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+        """The host's lines as the unit would have read them (its receive buffer, line
+        assembly, length limits, checksums): a list of ``conform.diagnosis.facts.ParsedLine``
+        for every line not read intact, or None when it has no model (the default)."""
+        return None
+
+    def live_monitor(self, variant: str | None) -> Any:
+        """``conform proxy --live``: an object with ``feed(direction, data, t)`` and a
+        ``state`` (``conform.diagnosis.live.LiveState``) kept current from the traffic, cheap
+        enough for the recording's pace; None (the default): the view shows the bytes only."""
+        return None
+
+    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+        """Where a stopped job can resume: a ``conform.diagnosis.facts.ResumePoint`` (last line
+        executed, last acknowledged, the uncertain ones, the modal preamble), or None (the
+        default)."""
+        return None
+
     # -- the command line ------------------------------------------------------------------------
     def commands(self) -> Sequence[Any]:
         """Click commands this family adds to ``conform`` (e.g. its reference sender)."""
@@ -331,9 +361,6 @@ class ProbeAnswer:
     variant: str | None   # the unit's variant when this family's unit answered
     answer: str | None    # what it answered, as text
     how: str              # how the variant was decided, or why not
-
-    fleet_columns: Sequence[FleetColumn] = ()
-    """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
 
 SPECS_ENV = "CONFORM_SPECS"

@@ -119,6 +119,9 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     echo(f"{path}: protocol family {d.family} ({d.why})")
     a = fam.analyze(path, variant=variant if variant and d.family == fam.name else None,
                     detected=d.why)
+    from conform.diagnosis import headline_for
+
+    headline_for(path, a, fam.name, click.echo)
     for line in a.summary_lines():
         echo(line)
     paths = {}

@@ -212,5 +212,31 @@ class GveFamily(Family):
 
         return analyze(path, **options)
 
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
+        from conform.families.gve.diagnosis.facts import analysis_facts, facts
+
+        if analysis is not None:
+            return analysis_facts(analysis, path)
+        return facts(raw, path, variant=variant)
+
+    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+        """Line assembly, the A13 watchdog, checksum mode and the `>` echoes
+        (diagnosis/reception.py)."""
+        from conform.families.gve.diagnosis.reception import reception
+
+        return reception(raw, variant=variant)
+
+    def live_monitor(self, variant: str | None) -> Any:
+        from conform.families.gve.diagnosis.live import live_monitor
+
+        return live_monitor(variant)
+
+    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+        """From the queue replay and position read-backs (diagnosis/resume.py)."""
+        from conform.families.gve.diagnosis.resume import resume_state
+
+        return resume_state(facts.family_data, facts)
+
 
 FAMILY = GveFamily()

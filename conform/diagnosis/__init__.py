@@ -1,0 +1,147 @@
+"""Why did it stop? A diagnosis of a capture: the cause ranked first, the lines as the unit
+read them, and where a stopped job can resume.
+
+    d = diagnose("session.mcap")
+    d.headline()            # one sentence
+    d.to_json()["causes"]   # most likely first
+
+The engine names no family: the capture's family (``conform.families``) turns its own analysis
+into neutral facts (``diagnosis_facts``), replays the host's bytes through its model of the
+unit's reception (``reception``) and finds the resume point (``resume_state``);
+:mod:`.causes` ranks the causes from the facts alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from conform.diagnosis.causes import Cause, find_stalls, rank
+from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
+from conform.errors import UserError
+
+FORMAT = "conform-diagnosis/1"
+
+__all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause"]
+
+
+@dataclass
+class Diagnosis:
+    path: str
+    family: str
+    facts: Facts
+    causes: list[Cause]
+    reception: list[ParsedLine] | None = None
+    resume: ResumePoint | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def headline(self) -> str:
+        """The diagnosis in one sentence."""
+        if not self.causes:
+            n = len(self.facts.exchanges)
+            return (f"No stop, stall or anomaly found: {n} lines sent and the session ran to "
+                    "its end.")
+        c = self.causes[0]
+        return f"Most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+
+    def to_json(self) -> dict[str, Any]:
+        f = self.facts
+        return {
+            "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,
+            "headline": self.headline(),
+            "causes": [c.to_json() for c in self.causes],
+            "session": {"duration_s": round(f.duration, 6), "lines": len(f.exchanges),
+                        "answered": sum(1 for e in f.exchanges if e.answer is not None),
+                        "rx_capacity": f.rx_capacity, "queue_capacity": f.queue_capacity,
+                        "stalls": [{"t_start": round(s.t_start, 6), "t_end": round(s.t_end, 6),
+                                    "at_end": s.at_end} for s in find_stalls(f)]},
+            "timeline": [ev.to_json() for ev in sorted(f.events, key=lambda e: e.t)],
+            "reception": None if self.reception is None else
+            [p.to_json() for p in self.reception],
+            "resume": None if self.resume is None else self.resume.to_json(),
+            "notes": f.notes + self.notes,
+        }
+
+
+def _family_of(path: str, variant: str | None) -> Any:
+    from conform.families import default_family, family
+    from conform.families.capture_hook import peek_family
+
+    d, _meta = peek_family(path, variant)
+    if d is None:
+        return default_family()
+    if d.family == "unknown":
+        raise UserError(f"{path}: protocol unknown ({d.why}); nothing to diagnose")
+    return family(d.family)
+
+
+def _link_events(raw: Any, t0: float) -> list[Event]:
+    """The capture's own link events: the proxy's sender pty closing is the sender leaving."""
+    method = str(raw.metadata.get("conform.session", {}).get("capture_method", ""))
+    out = []
+    for link in raw.link_events:
+        kind, side = str(link.get("kind", "")), str(link.get("side", ""))
+        t = float(link.get("t", t0)) - t0
+        detail = str(link.get("detail", ""))
+        if kind in ("open",) or (kind == "close" and side == "session"):
+            continue
+        if side == "host" and kind in ("disconnect", "close") and method == "proxy":
+            out.append(Event(t, "sender-closed", f"the sender closed its port ({detail})",
+                             "capture link event"))
+            continue
+        out.append(Event(t, "link", f"{kind} ({side}): {detail}".strip(),
+                         "capture link event", extra={"kind": kind, "side": side}))
+    return out
+
+
+def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
+             family: str | None = None) -> Diagnosis:
+    """Diagnose one capture file (``analysis``: its family's analysis, when already made;
+    ``family``: its family's name, when already known)."""
+    from conform.analysis.stream import read_raw
+    from conform.families import family as family_named
+
+    fam = family_named(family) if family else _family_of(path, variant)
+    facts_hook = getattr(fam, "diagnosis_facts", None)
+    raw = read_raw(path)
+    facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook else None
+    if facts is None:
+        raise UserError(f"{path}: the {fam.name} family gives no diagnosis")
+    if not facts.host_times:
+        facts.host_times = sorted((raw.host.t_read - facts.t0).tolist())
+    if not facts.unit_times:
+        facts.unit_times = sorted((raw.unit.t_read - facts.t0).tolist())
+    facts.events += _link_events(raw, facts.t0)
+    # the capture lasts until it was closed, not until its last byte: a silent end counts
+    ends = [float(x.get("t", facts.t0)) - facts.t0 for x in raw.link_events]
+    facts.duration = max([facts.duration, *ends])
+    if not raw.status.complete:
+        facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
+                           "intact")
+    d = Diagnosis(path, fam.name, facts, rank(facts))
+    rec = getattr(fam, "reception", None)
+    if rec is not None:
+        d.reception = rec(raw, variant=facts.variant)
+    res = getattr(fam, "resume_state", None)
+    if res is not None:
+        d.resume = res(raw, facts, variant=facts.variant)
+    return d
+
+
+def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:
+    """``conform analyze``: the diagnosis in one sentence first, and kept on the analysis for
+    the top of its report (``analysis.diagnosis``); a capture it cannot judge says why.
+    An analysis that streamed its tables (too long to keep) is not read whole again here."""
+    if getattr(analysis, "whole", True) is False:
+        echo(f"diagnosis: not made for a capture this long (`conform diagnose {path}`)")
+        return
+    try:
+        d = diagnose(path, analysis=analysis, family=family)
+    except UserError as exc:
+        echo(f"diagnosis: none ({exc})")
+        return
+    except Exception as exc:  # noqa: BLE001 - the analysis stands without its diagnosis
+        echo(f"diagnosis: failed ({type(exc).__name__}: {exc}); the analysis follows")
+        return
+    analysis.diagnosis = d.to_json()
+    echo(f"diagnosis: {d.headline()}")

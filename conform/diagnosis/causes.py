@@ -1,0 +1,407 @@
+"""The causes of a session's stalls, stops and anomalies, ranked, from neutral facts.
+
+Two passes over :class:`~conform.diagnosis.facts.Facts`:
+
+* **stalls**: stretches where the host sent no line for much longer than it usually does
+  (``stall_threshold``), including the stretch from its last line to the end of the capture.
+  What each side was doing then decides the cause: the host waiting on an answer that does not
+  come (``unit-silent``), the unit ready and the host silent (``sender-stopped``), both
+  directions dead or a recorded link event (``link-lost``), the host polling for room the unit
+  never makes (``deadlock``), an alarm just before (``unit-alarm``), a byte known lost in an
+  overflow just before (``buffer-overflow``).
+* **anomalies**: the family's events on their own — overflow episodes, noise bursts, misuse,
+  starvation, alarms, link events — each a cause where no stall already claims it.
+
+Confidence is a plain score in [0, 1] from the rule that fired and how much evidence backs
+it; causes are listed most likely first.
+"""
+
+from __future__ import annotations
+
+import bisect
+import statistics
+from dataclasses import dataclass, field
+from typing import Any
+
+from conform.diagnosis.facts import Event, Exchange, Facts
+
+CAUSE_KINDS = ("sender-stopped", "unit-silent", "link-lost", "buffer-overflow", "deadlock",
+               "starvation", "noise", "protocol-misuse", "unit-alarm")
+
+ADVICE = {
+    "sender-stopped": "The unit was ready and waiting: look at the sender (crash, closed "
+                      "program, USB suspend, its own pause or error dialog), then resume from "
+                      "the resume point.",
+    "unit-silent": "The host waited for an answer that never came: check the unit's power, "
+                   "its reset or watchdog, the cable, and whether the line reached it "
+                   "(a lost line end leaves the unit waiting for the rest).",
+    "link-lost": "Both directions went dead: check the cable, the USB converter (power "
+                 "saving, a loose plug, ground loops) and the port's reconnect handling; lines "
+                 "sent while the link was down never arrived.",
+    "buffer-overflow": "The host sent more than the unit's receive buffer holds: bytes were "
+                       "lost. Count every byte sent (polls and extra commands included) "
+                       "against the buffer, or send one line at a time.",
+    "deadlock": "Each side waited for the other: the unit held its work while the host "
+                "waited for room. Resume the unit (or clear the condition it holds for) "
+                "and make the sender stop waiting on room while the unit holds.",
+    "starvation": "The unit's queue ran dry while the host was slow: send ahead (keep the "
+                  "queue fed), cut per-line overhead (latency, packets), or slow the feed.",
+    "noise": "Damaged bytes on the line: check the cable, shielding and ground, lower the "
+             "baud rate, and use checksums where the protocol has them.",
+    "protocol-misuse": "The sender broke a protocol rule: fix the sender (wait for each "
+                       "answer, ask the unit before sending a line again, stay within the buffer).",
+    "unit-alarm": "The unit stopped on its own alarm or interrupt: read its code, clear the "
+                  "cause (limit, probe, door, e-stop), unlock or reset, and resume from the "
+                  "resume point.",
+}
+
+STALL_MIN_S = 1.0           # a stall is at least this long
+STALL_FACTOR = 10.0         # ... and this many times the host's median gap between lines
+BEFORE_S = 2.0              # events this long before a stall may explain it
+BURST_GAP_S = 1.0           # events of one kind closer than this form one burst
+
+
+@dataclass
+class Cause:
+    kind: str
+    confidence: float
+    t_start: float
+    t_end: float
+    evidence: list[str]
+    advice: str
+    summary: str                # one sentence
+    lines: list[int] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"kind": self.kind, "confidence": round(self.confidence, 3),
+                "t_start": round(self.t_start, 6), "t_end": round(self.t_end, 6),
+                "evidence": self.evidence, "advice": self.advice, "summary": self.summary,
+                "lines": self.lines}
+
+
+@dataclass
+class Stall:
+    t_start: float          # the last line sent before it
+    t_end: float            # the next line sent, or the end of the capture
+    last: int               # index of that last line in the exchanges
+    at_end: bool
+
+
+def stall_threshold(f: Facts) -> float:
+    """How long the host may go without a line before it is a stall."""
+    ts = [e.t_sent for e in f.exchanges]
+    gaps = [b - a for a, b in zip(ts, ts[1:], strict=False) if b > a]
+    med = statistics.median(gaps) if gaps else 0.0
+    return max(STALL_MIN_S, STALL_FACTOR * med)
+
+
+def find_stalls(f: Facts) -> list[Stall]:
+    """Stretches without progress, longer than ``stall_threshold``: the host sending no line
+    long after the unit was ready (a wait for answers that did come is no stall), or no answer
+    to any line while the host had one outstanding (resends or not). Overlapping ones join."""
+    ex = f.exchanges
+    if not ex:
+        return []
+    limit = stall_threshold(f)
+    answers = sorted(e.t_answer for e in ex if e.t_answer is not None)
+    sends = [e.t_sent for e in ex]
+    found: list[tuple[float, float]] = []
+    for i, e in enumerate(ex):
+        nxt = ex[i + 1].t_sent if i + 1 < len(ex) else f.duration
+        if nxt - e.t_sent < limit:
+            continue
+        k = bisect.bisect_right(answers, nxt)
+        ready = max(e.t_sent, answers[k - 1] if k else e.t_sent)
+        if nxt - ready >= limit:    # else: sent as soon as an answer made room, a wait
+            found.append((ready, nxt))
+    for a, b in zip([0.0, *answers], [*answers, f.duration], strict=True):
+        if b - a < limit:
+            continue
+        k = bisect.bisect_left(sends, b)
+        if k and any(x.t_answer is None or x.t_answer >= b - 1e-9 for x in ex[:k]
+                     if x.t_sent <= b):
+            found.append((max(a, ex[0].t_sent), b))
+    found.sort()
+    merged: list[list[float]] = []
+    for a, b in found:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    out = []
+    for a, b in merged:
+        last = max(bisect.bisect_right(sends, b - 1e-9) - 1, 0)
+        out.append(Stall(a, b, last, b >= f.duration - 1e-9))
+    return out
+
+
+def pending_at(f: Facts, s: Stall) -> list[Exchange]:
+    """Lines the host waited on through the stall: sent before its end, not answered before
+    its end, and not given up (a later line answered before the stall superseded them)."""
+    done_before = [e.n for e in f.exchanges if e.t_answer is not None and
+                   e.t_answer <= s.t_start + 1e-9]
+    floor = max(done_before, default=-1)
+    return [e for e in f.exchanges[:s.last + 1] if e.n > floor and
+            (e.t_answer is None or e.t_answer >= s.t_end - 1e-9)]
+
+
+def _any_between(times: list[float], lo: float, hi: float) -> bool:
+    k = bisect.bisect_right(times, lo)
+    return k < len(times) and times[k] < hi
+
+
+def _polled(f: Facts, t_line: float) -> bool:
+    """The host sent other traffic (status polls) besides its lines in the 3 s up to
+    ``t_line``."""
+    reads = _count_between(f.host_times, t_line - 3.0, t_line + 1e-6)
+    return reads > sum(1 for e in f.exchanges if t_line - 3.0 < e.t_sent <= t_line) + 1
+
+
+def _longest_gap(times: list[float], lo: float, hi: float) -> tuple[float, float]:
+    """The longest stretch in [lo, hi] without a time of ``times``: (length, start)."""
+    a, b = bisect.bisect_right(times, lo), bisect.bisect_left(times, hi)
+    edges = [lo, *times[a:b], hi]
+    best = (0.0, lo)
+    for x, y in zip(edges, edges[1:], strict=False):
+        if y - x > best[0]:
+            best = (y - x, x)
+    return best
+
+
+def _last_before(times: list[float], t: float) -> float:
+    k = bisect.bisect_left(times, t)
+    return times[k - 1] if k else 0.0
+
+
+def _count_between(times: list[float], lo: float, hi: float) -> int:
+    return bisect.bisect_left(times, hi) - bisect.bisect_right(times, lo)
+
+
+def _events(f: Facts, kinds: tuple[str, ...], lo: float, hi: float) -> list[Event]:
+    return [ev for ev in f.events if ev.kind in kinds and lo <= ev.t <= hi]
+
+
+def _fmt(t: float) -> str:
+    return f"{t:.3f} s"
+
+
+def _ev(ev: Event) -> str:
+    rule = f" [{ev.rule}]" if ev.rule else ""
+    return f"{_fmt(ev.t)} {ev.kind}: {ev.text}{rule}"
+
+
+def _line(e: Exchange) -> str:
+    return f"line {e.n + 1} `{e.text}`"
+
+
+def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
+    """The candidate causes of one stall, each with its confidence."""
+    ex = f.exchanges
+    last = ex[s.last]
+    wait = f.answer_time
+    pending = pending_at(f, s)
+    unit_quiet_from = s.t_start + wait
+    unit_active = _any_between(f.unit_times, unit_quiet_from, s.t_end - 1e-6)
+    host_reads = _count_between(f.host_times, s.t_start + 1e-6, s.t_end)
+    span = f"{_fmt(s.t_start)} to {_fmt(s.t_end)}" + (" (the end of the capture)"
+                                                       if s.at_end else "")
+    gap = s.t_end - s.t_start
+    before = s.t_start - BEFORE_S
+    link = _events(f, ("link",), before, s.t_end)
+    closed = _events(f, ("sender-closed",), before, s.t_end + 0.5)
+    alarms = _events(f, ("alarm",), before, s.t_end)
+    lost = _events(f, ("overflow", "loss"), 0.0, s.t_end)
+    noise = _events(f, ("noise",), before, s.t_end)
+    holds = _events(f, ("hold", "full"), before, s.t_end)
+    starved = _events(f, ("starved",), before, s.t_end)
+    ends = _events(f, ("job-end",), 0.0, s.t_start + wait)
+    out: list[Cause] = []
+
+    def add(kind: str, conf: float, summary: str, evidence: list[str], used: list[Event]
+            ) -> None:
+        claimed.update(id(ev) for ev in used)
+        out.append(Cause(kind, min(conf, 0.99), s.t_start, s.t_end,
+                         [f"stall {span}: the host sent no line for {gap:.3f} s", *evidence,
+                          *(_ev(ev) for ev in used[:8])], ADVICE[kind], summary,
+                         sorted({e.n for e in pending} | {last.n})))
+
+    if alarms:
+        a = alarms[0]
+        add("unit-alarm", 0.9, f"The unit stopped the job itself: {a.text} at {_fmt(a.t)}, "
+            f"after {_line(last)}.", [], alarms + starved)
+    real_link = [ev for ev in link if ev.extra.get("kind") in ("disconnect", "error", "close")]
+    if real_link:
+        add("link-lost", 0.92, f"The link was lost at {_fmt(real_link[0].t)}: "
+            f"{real_link[0].text}.", [], link)
+    if pending:
+        first = pending[0]
+        answered_later = [e for e in ex[s.last + 1:] if e.t_answer is not None]
+        if holds and unit_active and host_reads:
+            add("deadlock", 0.8, f"Both sides waited on each other from {_fmt(s.t_start)}: "
+                f"the unit held its work and the host waited for room, polling "
+                f"({host_reads} reads) without sending.",
+                [f"{_line(first)} waits for its answer; the unit kept answering polls"],
+                holds)
+        if lost:
+            add("buffer-overflow", 0.88, f"Bytes were lost in a receive-buffer overflow "
+                f"(from {_fmt(lost[0].t)}), so {_line(first)} was never answered and the "
+                f"host waited from {_fmt(s.t_start)}.",
+                [f"{len(pending)} line(s) without an answer"], lost)
+        if noise:
+            add("noise", 0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
+                f"{_line(first)} unanswered.", [], noise)
+        quiet, q_from = _longest_gap(f.unit_times, s.t_start, s.t_end)
+        back = _any_between(f.unit_times, q_from + quiet, s.t_end + 1e-9)
+        if unit_active and back and quiet >= stall_threshold(f) and not real_link:
+            add("link-lost", 0.75, f"The unit went silent for {quiet:.3f} s from "
+                f"{_fmt(q_from)} and then answered other traffic again, never "
+                f"{_line(first)}: what was sent meanwhile was lost on the way.",
+                [f"no byte from the unit from {_fmt(q_from)} to {_fmt(q_from + quiet)}",
+                 f"{len(pending)} line(s) never answered"], [])
+        if not unit_active and not s.at_end and answered_later and not real_link:
+            add("link-lost", 0.7, f"Both directions went dead from {_fmt(s.t_start)} for "
+                f"{gap:.3f} s: lines sent meanwhile were never answered, later ones were.",
+                [f"no byte from the unit from {_fmt(unit_quiet_from)} to {_fmt(s.t_end)}",
+                 f"{len(pending)} line(s) lost, answers resumed at "
+                 f"{_fmt(answered_later[0].t_answer or 0.0)}"], [])
+        t_line = last.t_sent
+        polled = _polled(f, t_line)
+        host_gone = bool(closed) or (
+            polled and not _any_between(f.host_times, t_line + 1e-6, s.t_end))
+        if host_gone:
+            add("sender-stopped", 0.95 if closed else 0.85,
+                f"The sender stopped at {_fmt(t_line)} while it waited on answers: "
+                + ("it closed its port." if closed else "its polls stopped with its lines."),
+                [f"{len(pending)} line(s) still waiting; the host sent nothing after "
+                 f"{_fmt(t_line)}"], closed)
+        silent_conf = 0.8 if not unit_active else 0.6
+        if answered_later and not unit_active:
+            silent_conf = 0.45
+        if first.t_answer is not None and first.t_answer <= s.t_end + 1e-9:
+            silent_conf = 0.3       # it came, late: a long motion or a full queue, maybe
+        if lost or noise:
+            silent_conf = min(silent_conf, 0.5)     # explained by what was lost before
+        answered_in = any(e.t_answer is not None and s.t_start < e.t_answer <= s.t_end
+                          for e in ex)
+        if host_gone and answered_in:
+            silent_conf = min(silent_conf, 0.4)     # the unit went on answering a dead host
+        add("unit-silent", silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
+            f"answer to {_line(first)}, which never came"
+            + (" (the unit answered nothing more)." if not unit_active else
+               " (the unit still answered other traffic)."),
+            [f"{len(pending)} line(s) without an answer",
+             "the unit sent nothing after " + _fmt(_last_before(f.unit_times, s.t_end))
+             if not unit_active else
+             "the unit sent bytes in the stall, none answering the line"], [])
+        return out
+    # every line answered: the unit was ready
+    if ends and s.at_end:
+        return out      # the job ended by its own end word: not a stop
+    conf = 0.85 if s.at_end else 0.6
+    ev_text = [f"{_line(last)} was answered `{last.answer}` at "
+               f"{_fmt(last.t_answer or last.t_sent)}: the unit was ready",
+               f"the host sent {host_reads} read(s) in the stall, no line"]
+    t_line = last.t_sent
+    polled = _polled(f, t_line)
+    silent_after = not _any_between(f.host_times, t_line + 1e-6, s.t_end)
+    if s.at_end and polled and silent_after:
+        conf = 0.9
+        ev_text.append("the host's other traffic (status polls) stopped with its lines: "
+                       "the sender's process ended or hung")
+    elif s.at_end and not silent_after:
+        conf = 0.6
+        ev_text.append("the sender went on polling without sending lines: it paused, "
+                       "waits on its user, or its job ended")
+    elif s.at_end and not polled:
+        conf = 0.65
+        ev_text.append("the host never polled: a job that simply ended looks the same "
+                       "unless its end word is in the capture")
+    if closed:
+        conf = 0.95
+    if alarms:
+        conf = min(conf, 0.5)       # stopping after an alarm is the sender's right answer
+    add("sender-stopped", conf, f"The sender stopped: the unit had answered every line and "
+        f"was ready at {_fmt(last.t_answer or last.t_sent)}, and the host sent nothing more "
+        + ("until the capture ended." if s.at_end else f"for {gap:.3f} s."),
+        ev_text, closed + starved)
+    return out
+
+
+def _bursts(events: list[Event]) -> list[list[Event]]:
+    out: list[list[Event]] = []
+    for ev in sorted(events, key=lambda e: e.t):
+        if out and ev.t - (out[-1][-1].t_end or out[-1][-1].t) <= BURST_GAP_S:
+            out[-1].append(ev)
+        else:
+            out.append([ev])
+    return out
+
+
+EVENT_CAUSE = {  # family event kind -> cause kind, base confidence, per-event step
+    "overflow": ("buffer-overflow", 0.6, 0.1),
+    "loss": ("buffer-overflow", 0.55, 0.1),
+    "noise": ("noise", 0.45, 0.08),
+    "misuse": ("protocol-misuse", 0.45, 0.05),
+    "starved": ("starvation", 0.55, 0.05),
+    "alarm": ("unit-alarm", 0.85, 0.0),
+    "link": ("link-lost", 0.6, 0.05),
+    "hold": ("deadlock", 0.3, 0.0),
+}
+
+SUMMARY = {
+    "buffer-overflow": "More bytes were in flight than the unit's receive buffer holds, "
+                       "from {t}: bytes were lost.",
+    "noise": "A burst of damaged bytes from {t} ({n} events).",
+    "protocol-misuse": "The sender broke the protocol from {t} ({n} times): {first}.",
+    "starvation": "The unit's queue ran dry {n} time(s) from {t} while the host was slow.",
+    "unit-alarm": "The unit raised an alarm at {t}: {first}.",
+    "link-lost": "The link dropped at {t}: {first}.",
+    "deadlock": "The unit held its work at {t}: {first}.",
+}
+
+
+def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
+    out = []
+    for ev_kind, (kind, base, step) in EVENT_CAUSE.items():
+        evs = [ev for ev in f.events if ev.kind == ev_kind and id(ev) not in claimed]
+        if ev_kind == "link":
+            evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
+        for burst in _bursts(evs):
+            n = sum(int(ev.extra.get("count", 1)) for ev in burst)
+            conf = base + step * min(n - 1, 4)
+            if kind == "buffer-overflow" and any(
+                    ev.kind in ("loss", "error-answer") and ev.t >= burst[0].t
+                    for ev in f.events if ev not in burst):
+                conf += 0.2          # something after it shows the loss
+            t1 = max(ev.t_end or ev.t for ev in burst)
+            summary = SUMMARY[kind].format(t=_fmt(burst[0].t), n=n, first=burst[0].text)
+            out.append(Cause(kind, min(conf, 0.95), burst[0].t, t1,
+                             [_ev(ev) for ev in burst[:10]], ADVICE[kind], summary,
+                             sorted({ev.line for ev in burst if ev.line is not None})))
+    return out
+
+
+def _merge(causes: list[Cause]) -> list[Cause]:
+    """One cause per kind and overlapping stretch: the evidence joined, the best confidence."""
+    out: list[Cause] = []
+    for c in sorted(causes, key=lambda c: (c.kind, c.t_start)):
+        prev = out[-1] if out and out[-1].kind == c.kind else None
+        if prev is not None and c.t_start <= prev.t_end + BURST_GAP_S:
+            best, other = (prev, c) if prev.confidence >= c.confidence else (c, prev)
+            best.evidence += [x for x in other.evidence if x not in best.evidence]
+            best.t_start, best.t_end = min(prev.t_start, c.t_start), max(prev.t_end, c.t_end)
+            best.lines = sorted(set(best.lines) | set(other.lines))
+            out[-1] = best
+        else:
+            out.append(c)
+    return out
+
+
+def rank(f: Facts) -> list[Cause]:
+    """Every cause found, most likely first."""
+    claimed: set[int] = set()
+    found: list[Cause] = []
+    for s in find_stalls(f):
+        found += _stall_cause(f, s, claimed)
+    found += _anomalies(f, claimed)
+    return sorted(_merge(found), key=lambda c: (-c.confidence, c.t_start))

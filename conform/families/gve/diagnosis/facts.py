@@ -1,0 +1,89 @@
+"""The GVE analysis of a capture as the diagnosis's neutral facts.
+
+Strictly simplex (GVE64 §13.3): one command in flight, so the bytes in flight are the
+command's own; the motion queue holds ``Variant.queue`` vectors (§13.5.2). An answer digit
+with bit 3 set (INTA, §13.7) to anything but the host's own halt ``H`` means an enabled
+input interrupt braked the motion: the unit's alarm.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from conform.diagnosis.facts import Event, Exchange, Facts
+from conform.families.gve.analysis.frames import CS_BAD, CS_MISSING
+
+EVENT_OF = {  # GVE finding kind -> neutral event kind
+    "checksum-error": "noise", "garbled-answer": "noise", "garbage-sent": "noise",
+    "simplex-violation": "misuse", "blind-resend": "misuse", "double-move": "misuse",
+    "lost-vector": "loss", "starvation": "starved", "queue-full-polling": "full",
+    "error-code": "error-answer", "reset": "reset",
+}
+MOTION = ("C", "L")
+SLOW = ("H", "W")       # answered when the motion ends (§13.3)
+
+
+def analysis_facts(a: Any, path: str) -> Facts:
+    """Facts from a finished ``conform.families.gve.analysis.Analysis``."""
+    ex_df = a.exchanges
+    notes = list(a.notes)
+    exchanges: list[Exchange] = []
+    events: list[Event] = []
+    t0 = a.t0
+    if ex_df is None:
+        notes.append("capture too long to keep its tables: the diagnosis uses the findings "
+                     "only")
+    else:
+        cols = {c: ex_df[c].to_numpy() for c in ("frame", "name", "status", "answer_frame",
+                                                 "answer_kind", "code", "inta", "t_cmd_last",
+                                                 "answer_checksum",
+                                                 "t_ans_last", "cmd_bytes")}
+        in_inta = False
+        for r in range(len(ex_df)):
+            answered = cols["status"][r] == "answered"
+            name = cols["name"][r]
+            frame = int(cols["frame"][r])
+            text = a.host_text(frame).rstrip("\\r").rstrip("\r")
+            answer = a.unit_text(int(cols["answer_frame"][r])).rstrip("\\r") \
+                if answered else None
+            code = int(cols["code"][r]) if answered else -1
+            clean = answered and cols["answer_kind"][r] == "answer"
+            e = Exchange(frame, text, float(cols["t_cmd_last"][r]) - t0,
+                         float(cols["t_ans_last"][r]) - t0 if answered else None,
+                         answer, (clean and code == 0) if answered else None,
+                         name in MOTION, int(cols["cmd_bytes"][r]))
+            exchanges.append(e)
+            # a damaged answer's digit says nothing: its checksum must hold where there is one
+            inta = bool(cols["inta"][r]) and clean and \
+                int(cols["answer_checksum"][r]) not in (CS_BAD, CS_MISSING)
+            if inta and not in_inta and name != "H":
+                events.append(Event(e.t_answer or e.t_sent, "alarm",
+                                    f"the unit answered `{answer}` to `{text}`: INTA, an "
+                                    "input interrupt braked the motion",
+                                    "GVE64 §13.7 (answer bit 3 INTA), §13.5.9", line=frame))
+            in_inta = inta
+    for f in a.findings:
+        kind = EVENT_OF.get(f.kind)
+        if kind == "error-answer" and ("damaged on the way" in f.message or
+                                       f.extra.get("code") == 2):
+            kind = "noise"      # refused though sent right, or cut short: changed on the way
+        if kind is None:
+            continue
+        line = None
+        if f.frames:
+            head = str(f.frames[0])
+            if head.startswith("host:"):
+                line = int(head[5:])
+        events.append(Event(float(f.t), kind, f.message, f.clause, line=line,
+                            extra={"count": int(f.count)} if f.count > 1 else {}))
+    q = a.metrics.get("queue", {})
+    return Facts("gve", a.variant.id, path, float(a.metrics["duration_s"]), exchanges, events,
+                 t0=t0, rx_capacity=None, queue_capacity=int(q.get("capacity") or
+                                                             a.variant.queue),
+                 queue_unit="vectors", answer_time=0.5, notes=notes, family_data=a)
+
+
+def facts(raw: Any, path: str, *, variant: str | None = None) -> Facts:
+    from conform.families.gve.analysis import analyze
+
+    return analysis_facts(analyze(path, variant=variant, whatif_replays=False), path)
