@@ -25,8 +25,8 @@ from diag_sessions import (
 
 from conform.analysis.stream import read_raw
 from conform.diagnosis import diagnose
-from conform.families.grbl.analysis import is_motion
-from conform.families.grbl.diagnosis import reception
+from conform.families.grbl.analysis.analyze import is_motion
+from conform.families.grbl.diagnosis.facts import reception
 
 REPO = Path(__file__).resolve().parents[1]
 GRBL, GVE = "grbl-1.1f", "gve64-v19"

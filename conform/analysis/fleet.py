@@ -110,7 +110,7 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
     to ``DIR/<family>/<table>/machine=M/<session>.parquet``. None: the default family's."""
     import shutil
 
-    from conform.families.capture_hook import peek_family
+    from conform.families.peek import peek_family
 
     d, meta = peek_family(str(p), options.get("variant"))
     if d is None:

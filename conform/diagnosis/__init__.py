@@ -65,7 +65,7 @@ class Diagnosis:
 
 def _family_of(path: str, variant: str | None) -> Any:
     from conform.families import default_family, family
-    from conform.families.capture_hook import peek_family
+    from conform.families.peek import peek_family
 
     d, _meta = peek_family(path, variant)
     if d is None:

@@ -124,7 +124,7 @@ def serial_ports(named: set[str], redact: bool) -> list[dict[str, Any]]:
 
 def _analysis(path: str, report: Path, tables: Path) -> None:
     """The capture's analysis report and tables, by its family (as ``conform analyze``)."""
-    from conform.families.capture_hook import detect_capture
+    from conform.families.peek import detect_capture
 
     d = detect_capture(path, None)
     if d is None:
@@ -226,7 +226,7 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
 
 def _ports_named(path: str) -> set[str]:
     """The serial ports a capture's session metadata names."""
-    from conform.families.capture_hook import peek_capture
+    from conform.families.peek import peek_capture
 
     try:
         meta = peek_capture(path, 0)[2]

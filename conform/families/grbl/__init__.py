@@ -152,24 +152,24 @@ class GrblFamily(Family):
 
     def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
                         analysis: Any = None) -> Any:
-        from conform.families.grbl.diagnosis import facts
+        from conform.families.grbl.diagnosis.facts import facts
 
         return facts(raw, path, variant=variant, analysis=analysis)
 
     def reception(self, raw: Any, *, variant: str | None = None) -> Any:
         """The receive ring (128 bytes, silent drops) and line reader replayed on the host's
         bytes, the answers as the clock (diagnosis.py)."""
-        from conform.families.grbl.diagnosis import reception
+        from conform.families.grbl.diagnosis.facts import reception
 
         return reception(raw, variant=variant)
 
     def live_monitor(self, variant: str | None) -> Any:
-        from conform.families.grbl.live import live_monitor
+        from conform.families.grbl.diagnosis.live import live_monitor
 
         return live_monitor(variant)
 
     def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
-        from conform.families.grbl.diagnosis import resume_state
+        from conform.families.grbl.diagnosis.facts import resume_state
 
         return resume_state(raw, facts, variant=variant)
 

@@ -29,7 +29,7 @@ from conform.capture.session import escape_bytes
 from conform.errors import UserError
 from conform.families.gve.analysis import exchanges as exm
 from conform.families.gve.analysis import frames as fr
-from conform.families.gve.analysis.columns import isin, packet_numbers, release_memory
+from conform.families.gve.analysis.columns import TIMES, isin, packet_numbers, release_memory
 from conform.families.gve.analysis.findings import (
     HAZARDS,
     Context,
@@ -197,8 +197,6 @@ def _dialect_from(spec: Any, text: str) -> Any:
 
 PACKET_COLUMNS = ("packet", "packet_role")  # a host line's packet, in its frames table
 CODED = frozenset({"packet_role"})  # its text columns written dictionary-encoded in Parquet
-TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
-         "queue_depth": ("t",)}  # its tables' time columns (conform.analysis.tables)
 KEEP_ROWS = 200_000  # command lines up to which the whole tables are kept (``Analysis``)
 FORCE_ROWS = 262_144  # rows waiting behind an undecided vector before it is judged anyway
 

@@ -76,3 +76,7 @@ def release_memory() -> None:
         return
     if _INFO is None or _INFO().fordblks > KEEP_FREE:
         _TRIM(0)
+
+
+TIMES = {"exchanges": ("t_cmd_first", "t_cmd_last", "t_ans_first", "t_ans_last"),
+         "queue_depth": ("t",)}  # its tables' time columns (conform.analysis.tables)

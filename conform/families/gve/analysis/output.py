@@ -80,7 +80,7 @@ def write_tables(a: Any, out_dir: str | Path, row_group: int | None = None
     except OSError as exc:
         raise UserError(f"{d}: cannot create the folder: {exc.strerror}") from None
     from conform.analysis.tables import ROW_GROUP, relative_times, write_frame, write_table
-    from conform.families.gve.analysis.analyze import TIMES
+    from conform.families.gve.analysis.columns import TIMES
 
     rows = row_group or ROW_GROUP
 

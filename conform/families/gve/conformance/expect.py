@@ -39,9 +39,7 @@ class Reference:
         self.variant = spec.variant(variant_id)
         self.dialect = dialect if dialect is not None else spec.dialect()
         if unit_cls is None:
-            from conform.families.gve.conformance.target import unit_class
-
-            unit_cls = unit_class()
+            from conform.families.gve.unit.model import Unit as unit_cls
         self.unit_cls = unit_cls
         self._parser: dict[Any, Any] = {}
 

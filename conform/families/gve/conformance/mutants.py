@@ -12,11 +12,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from conform.families.gve.conformance.target import unit_class
 from conform.families.gve.protocol import Command, Rejection
 from conform.families.gve.protocol.answers import encode_answer
+from conform.families.gve.unit.model import Unit as _Reference
 
-Unit: Any = unit_class()
+Unit: Any = _Reference
 
 OK, QUEUE_FULL, SYNTAX, RANGE, NOTHING_TO_GO = 0, 1, 4, 5, 6
 

@@ -21,6 +21,7 @@ from conform.conformance.target import (
     parse_target,
 )
 from conform.errors import LinkError, UserError
+from conform.families.gve.conformance.readiness import POLL_LINE, QUIET_MARGIN, StateStats, power_up
 from conform.families.gve.conformance.safety import STOP_SEQUENCE, Guard
 from conform.families.gve.protocol.checksum import append_checksum
 
@@ -30,7 +31,6 @@ DEFAULT_VARIANT = "gve64-v19"
 # characters' time at the baud, and at least QUIET_FLOOR_S for a host's scheduling
 QUIET_CHARS = 3
 QUIET_FLOOR_S = 0.002
-POLL_LINE = b"!0@\r"  # readiness after J: answered once the unit hears; not counted (A10)
 _CHECKSUM_CMD = re.compile(rb"^![07]%([+-])")
 
 
@@ -225,8 +225,6 @@ class GveLinkTarget(GveTarget, LinkTarget):
         return reply
 
     def ready_wait(self, seconds: float) -> float:
-        from conform.families.gve.conformance.state import QUIET_MARGIN
-
         ready = self.keeper.stats.readiness if self.keeper is not None else None
         return seconds if ready is None else max(seconds, ready + QUIET_MARGIN)
 
@@ -249,8 +247,6 @@ class GveLinkTarget(GveTarget, LinkTarget):
     def _fresh(self) -> None:
         """J, then the ~2 s the unit needs (GVE64 §13.4): polled the first time, then the
         readiness measured (what follows may be about @ or >, which a poll would change)."""
-        from conform.families.gve.conformance.state import StateStats, power_up
-
         if self.reset_stats is None:
             self.reset_stats = StateStats()
         power_up(self, self.reset_stats, self.ready_after, quiet=True)

@@ -20,7 +20,6 @@ capture ended first.
 
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -448,5 +447,3 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
     return a
 
 
-def write_json(a: MarlinAnalysis) -> str:
-    return json.dumps(a.to_json(), indent=1, default=str)

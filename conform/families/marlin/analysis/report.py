@@ -4,6 +4,7 @@ report), lines.parquet and findings.parquet (the tables)."""
 from __future__ import annotations
 
 import html
+import json
 from pathlib import Path
 from typing import Any
 
@@ -37,8 +38,12 @@ def _html(a: Any) -> str:
             f"</th></tr>{found}</table></body></html>\n")
 
 
+def write_json(a: Any) -> str:
+    """findings.json: the analysis as its JSON document."""
+    return json.dumps(a.to_json(), indent=1, default=str)
+
+
 def write_report(a: Any, directory: str) -> dict[str, Path]:
-    from conform.families.marlin.analysis.analyze import write_json
     from conform.report.render import write_files
 
     d = write_files(directory, {"findings.json": lambda: write_json(a), "summary.md":

@@ -12,8 +12,8 @@ from collections import deque
 from typing import Any
 
 from conform.diagnosis.live import LiveState
-from conform.families.grbl.analysis import DEFAULT_VARIANT
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.analysis.analyze import DEFAULT_VARIANT
+from conform.families.grbl.spec.load import load_grbl
 
 
 class GrblLive:

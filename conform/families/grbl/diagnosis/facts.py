@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from conform.diagnosis.facts import Event, Exchange, Facts, ParsedLine, ResumePoint
-from conform.families.grbl.analysis import DEFAULT_VARIANT, analyze_raw, is_motion
-from conform.families.grbl.codec import split_host, split_unit
-from conform.families.grbl.gcode import GcodeError, Modal, parse, strip_line
-from conform.families.grbl.tables import load_grbl
+from conform.families.grbl.analysis.analyze import DEFAULT_VARIANT, analyze_raw, is_motion
+from conform.families.grbl.protocol.codec import split_host, split_unit
+from conform.families.grbl.protocol.gcode import GcodeError, Modal, parse, strip_line
+from conform.families.grbl.spec.load import load_grbl
 
 EVENT_OF = {  # analysis finding kind -> neutral event kind
     "rx-overflow-hazard": "overflow", "error-response": "error-answer", "alarm": "alarm",
@@ -119,7 +119,7 @@ class _Read:
 
 
 def _host_and_unit(raw: Any) -> tuple[bytes, list[float], bytes, list[float]]:
-    from conform.families.grbl.analysis import _byte_times
+    from conform.families.grbl.analysis.analyze import _byte_times
 
     hb, ht = _byte_times(_chunks(raw.host))
     ub, ut = _byte_times(_chunks(raw.unit))
