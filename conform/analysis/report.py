@@ -65,6 +65,7 @@ def _context(a: Any, plots: dict[str, str]) -> dict[str, Any]:
         "counts": m.get("finding_counts", {}), "ms": _fmt_ms,
         "hazards": m.get("hazards", 0), "notes": a.notes,
         "status": a.raw.status,
+        "code_meaning": getattr(a, "code_meaning", None),   # the family's, when it has one
     }
 
 
