@@ -235,6 +235,7 @@ def throughput_plot(a: Any) -> str | None:
         h2, l2 = ax2.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
         fig.subplots_adjust(right=0.7)
+    ax.set_ylim(bottom=0)   # both axes count from 0 at the same height (the twin's starts at 0)
     legend_beside(ax, handles, labels)
     if "utilisation_host" in s:  # the right axis's labels sit between the plot and the legend
         ax.get_legend().set_bbox_to_anchor((1.12, 1.0))
