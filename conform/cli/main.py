@@ -86,7 +86,6 @@ def _register() -> None:
 _register()
 
 
-
 def main(argv: list[str] | None = None) -> None:
     from conform.stops import Stopped, exit_status, stop_signals
 
