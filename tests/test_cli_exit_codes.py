@@ -206,3 +206,16 @@ def test_the_top_level_help_names_every_family(capsys):
         for v in fam.variants():
             assert v.id in text, v.id
     assert "130 Ctrl-C, 143 SIGTERM, 129 SIGHUP" in text
+
+
+def test_run_matrix_keeps_the_target_given(tmp_path, capsys):
+    """--matrix with --target: the target is run beside every variant's emulator, not dropped."""
+    import json
+
+    code, out, err = _code(["run", "--matrix", "--target", "emu:gve64-v19:v-range-code",
+                            "--check", "*/V/*", "--no-machine", "-q", "--json", "--report",
+                            str(tmp_path / "r")], capsys)
+    assert code == 1, err   # the deviant unit's FAIL is there
+    targets = [r["target"] for r in json.loads(out)["runs"]]
+    assert targets[0] == "emu:gve64-v19:v-range-code"
+    assert {"emu:gve64-v10", "emu:gve124"} <= set(targets)

@@ -92,3 +92,30 @@ def test_check_sender_names_its_verdict_and_every_rule_short_of_pass(tmp_path):
     assert title.startswith("check-sender FAIL: ") and "[" not in title   # not a Python list
     assert '<span class="FAIL badge">FAIL</span>' in html
     assert (tmp_path / "r" / "summary.md").read_text().startswith("# check-sender summary: FAIL")
+
+
+def test_the_analysis_report_says_what_each_answer_code_means(tmp_path, capsys):
+    from pathlib import Path
+
+    noisy = Path(__file__).resolve().parent.parent / "captures" / "careless-noisy.mcap"
+    with pytest.raises(SystemExit):
+        main(["analyze", str(noisy), "--report", str(tmp_path / "an")])
+    html = (tmp_path / "an" / "index.html").read_text()
+    table = html[html.index("Answer codes"):]
+    table = table[:table.index("</table>")]
+    assert "<th>meaning</th>" in table
+    assert "<td>-1</td>" in table and "no code could be read" in table   # was unexplained
+    assert "queue full" in table   # code 1, from the tables (GVE64 §13.7)
+
+
+def test_the_throughput_plot_axes_share_their_zero(monkeypatch):
+    from pathlib import Path
+
+    from conform.analysis import analyze, plots
+
+    figures = []
+    monkeypatch.setattr(plots, "to_png", lambda fig: figures.append(fig) or "png")
+    a = analyze(str(Path(__file__).resolve().parent.parent / "captures" / "usb-latency.mcap"))
+    assert plots.throughput_plot(a) == "png"
+    left, right = figures[0].axes[:2]
+    assert left.get_ylim()[0] == 0 and right.get_ylim()[0] == 0

@@ -123,7 +123,7 @@ def test_a_signal_mid_run_halts_the_unit_and_writes_the_report(tmp_path, variant
         stop, then, options = HALTS[variant]
         run = subprocess.Popen(
             [sys.executable, "-m", "conform", "run", "--target", pty, "--report",
-             str(tmp_path / "report"), *options],
+             str(tmp_path / "report"), "--json", *options],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
             env=_env(), preexec_fn=_ignore_sigint if inherit_ignore else None)
         _until(run, "estimate")        # "<pty> (<variant>): N checks, estimate m:ss"
@@ -135,6 +135,7 @@ def test_a_signal_mid_run_halts_the_unit_and_writes_the_report(tmp_path, variant
             run.kill()
             pytest.fail(f"conform run did not stop on {sig.name}")
     assert run.returncode == 128 + sig, (run.returncode, err)
+    assert json.loads(out)["exit"] == 128 + sig   # --json says the status it exits with
     name = "Ctrl-C" if sig == signal.SIGINT else sig.name
     assert f"run aborted: interrupted ({name}) after " in err, err
     assert "Traceback" not in err

@@ -73,7 +73,8 @@ def base_context(a: Any) -> dict[str, Any]:
     for f in a.findings:
         by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
     return {"a": a, "m": m, "findings": a.findings, "by_sev": by_sev,
-            "counts": m.get("finding_counts", {}), "ms": fmt_ms, "notes": a.notes}
+            "counts": m.get("finding_counts", {}), "ms": fmt_ms, "notes": a.notes,
+            "code_meaning": getattr(a, "code_meaning", None)}   # the family's, when it has one
 
 
 def report_folder(out_dir: str | Path) -> Path:

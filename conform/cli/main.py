@@ -103,7 +103,6 @@ def _name_the_families() -> None:
 _register()
 
 
-
 def main(argv: list[str] | None = None) -> None:
     from conform.stops import Stopped, exit_status, stop_signals
 

@@ -29,7 +29,7 @@ from conform.conformance.suite import PROFILE_NAMES, results_of
 from conform.conformance.target import parse_target
 from conform.errors import UserError, writable_folder
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
-from conform.stops import shield
+from conform.stops import exit_status, shield
 
 
 @family_options("run")
@@ -109,8 +109,8 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         if not report_dir and not replay:   # a one-check replay leaves the last run's report
             link_latest(out)
     # a FAIL is about the unit (1); an ERROR says a check could not be run at all (2)
-    code = (2 if aborted is not None else 1 if results.failed() else
-            2 if results.errored() else 0)
+    code = exit_status(2 if aborted is not None else 1 if results.failed() else
+                       2 if results.errored() else 0)   # a signal's 128 + N first
     if as_json:
         echo_json(results.to_json() | {"report": str(out), "exit": code})
     _print_summary(results, out, err=as_json)

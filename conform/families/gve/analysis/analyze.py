@@ -79,6 +79,21 @@ class Analysis:
     plot: PlotData | None = None
     tables: dict[str, Any] = field(default_factory=dict)
 
+    def code_meaning(self, code: Any) -> str:
+        """What an answer code of the report's code table means (GVE64 §13.7: bit 3 INTA,
+        bits 2..0 the error); -1 is the analyser's own: no code could be read."""
+        try:
+            n = int(code)
+        except (TypeError, ValueError):
+            return ""
+        if n < 0:
+            return "no code could be read: a garbled answer, or one missing its fields"
+        from conform.families.gve.spec import load_spec
+
+        err = load_spec().errors.get(n & 7)
+        text = err.meaning if err is not None else "not in the tables"
+        return text + ("; INTA set (an input interrupt is pending)" if n & 8 else "")
+
     @property
     def whole(self) -> bool:
         return self.exchanges is not None

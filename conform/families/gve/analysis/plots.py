@@ -174,6 +174,7 @@ def throughput_plot(a: Any) -> str | None:
                  color="#aa3377", alpha=0.6)
         ax2.set_ylabel("line utilisation %")
         ax2.set_ylim(0, max(100, float(100 * s["utilisation_host"].max()) * 1.1))
+        ax.set_ylim(bottom=0)   # both axes count from 0 at the same height
         h2, l2 = ax2.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
         fig.subplots_adjust(right=0.7)
