@@ -24,7 +24,7 @@ def test_reference_units_pass_every_check(vid):
     runs, _ = run_targets([f"emu:{vid}"], None)
     bad = [(c.id, c.expected, c.actual, c.detail) for c in runs[0].checks if c.grade is not Grade.PASS]
     assert not bad
-    assert len(runs[0].checks) >= 22
+    assert len(runs[0].checks) >= 23
 
 
 def test_every_mutant_is_caught():
@@ -141,3 +141,18 @@ def test_ctrl_c_and_signals_halt_a_real_unit(tmp_path, sig):
         assert state["planner"] == 0 and not state["halted"]
     finally:
         stop(proc)
+
+
+def test_the_emergency_parser_checks_fail_on_a_unit_without_it():
+    """marlin-2.1-adv's checks against a plain marlin-2.1 unit: M108 cannot end M109's wait and
+    M112 waits for the dwell, as queue.cpp reads nothing while a command blocks."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.marlin.conformance.checks import run_checks
+
+    target = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:plain")
+    run = run_checks(target, "marlin-2.1-adv", patterns=["*/halt/*"])
+    grades = {c.id.split("/", 2)[2]: c.grade for c in run.checks}
+    assert grades["halt/m108-breaks-m109"] is Grade.FAIL
+    assert grades["halt/m112-while-busy"] is Grade.FAIL
+    assert grades["halt/m112"] is Grade.PASS

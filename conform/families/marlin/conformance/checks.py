@@ -278,6 +278,17 @@ def m112_while_busy(s: Session) -> Outcome:
     return oks_before == 1, "the dwell's ok, then halted", got.text()
 
 
+def m108_breaks_m109(s: Session) -> Outcome:
+    """EMERGENCY_PARSER: M108 ends a heating wait as it arrives (nothing else is read while
+    M109 waits); the heater is switched off after."""
+    s.target.send(b"M109 S200\n")
+    s.wait(0.5)
+    s.target.send(b"M108\n")
+    got = s.collect(until=lambda ls: s.oks(ls) >= 2, timeout=2.0, linger=0.1)
+    s.talk(b"M104 S0\n")
+    return s.oks(got.lines) == 2, "M109's ok and M108's ok within 2 s", got.text()
+
+
 def reset_banner(s: Session) -> Outcome:
     s.talk(s.numbered("G90"))
     s.target.reset()
@@ -360,6 +371,10 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
     if v.on("AUTO_REPORT_TEMPERATURES"):
         out.append(MarlinCheck(f"{vid}/M155.cpp/report/m155", cmd["M155"],
                                "M155 S1 reports every second, S0 stops", m155))
+    if v.on("EMERGENCY_PARSER"):
+        out.append(MarlinCheck(f"{vid}/e_parser.h/halt/m108-breaks-m109", v.cite["options"] +
+                               "; " + cmd["M108"], "M108 ends M109's wait at once",
+                               m108_breaks_m109, heat=True))
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
