@@ -219,7 +219,8 @@ def grbl_sender(**kw) -> Sender:
 
 def gve_sender(**kw) -> Sender:
     def retry(a: bytes) -> bool:        # queue full (1) or damaged (2, 4): send it again
-        return a[:1] in (b"1", b"2", b"4")
+        code = int(a[:1], 16) & 7 if a[:1] and a[:1] in b"0123456789ABCDEF" else 0
+        return code in (1, 2, 4)           # bit 3 is INTA, not part of the code (§13.7)
     return Sender(b"\r", lambda a: a[:1] in b"0123456789ABCDEF" and len(a) > 0,
                   retry=retry, **kw)
 

@@ -543,3 +543,16 @@ def test_emulator_link_fault_is_named(tmp_path):
     c = doc["causes"][0]
     assert c["kind"] == "link-lost", doc["causes"]
     assert any("fault injection: link dropped" in e for e in c["evidence"])
+
+
+def test_gve_sender_that_halted_the_unit_and_waits_for_room_is_a_deadlock(tmp_path):
+    """The sender halts the unit (H, a pause button) and its streaming goes on: the vectors
+    queue up behind the halt (answered 8: accepted, INTA) until the queue is full, then every
+    try is refused as full (9) and the sender asks again, forever: the unit waits for G, the
+    sender for room."""
+    job = gve_job(600, size=3000)
+    job.insert(60, b"!0H\r")
+    ses = drive(gve_unit(), job, gve_sender(gap=0.005), tail=1.0, t_max=8.0)
+    doc = first(record(tmp_path / "dl.mcap", ses, GVE))
+    c = doc["causes"][0]
+    assert c["kind"] == "deadlock" and "refused as full" in c["evidence"][0], doc["causes"]

@@ -9,6 +9,8 @@ Two passes over :class:`~conform.diagnosis.facts.Facts`:
   directions dead or a recorded link event (``link-lost``), the host polling for room the unit
   never makes (``deadlock``), an alarm just before (``unit-alarm``), a byte known lost in an
   overflow just before (``buffer-overflow``).
+* **full loops**: a stall's length of tries all refused for want of room (``Exchange.full``):
+  the queue does not drain while the host keeps asking, a ``deadlock``.
 * **anomalies**: the family's events on their own — overflow episodes, noise bursts, misuse,
   starvation, alarms, link events — each a cause where no stall already claims it.
 
@@ -397,10 +399,38 @@ def _merge(causes: list[Cause]) -> list[Cause]:
     return out
 
 
+def _full_loops(f: Facts, claimed: set[int]) -> list[Cause]:
+    """Stretches longer than a stall where every line was refused for want of room: the
+    unit's queue did not drain (it holds) while the host kept asking: a deadlock."""
+    out = []
+    limit = stall_threshold(f)
+    run: list[Exchange] = []
+    for e in [*f.exchanges, None]:
+        if e is not None and e.full:
+            run.append(e)
+            continue
+        if e is not None and e.accepted is None and run:
+            continue                    # an unanswered retry does not end the loop
+        if run and (run[-1].t_answer or run[-1].t_sent) - run[0].t_sent >= limit:
+            t0, t1 = run[0].t_sent, run[-1].t_answer or run[-1].t_sent
+            held = _events(f, ("alarm", "hold"), t0 - BEFORE_S, t1)
+            claimed.update(id(ev) for ev in held)
+            why = f" after {held[0].text}" if held else ""
+            out.append(Cause("deadlock", 0.85 if held else 0.75, t0, t1,
+                             [f"{len(run)} tries of {_line(run[0])} refused as full from "
+                              f"{_fmt(t0)} to {_fmt(t1)}: the queue did not drain",
+                              *(_ev(ev) for ev in held[:4])], ADVICE["deadlock"],
+                             f"Both sides waited on each other from {_fmt(t0)}: the unit "
+                             f"held its full queue{why} and the host kept asking for room "
+                             f"for {t1 - t0:.3f} s.", sorted({x.n for x in run})))
+        run = []
+    return out
+
+
 def rank(f: Facts) -> list[Cause]:
     """Every cause found, most likely first."""
     claimed: set[int] = set()
-    found: list[Cause] = []
+    found: list[Cause] = _full_loops(f, claimed)
     for s in find_stalls(f):
         found += _stall_cause(f, s, claimed)
     found += _anomalies(f, claimed)

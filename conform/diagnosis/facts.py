@@ -41,6 +41,7 @@ class Exchange:
     accepted: bool | None = None    # True: done/ok; False: refused; None: no answer
     motion: bool = False            # a line that moves the machine
     in_flight: int = 0              # bytes the unit had not yet taken when it was sent
+    full: bool = False              # refused for want of room (send again later)
 
 
 @dataclass(slots=True)

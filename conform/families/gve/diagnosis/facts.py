@@ -51,7 +51,8 @@ def analysis_facts(a: Any, path: str) -> Facts:
             e = Exchange(frame, text, float(cols["t_cmd_last"][r]) - t0,
                          float(cols["t_ans_last"][r]) - t0 if answered else None,
                          answer, (clean and code == 0) if answered else None,
-                         name in MOTION, int(cols["cmd_bytes"][r]))
+                         name in MOTION, int(cols["cmd_bytes"][r]),
+                         full=clean and code == 1 and name in MOTION)    # §13.7 code 1
             exchanges.append(e)
             # a damaged answer's digit says nothing: its checksum must hold where there is one
             inta = bool(cols["inta"][r]) and clean and \
