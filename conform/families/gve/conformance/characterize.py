@@ -23,6 +23,7 @@ from conform.families.gve.conformance.target import GveTarget as Target
 from conform.families.gve.protocol.checksum import append_checksum
 
 RESET = Step(reset=True)
+A5_PULSES = 200  # the vector running while the queue fills (at V10: 20 s)
 
 
 def _s(text: str, cs: bool = False, **kw: Any) -> Step:
@@ -38,8 +39,12 @@ def _running(v: Any) -> list[Step]:
     return [_s("!0V10"), _s("!0C1000,0,0")]
 
 
-def _probe(q: str, v: Any) -> Script | None:
-    """The probe script for question ``q`` on variant ``v`` (None: nothing to send)."""
+def probe(q: str, v: Any) -> Script | None:
+    """The probe script for question ``q`` on variant ``v`` (None: nothing to send). Where a
+    zero-pulse vector tells the alternatives apart (A4, A14) the probe moves nothing (GVE64
+    §13.5.2: L0,0,0 is a normal vector without motion effect); A5 needs a vector running and
+    reads the position back once the queue has run, so that the vector beyond the capacity is
+    seen executed before ``excludes-running`` can be found."""
     hi_v = v.ranges["velocity"][1]
     p: list[Step]
     if q == "A1":
@@ -48,10 +53,13 @@ def _probe(q: str, v: Any) -> Script | None:
         p = [_s("!0S100")]
     elif q == "A3":
         p = [_s("!000,FF")]
-    elif q == "A4":
-        p = [_s("!0V1000"), _s("!0L1000,0,0"), _s("!0L1000,0,0")]
+    elif q == "A4":  # behind H the first L0,0,0 waits in the queue: may a second follow?
+        p = [_s("!0H", timeout=v.commands["H"].answer_within), _s("!0L0,0,0"),
+             _s("!0L0,0,0"), _s("!0D")]
     elif q == "A5":
-        p = [_s("!0V10")] + [_s(f"!0C{100 if i % 2 else -100},0,0") for i in range(v.queue + 1)]
+        p = [_s("!0V10"), _s(f"!0C{A5_PULSES},0,0")]
+        p += [_s("!0C0,0,0") for _ in range(v.queue - 1)]
+        p += [_s("!0C0,1,0"), _s("!0F"), Step(wait=A5_PULSES / 10.0 + 1.5), _s("!0PF")]
     elif q == "A6":
         p = [_s("!0A1000"), _s("!0A1001"), _s("!0A65535"), _s("!0A65536")]
     elif q == "A7":
@@ -77,11 +85,12 @@ def _probe(q: str, v: Any) -> Script | None:
         for gap in (0.05, 0.5, 1.5):
             p += [_raw(b"!0V10", answer=False), Step(wait=gap), _raw(b"00\r", timeout=0.2)]
     elif q == "A14":
-        p = [_s("!0L10,0,0")]
+        p = [_s("!0L0,0,0")]
     elif q == "A15":
         p = [_s("!0G")]
     elif q == "A16":
-        p = [_s("!0V1000"), _s("!0C3000,0,0"), Step(wait=0.5), _s("!0H", answer=False),
+        halt = _s("!0H", answer=False, timeout=v.commands["H"].answer_within)
+        p = [_s("!0V1000"), _s("!0C3000,0,0"), Step(wait=0.5), halt,
              _s("!0V500", answer=False), Step(wait=2.0), _s("!0@")]
     elif q == "A17":
         p = [_s("!0J", timeout=0.3), _s("!0@", wait=0.5, timeout=0.3),
@@ -169,7 +178,7 @@ def _characterize(spec: Any, target: Target, variant_id: str,
     observed: dict[str, list[Any]] = {}
     for n in range(passes):
         for q in spec.questions:
-            script = _probe(q, variant)
+            script = probe(q, variant)
             if script is None:
                 findings[q] = Finding(q, "not-probed", belief[q], [], [], [],
                                       f"{variant_id} has nothing to probe {q} with")

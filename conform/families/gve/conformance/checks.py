@@ -16,12 +16,19 @@ from dataclasses import dataclass
 from typing import Any
 
 from conform.conformance.results import INFO, MUST
+from conform.families.gve.conformance.motion_free import (
+    motion_free_checks,
+    queue_edge_steps,
+    zero_line,
+)
+from conform.families.gve.conformance.question_checks import question_checks
 from conform.families.gve.conformance.script import ENVIRONMENT, POSITION, Script, Step
 from conform.families.gve.protocol import encode_command
 from conform.families.gve.protocol.checksum import append_checksum, checksum
 
 RESET = Step(reset=True)
 OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = 0, 1, 2, 3, 4, 5, 6, 7
+ZERO_EXTRA = "0,1,0"  # the vector beyond the queue's capacity: one Y pulse, seen if executed
 AT_ONCE_S = 0.05  # tolerance of "the answer is sent at once" (GVE64 §13.7) on a link
 
 # a typical valid value per range name
@@ -92,6 +99,10 @@ class _Builder:
         self.manual = variant.manual
         self.travel = travel
         self.deep = False
+        # may the run move axes? Without motion the valid forms of L, C, W and packets carry
+        # zero-pulse vectors and zero-length reference moves (docs/conformance.md, "What a
+        # default run verifies"): the same answers and framing, without a pulse
+        self.motion = True
         self.out: list[Check] = []
         self.range_questions: dict[str, tuple[str, ...]] = {}
         hi = variant.ranges.get("velocity", (0, 0))[1]
@@ -185,13 +196,16 @@ class _Builder:
 
     def valid_args(self, cid: str) -> list[Any]:
         if cid in _VALID_ARGS:
+            if cid == "W" and not self.motion:
+                return ["X", 0, 1000, 0, 500]
             return list(_VALID_ARGS[cid])
         cmd = self.v.commands.get(cid) or self._foreign(cid)
         args: list[Any] = []
         for p in cmd.params:
             if p.per_axis:
                 if p.kind == "int":
-                    args += [100, 0, 0][: max(p.min_count or 3, 1)]
+                    pulses = 100 if self.motion else 0
+                    args += [pulses, 0, 0][: max(p.min_count or 3, 1)]
                 else:
                     n = len(self.v.axes)
                     args += [_TYPICAL.get(p.range_name or "", 1000)] * n
@@ -208,17 +222,14 @@ class _Builder:
         """A long, slow C vector: the unit is RUN=1 for a good while."""
         return [self.raw("!0V10", cs), self.raw(f"!0C{self.travel},0,0", cs)]
 
+    def held(self, cs: bool = False) -> list[Step]:
+        """INTA=1 with a zero-pulse vector held for G (GVE64 §13.5.9): H with nothing
+        running, then ``C0,0,0``; no axis moves."""
+        return [self.halt(cs), self.raw(zero_line(cs), cs)]
+
     def inta(self, cs: bool = False) -> list[Step]:
         """INTA=1 by HALT during a move (GVE64 §13.5.9)."""
         return [*self.running(cs), self.halt(cs)]
-
-    def queue_fill(self, n: int) -> list[Step]:
-        """``n`` C vectors at V10, alternating direction so the net travel stays small."""
-        steps = [self.raw("!0V10")]
-        for i in range(n):
-            sign = "" if i % 2 == 0 else "-"
-            steps.append(self.raw(f"!0C{sign}{self.travel},20,0"))
-        return steps
 
     def position(self, x: int, y: int, z: int) -> list[Step]:
         if "N<axis>" in self.v.commands:
@@ -234,9 +245,9 @@ class _Builder:
             if g == "checksum-on":
                 cs = True
             elif g == "queue-full":
-                steps += self.queue_fill(self.v.queue)
-            elif g == "inta":
-                steps += self.inta()
+                steps += queue_edge_steps(self, "!0C0,0,0")[0][:-1]
+            elif g == "inta":  # H sets INTA=1 whether or not a vector runs (§13.5.9)
+                steps += self.inta() if self.motion else [self.halt()]
             elif g.startswith("position="):
                 x, y, z = (int(t) for t in g.split("=", 1)[1].split(","))
                 steps += self.position(x, y, z)
@@ -257,12 +268,13 @@ def _edge_text(kind: str, value: int) -> str | None:
 
 
 def generate(spec: Any, variant_id: str, *, travel: int = 100000,
-             deep: bool = False) -> list[Check]:
+             deep: bool = False, motion: bool = True) -> list[Check]:
     """Every directed and example check of one variant (nothing runs). ``deep`` (the full
     profile) also tries the range edges of every axis of per-axis parameters."""
     v = spec.variant(variant_id)
     b = _Builder(spec, v, travel)
     b.deep = deep
+    b.motion = motion
     universe = [cid for cid in spec.commands]
     for cid in universe:
         if cid in v.commands:
@@ -270,6 +282,8 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
         else:
             _absent_checks(b, cid)
     _semantic_checks(b)
+    motion_free_checks(b)
+    question_checks(b)
     _example_checks(b)
     return b.out
 
@@ -337,7 +351,7 @@ def _valid_questions(cid: str) -> tuple[str, ...]:
 
 def _valid_setup(b: _Builder, cid: str, cs: bool = False) -> tuple[list[Step], int | None]:
     if cid == "G":
-        return b.inta(cs), OK
+        return (b.inta(cs) if b.motion else b.held(cs)), OK
     if cid == ">":
         return [b.raw("!0V1000", cs)], None
     if cid == "R":
@@ -349,7 +363,7 @@ def _valid_setup(b: _Builder, cid: str, cs: bool = False) -> tuple[list[Step], i
 
 def _valid_steps(b: _Builder, cid: str, cs: bool = False) -> list[Step]:
     if cid in ("*S", "*E"):
-        c = b.cmd_step("C", [100, 0, 0], cs, answer=False, subject=False)
+        c = b.cmd_step("C", b.valid_args("C"), cs, answer=False, subject=False)
         # the vector the packet carried is accounted for by the position it reached
         return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs),
                 Step(wait=1.0), b.cmd_step("PF", [], cs, subject=False)]
@@ -465,10 +479,13 @@ def _absent_checks(b: _Builder, cid: str) -> None:
 
 def _semantic_checks(b: _Builder) -> None:
     v = b.v
-    # queue capacity (GVE64 §13.5.2; A5): `queue` vectors fit, the next answers 1; F shows it
-    fill = b.queue_fill(v.queue)
-    b.add("C", "queue-full", f"the queue holds {v.queue} C vectors; the next answers 1",
-          [RESET, *fill, b.raw(f"!0C{b.travel},20,0", subject=True),
+    # queue capacity (GVE64 §13.5.2; A5): `queue` vectors fit while one runs, the next answers
+    # 1; F shows it. Whether the vector beyond was taken is read back once the queue has run:
+    # answered 0 and never executed is a FAIL (§13.7 code 1), whatever A5 says
+    fill, drain = queue_edge_steps(b, f"!0C{ZERO_EXTRA}")
+    b.add("C", "queue-full", f"the queue holds {v.queue} C vectors with one running; the next "
+          "answers 1; the position read back after the queue has run shows what was executed",
+          [RESET, *fill, b.cmd_step("F", [], subject=False), Step(wait=drain),
            b.cmd_step("F", [], subject=False), b.cmd_step("PF", [], subject=False)],
           clause=f"{b.clause('C')}, {v.clause('queue')}", intent=QUEUE_FULL, questions=("A5",))
     # the @ index (GVE64 §13.5.13; A10)
@@ -601,6 +618,8 @@ def _example_checks(b: _Builder) -> None:
             kind = POSITION if text[2:4] in ("PF", "P4") or text[2:3] == "P" else ""
             steps.append(Step(line=text.encode() + b"\r", answer=not packet_inner,
                               subject=True, kind=kind))
+        if "queue-full" in ex.given:  # was the vector beyond the capacity executed?
+            steps += [Step(wait=queue_edge_steps(b, "")[1]), b.cmd_step("PF", [], subject=False)]
         na = None
         if b.manual != "GVE64" and not any(c.startswith(b.manual) for c in ex.clauses):
             na = f"{ex.id} is a GVE64 example"

@@ -35,11 +35,27 @@ def _bodies(body: str) -> list[str]:
     return [body, body[: m.start()]] if m else [body]
 
 
+_NO_COUNT = re.compile(r"[^1-9]*")  # no reading of such a field gives a count other than 0
+_LETTER_TAIL = re.compile(r"[A-Fa-f][0-9A-Fa-f]")  # a checksum no decimal reading takes for one
+_W_STILL = re.compile(r"^W[A-Za-z],-?0+,\d+,0+(?:,\d+)?(?:,[0-9A-Fa-f]{2})?$")
+
+
 def _zero_vector(body: str) -> bool:
-    """``L0,0,0`` / ``C0,0``: a vector of no pulses (whatever a unit makes of it, nothing moves)."""
-    v = _VECTOR.match(body)
-    return v is not None and v.end() == len(body) and all(
-        int(x) == 0 for x in v.group(1).split(","))
+    """``L0,0,0`` / ``C00,-0,0`` / ``C0#,0,0`` / ``C0,0,0,A8``: no field holds a digit 1-9
+    (a checksum tail that reads as a fourth field starts with a letter): whatever a unit makes
+    of the line, no axis gets a pulse (GVE64 §13.5.2: L0,0,0 has no motion effect)."""
+    if body[:1] not in ("L", "C"):
+        return False
+    fields = body[1:].split(",")
+    return all(_NO_COUNT.fullmatch(f) or (i == len(fields) - 1 and i >= 3
+                                          and _LETTER_TAIL.fullmatch(f))
+               for i, f in enumerate(fields))
+
+
+def _w_still(body: str) -> bool:
+    """``WX,0,1000,0,500``: a reference move of no length either way (GVE64 §13.5.7: n2 and
+    n4 are the longest travel to and from the switch): nothing moves."""
+    return _W_STILL.match(body) is not None
 
 
 def hazards(line: bytes, idle: bool = False) -> set[str]:
@@ -58,12 +74,10 @@ def hazards(line: bytes, idle: bool = False) -> set[str]:
     out: set[str] = set()
     for body in _bodies(text):
         if address == 7:
-            if body.startswith("V") and body[1:].lstrip("0") != "":
-                out.add("actuator")
+            if body.startswith("V") and not _NO_COUNT.fullmatch(body[1:]):
+                out.add("actuator")  # a spindle speed other than 0 (GVE64 §13.6)
         elif address == 0:
-            if body[:1] in ("L", "C") and _zero_vector(body):
-                pass
-            elif body[:1] == "G" and idle:
+            if _zero_vector(body) or (body[:1] == "G" and idle) or _w_still(body):
                 pass
             elif body[:1] in ("L", "C", "G", "W") or body.startswith(("Y+", "Y&")):
                 out.add("motion")

@@ -23,7 +23,8 @@ def suite(spec: Any, variant_id: str, *, patterns: Sequence[str] = (),
     travel = 100000
     if guard is not None and guard.max_steps is not None:
         travel = min(travel, guard.max_steps)
-    checks = generate(spec, variant_id, travel=travel, deep=profile == "full")
+    motion = guard is None or guard.allow_motion
+    checks = generate(spec, variant_id, travel=travel, deep=profile == "full", motion=motion)
     if machine:
         checks.append(machine_check(spec, variant_id))
     return select(checks, patterns)
