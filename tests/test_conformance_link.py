@@ -35,10 +35,13 @@ SUBSET = ["V/valid", "V/checksum", "V/bad-checksum", "V/range/velocity/hi+1", "@
 
 
 @contextmanager
-def served(variant: str, *extra: str, control: str | None = None):
+def served(variant: str, *extra: str, control: str | None = None, mutant: str | None = None):
     more = ["--control", control] if control else []
-    emu = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", variant, *extra,
-                            *more], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    cmd = [sys.executable, "-m", "conform", "emulate", "serve", variant, *extra, *more]
+    if mutant is not None:  # a deviant unit (no CLI option): the family's serve() names it
+        cmd = [sys.executable, "-c", "from conform.families.gve.serve import serve; "
+               f"serve({variant!r}, baud=115200, mutant={mutant!r})"]
+    emu = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert emu.stdout is not None
         port = emu.stdout.readline().strip()

@@ -18,8 +18,10 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           faults: str | None = None, seed: int | None = None, control_path: str | None = None,
           link_path: str | None = None, record_path: str | None = None,
           switch_pairs: tuple[str, ...] = (), answer_delay: float = 0.0,
-          truth_path: str | None = None, **_ignored: Any) -> None:
-    """Serve until SIGINT/SIGTERM; the first line of stdout is the device path."""
+          truth_path: str | None = None, mutant: str | None = None, **_ignored: Any) -> None:
+    """Serve until SIGINT/SIGTERM; the first line of stdout is the device path. ``mutant``
+    serves a deviant unit (conform.families.gve.conformance.mutants) instead of the reference,
+    so that the suite can be run against it over a real pty as against a real unit."""
     from conform.emulator.launch import (
         announce,
         check_pacing,
@@ -38,8 +40,15 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
     dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))
     check_pacing(baud, answer_delay)
     t_start = time.monotonic()  # the unit runs on the monotonic wall clock
+    cls: Any = Unit
+    if mutant is not None:
+        from conform.families.gve.conformance.mutants import MUTANTS
+
+        if mutant not in MUTANTS:
+            raise UserError(f"unknown mutant {mutant!r} (known: {', '.join(MUTANTS)})")
+        cls = MUTANTS[mutant].cls
     try:
-        unit = Unit(v, dialect, t0=t_start, switches=_switches(switch_pairs),
+        unit = cls(v, dialect, t0=t_start, switches=_switches(switch_pairs),
                     answer_delay=answer_delay)
     except ValueError as exc:
         raise UserError(f"--switch: {exc}") from None

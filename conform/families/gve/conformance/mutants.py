@@ -18,7 +18,7 @@ from conform.families.gve.protocol.answers import encode_answer
 
 Unit: Any = unit_class()
 
-OK, SYNTAX, RANGE, NOTHING_TO_GO = 0, 4, 5, 6
+OK, QUEUE_FULL, SYNTAX, RANGE, NOTHING_TO_GO = 0, 1, 4, 5, 6
 
 
 class WrongRangeCodeV(Unit):
@@ -106,6 +106,49 @@ class SwappedAxes(Unit):
         return tuple(pos)
 
 
+class QueueEdgeDrop(Unit):
+    """The first C vector beyond the queue's capacity is answered 0 and then lost (GVE64
+    §13.5.2, §13.7 code 1): a unit that looks like A5 ``excludes-running`` until the vector
+    should have executed."""
+
+    _edge_taken = False
+
+    def _cmd_C(self, args: tuple, t: float) -> Any:
+        if self.queue_len < self.variant.queue:
+            self._edge_taken = False
+        r = super()._cmd_C(args, t)
+        if r == QUEUE_FULL and self._kept is None and not self._edge_taken:
+            self._edge_taken = True
+            return OK
+        return r
+
+
+class LowerCaseSyntax(Unit):
+    """A lower-case mnemonic is answered 4 (syntax), neither A21 alternative (3, or taken as
+    the upper-case command)."""
+
+    def _parse(self, line: bytes) -> Any:
+        r = super()._parse(line)
+        if (isinstance(r, Rejection) and r.kind == "unknown" and line[2:3].islower()):
+            return dataclasses.replace(r, code=SYNTAX)
+        return r
+
+
+class AnswersCrLf(Unit):
+    """Every answer ends with CR LF instead of CR alone (GVE64 §13.7: Enter 0Dh)."""
+
+    def poll(self, t: float) -> list[tuple[float, bytes]]:
+        return [(due, data.replace(b"\r", b"\r\n")) for due, data in super().poll(t)]
+
+
+class NoQueueFullFlag(Unit):
+    """F never shows the queue-full bit (bit 5, GVE64 §13.5.12)."""
+
+    def _cmd_F(self, args: tuple, t: float) -> Any:
+        code, fields = super()._cmd_F(args, t)
+        return code, tuple("%02X" % (int(str(f), 16) & ~self._bit_full) for f in fields)
+
+
 @dataclass(frozen=True)
 class Mutant:
     name: str
@@ -131,6 +174,14 @@ MUTANTS: dict[str, Mutant] = {m.name: m for m in (
     Mutant("answer-no-cr", FlagsWithoutCR, (), ("F/valid",), "the answer to F has no CR"),
     Mutant("axes-swapped", SwappedAxes, (), ("position", "L/position-1"),
            "positions with X and Y swapped"),
+    Mutant("queue-edge-drop", QueueEdgeDrop, (), ("C/queue-full", "C/queue-zero"),
+           "a vector beyond the queue's capacity is answered 0 and lost"),
+    Mutant("lower-case-4", LowerCaseSyntax, (), ("question/A21",),
+           "a lower-case mnemonic answers 4"),
+    Mutant("answer-crlf", AnswersCrLf, (), ("framing/answers",),
+           "answers end with CR LF"),
+    Mutant("no-queue-full-flag", NoQueueFullFlag, (), ("C/queue-zero",),
+           "F never shows the queue-full bit"),
 )}
 
 

@@ -1,0 +1,178 @@
+"""Issue 24's bug classes: the queue's edge, every open question asked in a run, answers judged
+whole, and what a default run (no opt-in) verifies without moving an axis; each class with its
+project mutant, killed by the check meant for it — over a real pty where the class is about
+what a link shows."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from test_conformance_link import served  # conform emulate serve (or a mutant) on a pty
+
+from conform.conformance.results import Grade
+from conform.conformance.runner import RunOptions
+from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.motion_free import zero_line
+from conform.families.gve.conformance.runner import Runner
+from conform.families.gve.conformance.safety import Guard, hazards
+from conform.families.gve.conformance.script import skip_reason
+from conform.families.gve.conformance.suite import suite
+from conform.families.gve.conformance.target import GveEmuTarget, GveLinkTarget, emulator_factory
+from conform.families.gve.protocol.checksum import append_checksum
+from conform.link import open_port
+
+NO_OPT_IN = Guard(False, None, False)
+VARIANTS = ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124")
+
+
+def _emu_run(spec, variant, patterns, *, mutant=None, dialect=None, guard=None):
+    target = GveEmuTarget(emulator_factory(spec, variant, dialect, mutant), "emu", guard)
+    checks = suite(spec, variant, patterns=patterns, guard=guard, machine=False)
+    return {c.key: c for c in Runner(spec, target, variant, options=RunOptions()).run(checks).checks}
+
+
+def _link_run(spec, port, variant, patterns, guard=NO_OPT_IN):
+    target = GveLinkTarget(open_port(port, 115200, 0.1), port, guard, 115200)
+    try:
+        checks = suite(spec, variant, patterns=patterns, guard=guard, machine=False)
+        run = Runner(spec, target, variant, options=RunOptions()).run(checks)
+    finally:
+        target.close()
+    return {c.key: c for c in run.checks}
+
+
+# -- 1. the queue's edge ----------------------------------------------------------------------
+
+def test_a_vector_answered_0_beyond_capacity_and_lost_fails(spec):
+    got = _emu_run(spec, "gve64-v19", ["C/queue-full", "C/queue-zero", "*/13.7/queue-full"],
+                   mutant="queue-edge-drop")
+    for key in ("C/queue-full", "C/queue-zero", "queue-full"):
+        assert got[key].grade is Grade.FAIL, (key, got[key].grade, got[key].detail)
+        assert got[key].question is None  # no open question explains a lost vector
+
+
+def test_a5_is_concluded_once_the_extra_vector_was_seen_executed(spec):
+    """A unit that does take capacity + 1 vectors while one runs, and executes the extra one,
+    is still the A5 alternative: the position read back after the queue has run shows it."""
+    dialect = spec.dialect({"A5": "excludes-running"})
+    got = _emu_run(spec, "gve64-v19", ["C/queue-full", "question/A5"], dialect=dialect)
+    for key in ("C/queue-full", "question/A5"):
+        assert got[key].grade is Grade.DEVIATION, (key, got[key].detail)
+        assert (got[key].question, got[key].alternative) == ("A5", "excludes-running")
+    script = [s.describe() for s in select(generate(spec, "gve64-v19"), ["C/queue-full"])[0]
+              .script]
+    assert script[-1] == "!0PF" and script[-3].startswith("(wait")  # read back after the drain
+
+
+# -- 2. every open question is asked --------------------------------------------------------
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_every_open_question_has_an_info_check(spec, variant):
+    checks = {c.key: c for c in generate(spec, variant)}
+    for q in spec.questions:
+        c = checks[f"question/{q}"]
+        assert c.level == "INFO" and c.questions == (q,)
+        # N/A only where the variant lacks the command asked about: XM (v10: A8), EFW (GVE124)
+        assert c.na is None or (variant, q) in {("gve64-v10", "A8"), ("gve124", "A18")}, c.na
+
+
+# the alternatives a probe cannot tell apart on GVE64 v19 (the variant makes them equal)
+SAME_ON_V19 = {("A7", "rate-limited"), ("A19", "none"), ("A20", "missing-reads-0")}
+
+
+def test_each_alternative_is_named_by_its_question_check(spec):
+    for q, question in spec.questions.items():
+        for alt in question.alternatives:
+            if alt == spec.dialect()[q]:
+                continue
+            got = _emu_run(spec, "gve64-v19", [f"question/{q}"],
+                           dialect=spec.dialect({q: alt}))[f"question/{q}"]
+            if (q, alt) in SAME_ON_V19:
+                assert got.grade is Grade.PASS, (q, alt, got.detail)
+            else:
+                assert got.grade is Grade.DEVIATION, (q, alt, got.grade, got.detail)
+                assert (got.question, got.alternative) == (q, alt)
+
+
+def test_a_lower_case_answer_no_alternative_lists_fails_the_a21_check(spec):
+    got = _emu_run(spec, "gve64-v19", ["question/A21", "unknown-command"],
+                   mutant="lower-case-4")
+    assert got["question/A21"].grade is Grade.FAIL
+    assert got["unknown-command"].grade is Grade.PASS  # what caught nothing before
+
+
+def test_default_run_asks_all_but_the_motion_and_eeprom_questions(spec):
+    asked = {c.questions[0] for c in suite(spec, "gve64-v19", patterns=["question/*"],
+                                           guard=NO_OPT_IN, machine=False)
+             if skip_reason(c.script, NO_OPT_IN, False) is None}
+    assert set(spec.questions) - asked == {"A5", "A16", "A18", "A25", "A26", "A27"}
+
+
+# -- 3. answers judged whole, over a pty --------------------------------------------------------
+
+FRAMING = ["framing/answers", "V/valid", "F/valid", "PF/valid", "SR/word-2", "H/idle"]
+
+
+@pytest.mark.slow
+def test_cr_lf_answers_fail_every_directed_check_over_a_pty(spec):
+    with served("gve64-v19", mutant="answer-crlf") as port:
+        bad = _link_run(spec, port, "gve64-v19", FRAMING)
+    for key, c in bad.items():
+        assert c.grade is Grade.FAIL, (key, c.grade, c.detail)
+        assert "after the answer's CR" in c.detail or "LF" in c.detail, (key, c.detail)
+
+
+@pytest.mark.slow
+def test_the_reference_over_a_pty_passes_the_framing_checks(spec):
+    with served("gve64-v19", "--baud", "115200") as port:
+        good = _link_run(spec, port, "gve64-v19", FRAMING)
+    assert {k: c.grade for k, c in good.items()} == {k: Grade.PASS for k in good}
+
+
+# -- 4. verified without opt-in ---------------------------------------------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mutant", ["queue-edge-drop", "no-queue-full-flag", "queue-one-short"])
+def test_queue_mutants_are_killed_without_opt_in_over_a_pty(spec, mutant):
+    with served("gve64-v19", mutant=mutant) as port:
+        got = _link_run(spec, port, "gve64-v19", ["C/queue-zero", "C/queue-full"])
+    assert got["C/queue-full"].grade is Grade.SKIPPED  # moves: needs the opt-in
+    assert got["C/queue-zero"].grade is Grade.FAIL, got["C/queue-zero"].detail
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_what_runs_without_opt_in_sends_no_pulse(spec, variant):
+    """Every vector a default run sends holds no digit 1-9 in any field (a checksum tail that
+    could read as a field starts with a letter), every W no length: whatever a unit makes of
+    the line, nothing moves."""
+    checks = suite(spec, variant, guard=NO_OPT_IN, machine=False)
+    sent = [s.line for c in checks if c.na is None and skip_reason(c.script, NO_OPT_IN, False)
+            is None for s in c.script if s.line]
+    vectors = [ln for ln in sent if re.match(rb"^!0[LC]", ln)]
+    assert len(vectors) > spec.variant(variant).queue  # the queue fill among them
+    for ln in vectors:
+        fields = ln[3:].rstrip(b"\r").split(b",")
+        assert all(not re.search(rb"[1-9]", f) or (i >= 3 and re.fullmatch(rb"[A-F][0-9A-F]", f))
+                   for i, f in enumerate(fields)), ln
+    for ln in sent:
+        if re.match(rb"^!0W", ln):
+            assert re.match(rb"^!0W[A-Z],-?0+,\d+,0+", ln), ln
+
+
+def test_zero_lines_with_checksums_are_motion_free():
+    for mnemonic in ("C", "L"):
+        text = zero_line(True, mnemonic)
+        line = append_checksum(text.encode()) + b"\r"
+        assert not hazards(line) and not re.search(rb"[1-9]", line[3:-4]), line
+    assert hazards(b"!0C0,0,0,38\r") == {"motion"}  # a tail that reads as 38 pulses on A
+    assert hazards(b"!0WX#,0,1000,0,500\r") == {"motion"}  # '#' might shift a speed into a length
+
+
+def test_default_run_skips_fewer_checks(spec):
+    """107 were SKIPPED for gve64-v19 without opt-in before these motion-free forms."""
+    checks = suite(spec, "gve64-v19", guard=NO_OPT_IN, machine=False)
+    skipped = [c for c in checks if c.na is None and skip_reason(c.script, NO_OPT_IN, False)]
+    assert len(skipped) <= 86, len(skipped)
+    assert not [c.key for c in skipped if c.key.endswith(("/valid", "/checksum"))
+                and c.key.split("/")[0] in ("L", "C", "G", "*S", "*E", "W")]
