@@ -17,6 +17,7 @@ from typing import Any
 
 from conform.conformance.results import INFO, MUST
 from conform.families.gve.conformance.motion_free import (
+    SETTLE_S,
     motion_free_checks,
     queue_edge_steps,
     zero_line,
@@ -366,12 +367,14 @@ def _valid_steps(b: _Builder, cid: str, cs: bool = False) -> list[Step]:
         c = b.cmd_step("C", b.valid_args("C"), cs, answer=False, subject=False)
         # the vector the packet carried is accounted for by the position it reached
         return [b.cmd_step("*S", [], cs, answer=False), c, b.cmd_step("*E", [1], cs),
-                Step(wait=1.0), b.cmd_step("PF", [], cs, subject=False)]
+                Step(wait=1.0 if b.motion else SETTLE_S), b.cmd_step("PF", [], cs, subject=False)]
     if cid == "J":
         return [b.cmd_step("J", [], cs), b.raw("!0?", False, wait=2.2, ready=True)]
     step = b.cmd_step(cid, b.valid_args(cid), cs)
     if cid in ("L", "C", "W"):
-        return [step, Step(wait=1.5), b.cmd_step("PF", [], cs, subject=False)]
+        # a move runs its course; zero-pulse vectors (no motion allowed) only need working off
+        return [step, Step(wait=1.5 if b.motion else SETTLE_S),
+                b.cmd_step("PF", [], cs, subject=False)]
     return [step]
 
 
