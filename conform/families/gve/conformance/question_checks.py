@@ -16,7 +16,7 @@ from conform.families.gve.conformance.characterize import probe
 from conform.families.gve.conformance.script import ENVIRONMENT
 
 
-def _on_a_link(q: str, steps: tuple) -> tuple:
+def _eeprom_by_shape(q: str, steps: tuple) -> tuple:
     """A28 asks what the EEPROM held at delivery: a unit in use holds its own settings, so the
     answer is compared by its shape on a real unit (exactly on the emulator)."""
     if q != "A28":
@@ -26,6 +26,8 @@ def _on_a_link(q: str, steps: tuple) -> tuple:
 
 
 def question_checks(b: Any) -> None:
+    """``question/An`` for every open question; its last line is the subject (NOT-APPLICABLE
+    where the variant lacks what the probe needs)."""
     for q, question in b.spec.questions.items():
         clause = next((c for c in question.clauses if c.startswith(b.manual + " ")),
                       question.clauses[0])
@@ -36,6 +38,6 @@ def question_checks(b: Any) -> None:
             continue
         last = max(i for i, s in enumerate(script) if s.line)
         steps = tuple(dataclasses.replace(s, subject=True) if i == last else s
-                      for i, s in enumerate(_on_a_link(q, script)))
+                      for i, s in enumerate(_eeprom_by_shape(q, script)))
         b.add(None, f"question/{q}", f"{q}: {question.question}", steps, clause=clause,
               questions=(q,))
