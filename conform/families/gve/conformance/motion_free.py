@@ -87,6 +87,15 @@ def motion_free_checks(b: Any) -> None:
           [RESET, b.halt(), b.raw(zero), b.raw(zero), b.cmd_step("SR", [6]),
            b.cmd_step("G", []), Step(wait=SETTLE_S), sr6, flags, *_read_position(b)],
           clause=_cites(b, "G", "SR", "C"), intent=OK)
+    # the manual's recovery sequence, zero-pulse: K keeps the held queue, INTA and ST4-6; one
+    # L fits (a C does not); R brings them back and G works them off (§13.5.9)
+    b.add("K", "zero-recovery", "H, two zero-pulse vectors held; K, a C refused (1), L0,0,0 "
+          "accepted; R restores the queue and INTA; G answers 0 and empties it",
+          [RESET, b.halt(), b.raw(zero), b.raw(zero), b.raw("!0K", subject=True), sr6,
+           b.raw(zero), b.raw(f"!0L{ZERO}"), Step(wait=SETTLE_S), flags,
+           b.raw("!0R", subject=True), sr6, flags, b.cmd_step("G", []), Step(wait=SETTLE_S),
+           flags, *_read_position(b)],
+          clause=_cites(b, "K", "R", "G"), intent=OK)
     # a packet of zero-pulse vectors (and a B) is answered with its count (§13.3.3)
     if "*S" in v.commands:
         packet = [b.cmd_step("*S", [], answer=False, subject=False),
