@@ -17,13 +17,13 @@ from typing import Any
 from conform.conformance.suite import now_iso
 from conform.conformance.target import HarnessError
 from conform.families.gve.conformance.expect import Reference, first_mismatch, show
+from conform.families.gve.conformance.motion_free import queue_edge_steps
 from conform.families.gve.conformance.profile import Profile
 from conform.families.gve.conformance.script import ENVIRONMENT, Script, Step, run_script, skip_reason
 from conform.families.gve.conformance.target import GveTarget as Target
 from conform.families.gve.protocol.checksum import append_checksum
 
 RESET = Step(reset=True)
-A5_PULSES = 200  # the vector running while the queue fills (at V10: 20 s)
 
 
 def _s(text: str, cs: bool = False, **kw: Any) -> Step:
@@ -57,9 +57,8 @@ def probe(q: str, v: Any) -> Script | None:
         p = [_s("!0H", timeout=v.commands["H"].answer_within), _s("!0L0,0,0"),
              _s("!0L0,0,0"), _s("!0D")]
     elif q == "A5":
-        p = [_s("!0V10"), _s(f"!0C{A5_PULSES},0,0")]
-        p += [_s("!0C0,0,0") for _ in range(v.queue - 1)]
-        p += [_s("!0C0,1,0"), _s("!0F"), Step(wait=A5_PULSES / 10.0 + 1.5), _s("!0PF")]
+        fill, drain = queue_edge_steps(v, "!0C0,1,0")
+        p = [*fill, _s("!0F"), Step(wait=drain), _s("!0PF")]
     elif q == "A6":
         p = [_s("!0A1000"), _s("!0A1001"), _s("!0A65535"), _s("!0A65536")]
     elif q == "A7":

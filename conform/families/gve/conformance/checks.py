@@ -246,7 +246,7 @@ class _Builder:
             if g == "checksum-on":
                 cs = True
             elif g == "queue-full":
-                steps += queue_edge_steps(self, "!0C0,0,0")[0][:-1]
+                steps += queue_edge_steps(self.v, "", min(20, self.travel))[0][:-1]
             elif g == "inta":  # H sets INTA=1 whether or not a vector runs (§13.5.9)
                 steps += self.inta() if self.motion else [self.halt()]
             elif g.startswith("position="):
@@ -485,7 +485,7 @@ def _semantic_checks(b: _Builder) -> None:
     # queue capacity (GVE64 §13.5.2; A5): `queue` vectors fit while one runs, the next answers
     # 1; F shows it. Whether the vector beyond was taken is read back once the queue has run:
     # answered 0 and never executed is a FAIL (§13.7 code 1), whatever A5 says
-    fill, drain = queue_edge_steps(b, f"!0C{ZERO_EXTRA}")
+    fill, drain = queue_edge_steps(v, f"!0C{ZERO_EXTRA}", min(20, b.travel))
     b.add("C", "queue-full", f"the queue holds {v.queue} C vectors with one running; the next "
           "answers 1; the position read back after the queue has run shows what was executed",
           [RESET, *fill, b.cmd_step("F", [], subject=False), Step(wait=drain),
@@ -622,7 +622,8 @@ def _example_checks(b: _Builder) -> None:
             steps.append(Step(line=text.encode() + b"\r", answer=not packet_inner,
                               subject=True, kind=kind))
         if "queue-full" in ex.given:  # was the vector beyond the capacity executed?
-            steps += [Step(wait=queue_edge_steps(b, "")[1]), b.cmd_step("PF", [], subject=False)]
+            drain = queue_edge_steps(b.v, "", min(20, b.travel))[1]
+            steps += [Step(wait=drain), b.cmd_step("PF", [], subject=False)]
         na = None
         if b.manual != "GVE64" and not any(c.startswith(b.manual) for c in ex.clauses):
             na = f"{ex.id} is a GVE64 example"

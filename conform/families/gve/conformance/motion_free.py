@@ -123,14 +123,19 @@ def motion_free_checks(b: Any) -> None:
           clause=_answers_clause(b))
 
 
-def queue_edge_steps(b: Any, extra: str) -> tuple[list[Step], float]:
-    """One slow vector running and zero-pulse vectors behind it up to the capacity (GVE64
-    §13.5.2: "1 is executed, the others wait in the queue"), then ``extra`` — the vector
-    beyond the capacity; and how long until everything has run. The running vector is short
-    (at most 200 pulses at V10) so that the queue drains within the check and the position read
-    back afterwards shows whether ``extra`` was executed."""
-    pulses = min(200, b.travel)
-    steps = [b.raw("!0V10"), b.raw(f"!0C{pulses},0,0")]
-    steps += [b.raw(f"!0C{ZERO}") for _ in range(b.v.queue - 1)]
-    steps.append(b.raw(extra, subject=True))
+def queue_edge_steps(v: Any, extra: str, pulses: int = 20) -> tuple[list[Step], float]:
+    """A short slow vector (``pulses`` at V10) started and stopped by H at once, zero-pulse
+    vectors held behind it up to the capacity (GVE64 §13.5.2: "1 is executed, the others wait in
+    the queue"), G to run it again, then ``extra`` — the vector beyond the capacity, sent while
+    one runs (A5); and how long until everything has run. The fill happens while the queue is
+    held, so no link is too slow for it; the position read back once the queue has run shows
+    whether ``extra`` was executed."""
+    halt = Step(line=b"!0H\r", timeout=v.commands["H"].answer_within)
+    steps = [_line("!0V10"), _line(f"!0C{pulses},0,0"), halt]
+    steps += [_line(f"!0C{ZERO}") for _ in range(v.queue - 1)]
+    steps += [_line("!0G", timeout=v.commands["G"].answer_within), _line(extra, subject=True)]
     return steps, pulses / 10.0 + 1.5
+
+
+def _line(text: str, **kw: Any) -> Step:
+    return Step(line=text.encode("ascii") + b"\r", **kw)
