@@ -13,12 +13,18 @@ from test_conformance_link import served  # conform emulate serve (or a mutant) 
 from conform.conformance.results import Grade
 from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.expect import reply_mismatch
 from conform.families.gve.conformance.motion_free import zero_line
 from conform.families.gve.conformance.runner import Runner
 from conform.families.gve.conformance.safety import Guard, hazards
-from conform.families.gve.conformance.script import skip_reason
+from conform.families.gve.conformance.script import Step, skip_reason
 from conform.families.gve.conformance.suite import suite
-from conform.families.gve.conformance.target import GveEmuTarget, GveLinkTarget, emulator_factory
+from conform.families.gve.conformance.target import (
+    GveEmuTarget,
+    GveLinkTarget,
+    GveReply,
+    emulator_factory,
+)
 from conform.families.gve.protocol.checksum import append_checksum
 from conform.link import open_port
 
@@ -110,6 +116,23 @@ def test_default_run_asks_all_but_the_motion_and_eeprom_questions(spec):
 
 
 # -- 3. answers judged whole, over a pty --------------------------------------------------------
+
+def test_bytes_after_the_cr_are_judged_with_the_answer():
+    step = Step(line=b"!0F\r")
+    ref = GveReply(b"!0F\r", 0.0, [b"0,00"])
+    for loose in (False, True):
+        assert reply_mismatch(step, ref, GveReply(b"!0F\r", 0.0, [b"0,00"]), loose, 0) is None
+        lf = GveReply(b"!0F\r", 0.0, [b"0,00"], trailing=b"\n")
+        assert reply_mismatch(step, ref, lf, loose, 0) == "bytes after the answer's CR: '\\n'"
+        twice = GveReply(b"!0F\r", 0.0, [b"0,00"], trailing=b"0,00\r")
+        assert "after the answer's CR" in reply_mismatch(step, ref, twice, loose, 0)
+    late = GveReply(b"!0F\r", 0.0, [b"0,00"], stray=b"\n")  # the LF came after the quiet time
+    assert "LF" in reply_mismatch(step, ref, late, True, 0)
+    pos = Step(line=b"!0PF\r", kind="position")
+    ref = GveReply(b"!0PF\r", 0.0, [b"0,1,2,3"])
+    plus = GveReply(b"!0PF\r", 0.0, [b"0,+1,2,3"])
+    assert "not an integer" in reply_mismatch(pos, ref, plus, True, 5)
+
 
 FRAMING = ["framing/answers", "V/valid", "F/valid", "PF/valid", "SR/word-2", "H/idle"]
 
