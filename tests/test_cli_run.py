@@ -36,13 +36,13 @@ def emulator():
 def test_what_was_not_verified_is_said_and_how_to_include_it(emulator, tmp_path):
     _, pty = emulator
     run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", pty, "--json",
-                          "--no-machine", "--check", "*/C/valid", "--check", "*/V/valid",
+                          "--no-machine", "--check", "*/L/position-1", "--check", "*/V/valid",
                           "--check", "*/EW/valid"],
                          capture_output=True, text=True, cwd=tmp_path, env=_env(), timeout=300)
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
     grades = {c["id"].split("/", 2)[2]: c["grade"] for c in doc["checks"]}
-    assert grades == {"C/valid": "SKIPPED", "V/valid": "PASS", "EW/valid": "SKIPPED"}
+    assert grades == {"L/position-1": "SKIPPED", "V/valid": "PASS", "EW/valid": "SKIPPED"}
     lines = run.stderr.splitlines()
     assert any(x.startswith("not verified: 1 check needs motion (axes, outputs, spindle) "
                             "(enable with --allow-motion --max-steps N") for x in lines), lines
