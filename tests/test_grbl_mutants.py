@@ -54,7 +54,7 @@ def test_conform_run_mutants_and_a_mutant_target(tmp_path):
     assert "Traceback" not in r.stderr
 
 
-@pytest.mark.parametrize("name", ["jog-checked-first", "m7-built", "fraction-is-23"])
+@pytest.mark.parametrize("name", ["jog-checked-first", "fraction-is-23"])
 def test_random_sequences_find_a_mutant_and_shrink_it_to_its_replay(name):
     """The hypothesis machine drives the mutant and the reference side by side and shrinks
     the first difference to the shortest sequence: one line for these bugs."""
