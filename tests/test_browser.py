@@ -195,7 +195,10 @@ def test_analysis_report_first_screen(browser, tmp_path, capsys):
     capsys.readouterr()
     errors = _load(browser, out / "index.html", "analysis")
     assert errors == []
-    summary = _on_first_screen(browser, "table")
+    # the diagnosis opens the report: its one sentence, then the session's figures
+    diagnosis = _on_first_screen(browser, ".diagnosis")
+    assert diagnosis.startswith("Diagnosis: Most likely "), diagnosis[:200]
+    summary = _on_first_screen(browser, "table.session")
     assert "variant" in summary and "exchanges" in summary
     first = _on_first_screen(browser, ".sev-hazard, .sev-error")
     assert "hazard" in first or "error" in first
