@@ -50,7 +50,7 @@ def test_a_harness_failure_is_an_error_in_every_family(tmp_path, monkeypatch, va
         raise OSError("out of ptys")
 
     monkeypatch.setattr(conform.link.pty, "PtyEndpoint", no_pty)
-    r = check([sys.executable, "-c", "pass"], variant=variant, names=[first],
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[first],
               directory=tmp_path / "r", timeout=10)
     shapes = family_for_variant(variant).check_sender
     assert [v.rule for v in r.verdicts] == [rule.id for rule in shapes.rules]
@@ -70,7 +70,7 @@ def test_one_junit_writer_and_one_results_file_for_every_family(tmp_path, varian
     """A program that ends at once without a word: graded by each family's rules, written by
     the same report code (one suite per scenario, one case per rule, classname
     VARIANT.SCENARIO)."""
-    r = check([sys.executable, "-c", "pass"], variant=variant, names=[first],
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[first],
               directory=tmp_path / "r", timeout=20)
     assert r.exit_code in (0, 1) and not any(v.grade is Grade.ERROR for v in r.verdicts)
     write_reports(r, tmp_path / "r")
@@ -106,7 +106,7 @@ def test_an_interrupted_run_keeps_the_finished_scenarios(tmp_path, variant, firs
 
     old = signal.getsignal(sig)
     threading.Thread(target=interrupt_once_it_runs, daemon=True).start()
-    r = check([sys.executable, "-c", SLEEPER, first], variant=variant, names=[first, second],
+    r = check([sys.executable, "-c", SLEEPER, first, "{port}"], variant=variant, names=[first, second],
               directory=tmp_path / "r", timeout=30)
     assert sent.is_set() and signal.getsignal(sig) == old  # the handlers are put back
     assert [s.name for s in r.scenarios] == [first]
@@ -129,7 +129,7 @@ def test_a_job_that_is_not_ascii_is_one_line(tmp_path, capsys, variant):
     job.write_text("G1X1\nG1X2 ; déjà\n", encoding="utf-8")
     with pytest.raises(SystemExit) as exc:
         main(["check-sender", "--variant", variant, "--job", str(job), "--report",
-              str(tmp_path / "r"), "--", sys.executable, "-c", "pass"])
+              str(tmp_path / "r"), "--", sys.executable, "-c", "pass", "{port}"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1, err
     assert f"{job}: line 2, column 9: not ASCII" in err
@@ -146,7 +146,7 @@ def test_ctrl_c_on_the_command_writes_the_report_of_the_finished_scenarios(tmp_p
     pid_file = rep / second / "job.gcode.pid"
     p = subprocess.Popen([sys.executable, "-m", "conform", "check-sender", "--variant", variant,
                           "--scenario", f"{first},{second}", "--report", str(rep), "--",
-                          sys.executable, "-c", SLEEPER, first],
+                          sys.executable, "-c", SLEEPER, first, "{port}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not (pid_file.exists() and pid_file.read_text()) and time.monotonic() < deadline:
@@ -154,7 +154,7 @@ def test_ctrl_c_on_the_command_writes_the_report_of_the_finished_scenarios(tmp_p
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=60)
     assert p.returncode == 130, out + err
-    assert "Traceback" not in err and "interrupted (SIGINT)" in err
+    assert "Traceback" not in err and "interrupted (Ctrl-C)" in err
     res = json.loads((rep / "results.json").read_text())
     assert [s["scenario"] for s in res["scenarios"]] == [first]
     assert (rep / "junit.xml").exists() and (rep / "index.html").exists()

@@ -124,6 +124,9 @@ class Family:
     analyze: Callable[[Any, str], Any]  # (capture path, variant id) -> the capture's analysis
     truth_findings: Callable[[Any], list[dict[str, Any]]]  # session -> ground-truth findings
     units: Callable[[list[str]], list[Any]] = list  # job lines -> the units actions count
+    # job lines -> how many are moves its unit executes (a --job with none is another
+    # family's: a usage error); None: every unit counts
+    moves: Callable[[list[str]], int] | None = None
     job_name: str = "job.txt"  # the job file's name in each scenario's folder
     # (action, variant) -> [(seconds after it fires, control request)]; the engine itself
     # answers ``link dead SECONDS`` and ``link back`` (a dead line, both ways)

@@ -85,6 +85,19 @@ def _truth_findings(s: Any) -> list[dict[str, Any]]:
             for line in c.doubles]
 
 
+def _moves(lines: list[str]) -> int:
+    """The lines of a job with a motion, axis or machine word (what a grbl job is made of)."""
+    from conform.families.grbl.protocol.gcode import GcodeError, strip_line, words
+
+    n = 0
+    for line in lines:
+        try:
+            n += any(w[0] in "GMXYZ" for w in words(strip_line(line.encode("latin-1"))[0]))
+        except (GcodeError, UnicodeEncodeError):
+            continue
+    return n
+
+
 def _rule(rid: str, title: str, clause: str, level: str, check: Any) -> Rule:
     """A rule of rules.py: (grade, expected, actual) becomes (grade, detail, evidence,
     expected)."""
@@ -105,5 +118,5 @@ GRBL = Family(
     settle=_settle, analyze=_analyze, truth_findings=_truth_findings, job_name="job.gcode",
     steps=scenarios.steps, injector=_injector, reopen=_reopen, facts=sender_run,
     end_counts=lambda unit: {"bytes_lost": unit.lost}, decode=False, backdate=False, linger=0.2,
-    fast=("stream", "lost-answers"),
+    fast=("stream", "lost-answers"), moves=_moves,
 )
