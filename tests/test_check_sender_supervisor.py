@@ -3,8 +3,9 @@ failure is graded ERROR for every rule of either family (exit status 2), the JUn
 from the same writer, Ctrl-C, SIGTERM or SIGHUP stop the program running and leave the results
 of the scenarios that finished, and the family contract has no second entry point.
 
-The programs here are tiny Python one-liners that open nothing: what is checked is the
-supervision around them, not a sender's protocol.
+The programs here are tiny Python one-liners that open nothing (they take ``{port}`` only
+because check-sender asks for it): what is checked is the supervision around them, not a
+sender's protocol.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def test_a_harness_failure_is_an_error_in_every_family(tmp_path, monkeypatch, va
         raise OSError("out of ptys")
 
     monkeypatch.setattr(conform.link.pty, "PtyEndpoint", no_pty)
-    r = check([sys.executable, "-c", "pass"], variant=variant, names=[first],
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[first],
               directory=tmp_path / "r", timeout=10)
     shapes = family_for_variant(variant).check_sender
     assert [v.rule for v in r.verdicts] == [rule.id for rule in shapes.rules]
@@ -70,7 +71,7 @@ def test_one_junit_writer_and_one_results_file_for_every_family(tmp_path, varian
     """A program that ends at once without a word: graded by each family's rules, written by
     the same report code (one suite per scenario, one case per rule, classname
     VARIANT.SCENARIO)."""
-    r = check([sys.executable, "-c", "pass"], variant=variant, names=[first],
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[first],
               directory=tmp_path / "r", timeout=20)
     assert r.exit_code in (0, 1) and not any(v.grade is Grade.ERROR for v in r.verdicts)
     write_reports(r, tmp_path / "r")
@@ -106,8 +107,8 @@ def test_an_interrupted_run_keeps_the_finished_scenarios(tmp_path, variant, firs
 
     old = signal.getsignal(sig)
     threading.Thread(target=interrupt_once_it_runs, daemon=True).start()
-    r = check([sys.executable, "-c", SLEEPER, first], variant=variant, names=[first, second],
-              directory=tmp_path / "r", timeout=30)
+    r = check([sys.executable, "-c", SLEEPER, first, "{port}"], variant=variant,
+              names=[first, second], directory=tmp_path / "r", timeout=30)
     assert sent.is_set() and signal.getsignal(sig) == old  # the handlers are put back
     assert [s.name for s in r.scenarios] == [first]
     assert f"during scenario {second}" in r.interrupted
@@ -129,7 +130,7 @@ def test_a_job_that_is_not_ascii_is_one_line(tmp_path, capsys, variant):
     job.write_text("G1X1\nG1X2 ; déjà\n", encoding="utf-8")
     with pytest.raises(SystemExit) as exc:
         main(["check-sender", "--variant", variant, "--job", str(job), "--report",
-              str(tmp_path / "r"), "--", sys.executable, "-c", "pass"])
+              str(tmp_path / "r"), "--", sys.executable, "-c", "pass", "{port}"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1, err
     assert f"{job}: line 2, column 9: not ASCII" in err
@@ -146,7 +147,7 @@ def test_ctrl_c_on_the_command_writes_the_report_of_the_finished_scenarios(tmp_p
     pid_file = rep / second / "job.gcode.pid"
     p = subprocess.Popen([sys.executable, "-m", "conform", "check-sender", "--variant", variant,
                           "--scenario", f"{first},{second}", "--report", str(rep), "--",
-                          sys.executable, "-c", SLEEPER, first],
+                          sys.executable, "-c", SLEEPER, first, "{port}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not (pid_file.exists() and pid_file.read_text()) and time.monotonic() < deadline:

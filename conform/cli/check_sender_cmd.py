@@ -85,7 +85,7 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     check_timeout(timeout)
     shapes.variant(variant or shapes.default_variant)
     job_lines = read_job(job_file)
-    job_of_family(job_lines, job_file, len(shapes.vectors(job_lines or [])), shapes.name)
+    job_of_family(job_lines, job_file, len(shapes.units(job_lines or [])), shapes.name)
     directory = report_folder(report_dir)
 
     def say(msg: str) -> None:
