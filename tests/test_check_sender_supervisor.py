@@ -1,5 +1,5 @@
-"""Both families' check-sender run through one supervisor (conform/sendercheck): a harness
-failure is graded ERROR for every rule of either family (exit status 2), the JUnit file comes
+"""Every family's check-sender runs through one supervisor (conform/sendercheck): a harness
+failure is graded ERROR for every rule of every family (exit status 2), the JUnit file comes
 from the same writer, Ctrl-C, SIGTERM or SIGHUP stop the program running and leave the results
 of the scenarios that finished, and the family contract has no second entry point.
 
@@ -27,7 +27,8 @@ from conform.sendercheck.grade import check
 from conform.sendercheck.report import render_junit, write_reports
 
 # (variant, a quick scenario, a second scenario) of each built-in family
-FAMILIES = [("gve64-v19", "clean", "lost-answers"), ("grbl-1.1f", "stream", "lost-answers")]
+FAMILIES = [("gve64-v19", "clean", "lost-answers"), ("grbl-1.1f", "stream", "lost-answers"),
+            ("marlin-2.1", "clean", "lost-ok")]
 
 # exits at once in FIRST's scenario; elsewhere writes its pid beside the job and sleeps
 SLEEPER = ("import os, sys, time\n"
