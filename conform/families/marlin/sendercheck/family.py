@@ -93,7 +93,8 @@ RULES = tuple(Rule(rid, title, clause, level, partial(_graded, check))
               for rid, title, clause, level, check in rules.RULES)
 
 
-# recorded raw (lines are paired when analysed), each answer dated when the emulator wrote it
+# recorded raw (lines are paired when analysed), each answer dated when the emulator wrote it;
+# served at 250 000 Bd, every variant's speed (variants.toml baud: Configuration.h BAUDRATE)
 MARLIN = Family(
     name="marlin", default_variant="marlin-2.1", scenarios=scenarios.SCENARIOS,
     rules=RULES, job=scenarios.job_for,
@@ -102,5 +103,5 @@ MARLIN = Family(
     truth_findings=_truth_findings, job_name="job.gcode", steps=scenarios.steps,
     injector=_injector, reopen=_reopen, facts=sender_run,
     end_counts=lambda unit: {"bytes_lost": unit.lost}, decode=False, backdate=False,
-    linger=0.2, fast=("clean", "noisy"),
+    linger=0.2, fast=("clean", "noisy"), baud=250000,
 )
