@@ -1,10 +1,11 @@
-"""Both families' check-sender run through one supervisor (conform/sendercheck): a harness
-failure is graded ERROR for every rule of either family (exit status 2), the JUnit file comes
+"""Every family's check-sender runs through one supervisor (conform/sendercheck): a harness
+failure is graded ERROR for every rule of every family (exit status 2), the JUnit file comes
 from the same writer, Ctrl-C, SIGTERM or SIGHUP stop the program running and leave the results
 of the scenarios that finished, and the family contract has no second entry point.
 
-The programs here are tiny Python one-liners that open nothing: what is checked is the
-supervision around them, not a sender's protocol.
+The programs here are tiny Python one-liners that open nothing (they take ``{port}`` only
+because check-sender asks for it): what is checked is the supervision around them, not a
+sender's protocol.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ from conform.sendercheck.grade import check
 from conform.sendercheck.report import render_junit, write_reports
 
 # (variant, a quick scenario, a second scenario) of each built-in family
-FAMILIES = [("gve64-v19", "clean", "lost-answers"), ("grbl-1.1f", "stream", "lost-answers")]
+FAMILIES = [("gve64-v19", "clean", "lost-answers"), ("grbl-1.1f", "stream", "lost-answers"),
+            ("marlin-2.1", "clean", "lost-ok")]
 
 # exits at once in FIRST's scenario; elsewhere writes its pid beside the job and sleeps
 SLEEPER = ("import os, sys, time\n"
@@ -106,8 +108,8 @@ def test_an_interrupted_run_keeps_the_finished_scenarios(tmp_path, variant, firs
 
     old = signal.getsignal(sig)
     threading.Thread(target=interrupt_once_it_runs, daemon=True).start()
-    r = check([sys.executable, "-c", SLEEPER, first, "{port}"], variant=variant, names=[first, second],
-              directory=tmp_path / "r", timeout=30)
+    r = check([sys.executable, "-c", SLEEPER, first, "{port}"], variant=variant,
+              names=[first, second], directory=tmp_path / "r", timeout=30)
     assert sent.is_set() and signal.getsignal(sig) == old  # the handlers are put back
     assert [s.name for s in r.scenarios] == [first]
     assert f"during scenario {second}" in r.interrupted

@@ -2,7 +2,7 @@
 ``conform.families`` entry point group by its own dist-info and written against the family
 contract only, goes through every command with no engine file naming it: ``spec list``,
 ``run`` (in-process, its mutants, and over a pty against ``emulate serve``), ``proxy`` capture,
-``analyze`` of one file and of a fleet."""
+``analyze`` of one file and of a fleet, ``check-sender`` with its own scenarios and rules."""
 
 from __future__ import annotations
 
@@ -123,3 +123,41 @@ def test_toy_over_a_pty_capture_and_analysis(tmp_path):
     assert fleet.returncode == 0, fleet.stderr
     assert "2 captures" in fleet.stdout and "10 exchanges" in fleet.stdout
     assert (tmp_path / "fr" / "index.html").exists()
+
+
+def _check_sender(tmp_path: Path, name: str, *sender_args: str) -> tuple[int, dict[str, str]]:
+    """`conform check-sender --variant toy-1 -- python toy_sender.py {port} {job} ARGS`: its
+    exit status and every verdict (SCENARIO/RULE -> grade)."""
+    report = tmp_path / name
+    ran = conform("check-sender", "--variant", "toy-1", "--report", str(report), "--json", "--",
+                  sys.executable, str(TOY / "toy_sender.py"), "{port}", "{job}", *sender_args,
+                  cwd=tmp_path)
+    assert ran.returncode in (0, 1), ran.stdout + ran.stderr
+    verdicts = json.loads(ran.stdout)["verdicts"]
+    return ran.returncode, {f"{v['scenario']}/{v['rule']}": v["grade"] for v in verdicts}
+
+
+@pytest.mark.slow
+def test_toy_check_sender_grades_from_the_units_ground_truth(tmp_path):
+    """The toy's check-sender (scenarios, rules, hooks in its own package) through the engine's
+    supervisor: a sender that asks GET when an answer is lost passes both scenarios; one that
+    leaves out a line fails the rule for skipped lines only; one that sends a line again when its
+    answer is lost executes it twice and fails the once-in-order rule."""
+    rules = ("none-skipped", "once-in-order")
+    code, got = _check_sender(tmp_path, "good")
+    assert code == 0 and got == {f"{s}/{r}": "PASS" for s in ("clean", "lost-answers")
+                                 for r in rules}
+    truth = json.loads((tmp_path / "good" / "lost-answers" / "truth.json").read_text())
+    assert truth["executed"] == [f"SET {i}" for i in range(1, 41)]
+    results = json.loads((tmp_path / "good" / "results.json").read_text())
+    assert results["scenarios"][1]["faults"]["lost_answers"] > 0  # the engine's faults acted
+
+    code, got = _check_sender(tmp_path, "skips", "--skip", "5")
+    assert code == 1
+    assert got["clean/none-skipped"] == got["lost-answers/none-skipped"] == "FAIL"
+    assert got["clean/once-in-order"] == got["lost-answers/once-in-order"] == "PASS"
+
+    code, got = _check_sender(tmp_path, "blind", "--blind")
+    assert code == 1
+    assert got["lost-answers/once-in-order"] == "FAIL"
+    assert got["clean/once-in-order"] == got["lost-answers/none-skipped"] == "PASS"

@@ -18,7 +18,6 @@ from conform.cli.params import (
     NON_NEGATIVE_INT,
     OUTPUT_DIR,
     VARIANT,
-    command_line,
     default_variant_text,
     json_option,
 )
@@ -54,7 +53,6 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     """
     import json
 
-    from conform.families import family_for_variant
     from conform.sendercheck.grade import check, default_family, family_for
     from conform.sendercheck.options import (
         check_timeout,
@@ -66,15 +64,6 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     from conform.sendercheck.report import write_reports
     from conform.stops import shield
 
-    fam = family_for_variant(variant or "")
-    if fam.check_sender is None and hasattr(fam, "check_sender_cli"):
-        # transitional: a family still supervising its own senders (being moved onto the
-        # engine's supervisor)
-        sys.exit(fam.check_sender_cli(
-            list(command), variant or "", list(scenarios), report_dir, timeout, job_file,
-            as_json, echo=click.echo, seed=seed,
-            progress=lambda m: click.echo(f"check-sender: {m}", err=True),
-            command_line=command_line()))
     names = [n.strip() for x in scenarios for n in x.split(",") if n.strip()]
     shapes = family_for(variant) if variant else default_family()
     if "list" in names:

@@ -142,5 +142,6 @@ class Family:
     # on a line); False: when it was written (what the family's analyser and rules expect)
     backdate: bool = True
     linger: float = 0.0  # s the emulator keeps serving (and recording) after the program ended
+    baud: int = 115200  # the line's speed: the emulator's pacing, and CONFORM_BAUD for the program
     fast: tuple[str, ...] = ()  # scenarios for a quick run
     prepare: Callable[[Any, Scenario, float], None] = _nothing  # (unit, scn, t0) before the run

@@ -35,7 +35,6 @@ from conform.sendercheck.faults import ScriptedFaults
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL
-BAUD = 115200  # the emulator's pacing
 
 
 @dataclass
@@ -156,9 +155,10 @@ class _Control:
 
 def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
                 command: list[str], directory: Path, *, timeout: float | None = None,
-                seed: int = 1, baud: int = BAUD, job_lines: list[str] | None = None
+                seed: int = 1, baud: int | None = None, job_lines: list[str] | None = None
                 ) -> Session:
-    """Run ``command`` once against the family's reference unit in scenario ``scn``."""
+    """Run ``command`` once against the family's reference unit in scenario ``scn``, paced at
+    ``baud`` (the family's line speed unless given)."""
     from conform.capture import Recorder
     from conform.emulator.serve import Emulator
 
@@ -166,6 +166,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"{directory}: cannot create: {exc.strerror or exc}") from None
+    baud = baud or family.baud
     lines = family.job(scn, variant, job_lines)
     job_path = directory / family.job_name
     job_path.write_text("\n".join(lines) + "\n", encoding="ascii")
@@ -214,7 +215,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
     thread.start()
     try:
         recorder.log("info", f"check-sender scenario {scn.name}: {scn.title}")
-        _run_program(s, recorder, control, truth, job_path)
+        _run_program(s, recorder, control, truth, job_path, baud)
         if family.linger:
             time.sleep(family.linger)
     except Exception as exc:  # noqa: BLE001 - the harness failing is graded ERROR, not a crash
@@ -243,10 +244,11 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
 
 
 def _run_program(s: Session, recorder: Any, control: LocalControl, truth: Any,
-                 job_path: Path) -> None:
+                 job_path: Path, baud: int) -> None:
     scn = s.scenario
     env = dict(os.environ, CONFORM_PORT=s.port, CONFORM_JOB=str(job_path),
-               CONFORM_VARIANT=s.variant.id, CONFORM_SCENARIO=scn.name)
+               CONFORM_VARIANT=s.variant.id, CONFORM_SCENARIO=scn.name,
+               CONFORM_BAUD=str(baud))
     argv = argv_for(s.command, s.port, job_path, s.variant.id)
     n_job = max(1, len(s.job))
     pending = sorted(scn.actions, key=lambda a: a.at)

@@ -14,7 +14,7 @@ from printrun.printcore import printcore
 
 
 def main(port, job_path):
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stdout)
     p = printcore()
     p.loud = True
     p.connect(port, int(os.environ.get("CONFORM_BAUD", "250000")))

@@ -25,7 +25,6 @@ class MarlinFamily(Family):
     default_rank = 300
     table_files = ("variants", "messages", "commands", "caps")
     pytest_plugin = None
-    check_sender = None   # judged by sendercheck.run_cli (conform check-sender --variant marlin-…)
 
     @property
     def default_variant(self) -> str:
@@ -97,10 +96,12 @@ class MarlinFamily(Family):
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
 
-    def check_sender_cli(self, *args: Any, **kw: Any) -> int:
-        from conform.families.marlin.sendercheck.cli import run_cli
+    @property
+    def check_sender(self) -> Any:
+        """check-sender's Marlin scenarios, rules and hooks (sendercheck/family.py)."""
+        from conform.families.marlin.sendercheck.family import MARLIN
 
-        return run_cli(*args, **kw)
+        return MARLIN
 
     def characterize(self, target: str, output: str, variant: str | None, **_options: Any
                      ) -> None:

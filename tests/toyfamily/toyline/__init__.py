@@ -2,6 +2,8 @@
 registered through the ``conform.families`` entry point group by its own dist-info
 (tests/toyfamily/toyline-0.1.dist-info): the proof that a new family is one new package and no
 engine edit. Its protocol (tables/variants.toml): PING, SET n, GET, HALT, one CR-ended line each.
+Its check-sender (``check_sender``): a clean line and one losing answers, and two rules graded
+from what the unit executed.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import json
 import tomllib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ from conform.conformance.results import MUST, CheckResult, Grade
 from conform.conformance.runner import Runner
 from conform.errors import UserError
 from conform.families import Detection, Family, VariantInfo, table_folder
+from conform.sendercheck import family as sender
 
 ANSWER_TIME = 0.002  # s from a line's CR to its answer
 
@@ -107,6 +110,7 @@ class ToyAnalysis:
     answered: int
     errors: int
     duration: float
+    findings: list[Any] = field(default_factory=list)   # what check-sender lists (none here)
 
     def summary_lines(self) -> list[str]:
         return [f"toy: {self.lines} lines, {self.answered} answered, {self.errors} errors "
@@ -133,10 +137,91 @@ class ToyAnalysis:
                 "errors": self.errors, "duration_s": round(self.duration, 3)}
 
 
+# -- check-sender: scenarios, rules graded from the unit's ground truth, the hooks -------------
+
+SENDER_CLAUSE = "variants.toml (SET n -> OK: the register takes n; one answer a line)"
+
+
+@dataclass(frozen=True)
+class ToyVariant:
+    id: str
+    top: int
+
+
+def _sets(lines: list[str]) -> list[str]:
+    """The job's SET lines as the unit keeps them (words single-spaced)."""
+    return [" ".join(x.split()) for x in lines if x.split()[:1] == ["SET"]]
+
+
+def _none_skipped(s: Any) -> tuple[Any, ...]:
+    """Every SET line of the job executed (as often as the job has it)."""
+    left = list(s.truth["executed"])
+    missing = []
+    for line in _sets(s.job_lines):
+        if line in left:
+            left.remove(line)
+        else:
+            missing.append(line)
+    grade = sender.FAIL if missing else sender.PASS
+    detail = f"{len(missing)} SET lines never executed" + (f", first {missing[0]!r}" if missing else "")
+    return grade, detail, missing[:5], "every SET line of the job executed"
+
+
+def _once_in_order(s: Any) -> tuple[Any, ...]:
+    """What the unit executed is the job's SET lines in the job's order, none twice (lines may
+    be missing: that is the other rule's)."""
+    job, executed = _sets(s.job_lines), s.truth["executed"]
+    at = 0
+    for k, line in enumerate(executed):
+        try:
+            at = job.index(line, at) + 1
+        except ValueError:
+            why = "again or out of order" if line in job else "not a line of the job"
+            return (sender.FAIL, f"execution {k + 1}: {line!r} {why}", executed[max(0, k - 2):k + 1],
+                    "the job's SET lines in order, each once")
+    return sender.PASS, f"{len(executed)} SET lines executed in the job's order", []
+
+
+def _settle(s: Any, unit: ToyUnit, _truth: Any) -> None:
+    s.truth = {"executed": list(unit.executed), "value": unit.value}
+    (s.directory / "truth.json").write_text(json.dumps(s.truth, indent=1), "utf-8")
+
+
+def _sender_variant(variant_id: str) -> tuple[ToyVariant, None]:
+    rows = _tables()
+    if variant_id not in rows:
+        raise UserError(f"{variant_id!r}: not a toy variant ({', '.join(rows)})")
+    return ToyVariant(variant_id, rows[variant_id]["max"]), None
+
+
+def _analyze(capture: Any, _variant_id: str) -> ToyAnalysis:
+    return FAMILY.analyze(str(capture))
+
+
+SENDER_SHAPES = sender.Family(
+    name="toy", default_variant="toy-1",
+    scenarios={sc.name: sc for sc in (
+        sender.Scenario("clean", "a clean job of SET lines", timeout=20.0),
+        sender.Scenario("lost-answers", "one answer in ten never arrives", lose=0.1,
+                        timeout=20.0))},
+    rules=(sender.Rule("none-skipped", "every SET line executed", SENDER_CLAUSE, sender.MUST,
+                       _none_skipped),
+           sender.Rule("once-in-order", "SET lines executed once, in the job's order",
+                       SENDER_CLAUSE, sender.MUST, _once_in_order)),
+    job=lambda _scn, _v, given: list(given or [f"SET {i}" for i in range(1, 41)]),
+    units=_sets, variant=_sender_variant,
+    make_unit=lambda v, _ctx, t0, _scn: ToyUnit(v.top, t0),
+    control=lambda _faults: None, observe=lambda unit, _t0: unit,
+    taken=lambda unit: len(unit.executed), settle=_settle, analyze=_analyze,
+    truth_findings=lambda _s: [], decode=False,
+)
+
+
 class ToyFamily(Family):
     name = "toy"
     title = "the toy line protocol (tests)"
     table_files = ("variants",)
+    check_sender = SENDER_SHAPES
 
     def load_tables(self, root: str | None = None) -> Any:
         return _tables(root)
