@@ -457,25 +457,6 @@ class MarlinRunner(Runner):
     def halt(self, after_silence: bool = False) -> str:
         return halt(self.target)
 
-    def run(self, checks: Sequence[Any], progress: Any = None) -> TargetRun:
-        """The engine's loop, with SIGTERM and SIGHUP taken as Ctrl-C while it runs on a real
-        unit, so that every way a run is ended halts the unit and keeps the report."""
-        import signal
-        import threading
-
-        if self.target.emulated or threading.current_thread() is not threading.main_thread():
-            return super().run(checks, progress)
-
-        def interrupt(signum: int, _frame: Any) -> None:
-            raise KeyboardInterrupt(signal.Signals(signum).name)
-
-        old = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
-        try:
-            return super().run(checks, progress)
-        finally:
-            for sig, handler in old.items():
-                signal.signal(sig, handler)
-
     def stop_at_end(self) -> bool:
         return not self.target.emulated and (self.motion_ok or self.heat_ok)
 
