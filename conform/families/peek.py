@@ -61,7 +61,8 @@ def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[
 
 def detect_or_empty(path: str, variant: str | None) -> tuple[Detection | None, bool]:
     """The family of a capture other than the default one (None: the default family's), and
-    whether it holds no traffic at all."""
+    whether it holds no traffic at all (and is intact: a damaged file with no traffic goes to
+    the default path, which says what is damaged)."""
     if variant:
         return divert(b"", b"", {}, variant), False
     try:
@@ -69,5 +70,14 @@ def detect_or_empty(path: str, variant: str | None) -> tuple[Detection | None, b
     except Exception:  # noqa: BLE001 - not ours to report: the default path says what is wrong
         return None, False
     if not host and not unit and not meta.get("variant"):
-        return None, True
+        return None, _intact(path)
     return divert(host, unit, meta, variant), False
+
+
+def _intact(path: str) -> bool:
+    from conform.capture.scan import ScanStatus, iter_messages
+
+    status = ScanStatus(path)
+    for _ in iter_messages(status):
+        pass
+    return status.clean
