@@ -214,7 +214,7 @@ def check(command: list[str], *, variant: str | None = None, names: list[str] | 
                 done = ScenarioResult(name, scn.title, verdicts, s, session_findings(s))
             except KeyboardInterrupt as exc:
                 why = interrupted_by(exc)
-                out.interrupted = (f"interrupted ({why}) during scenario {name}; "
+                out.interrupted = (f"interrupted ({why}) during {name}; "
                                    f"{len(out.scenarios)} of {len(chosen)} scenario(s) finished")
                 say(out.interrupted)
                 break

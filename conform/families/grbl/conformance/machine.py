@@ -115,6 +115,7 @@ def build_machine(target_session: Any, reference_session: Any, spec: GrblSpec, v
             super().__init__()
             self.steps: list[bytes] = []
             for s in (target_session, reference_session):
+                s.restore()   # a real unit keeps an example's setting writes (EEPROM): undo them
                 s.fresh()
             out.examples += 1
 
