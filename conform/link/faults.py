@@ -123,6 +123,16 @@ class FaultInjector:
         self.counts = {"corrupted": 0, "dropped": 0, "garbled": 0, "disconnects": 0}
         self._next_drop = self._schedule(t0)
         self.down_until = -float("inf")
+        self.unplugged = False   # set by unplug(), taken by a family's reopen hook
+
+    def unplug(self, t: float, downtime: float) -> None:
+        """Pull the cable at ``t`` for ``downtime`` seconds (the emulator closes the pty); the
+        reopen hook sees ``unplugged`` and restarts the unit as a board that lost power."""
+        self.config = FaultConfig(self.config.host, self.config.unit, self.config.disconnect,
+                                  downtime)
+        self._next_drop = t
+        self.unplugged = True
+        self.counts["unplugged"] = self.counts.get("unplugged", 0) + 1
 
     def _schedule(self, t: float) -> float:
         rate = self.config.disconnect

@@ -23,15 +23,6 @@ class GrblFaults(FaultInjector):
         self.lose, self.garble = lose, garble
         self.lose_next = self.garble_next = 0
         self.counts.update(lost_answers=0, garbled_answers=0, unplugged=0)
-        self.unplugged = False   # set by unplug(), taken by the reopen hook
-
-    def unplug(self, t: float, downtime: float) -> None:
-        """Pull the cable at ``t`` for ``downtime`` seconds (the emulator closes the pty)."""
-        self.config = FaultConfig(self.config.host, self.config.unit, self.config.disconnect,
-                                  downtime)
-        self._next_drop = t
-        self.unplugged = True
-        self.counts["unplugged"] += 1
 
     def feed(self, direction: str, data: bytes, t: float) -> list[tuple[float, bytes]]:
         if direction == "unit" and data.startswith(ANSWER_PREFIXES) and t >= self.down_until:

@@ -20,15 +20,6 @@ class MarlinFaults(FaultInjector):
         self.lose = lose
         self.lose_next = 0
         self.counts.update(lost_oks=0, unplugged=0)
-        self.unplugged = False     # set by unplug(), taken by the reopen hook
-
-    def unplug(self, t: float, downtime: float) -> None:
-        """Pull the cable at ``t`` for ``downtime`` seconds (the emulator closes the pty)."""
-        self.config = FaultConfig(self.config.host, self.config.unit, self.config.disconnect,
-                                  downtime)
-        self._next_drop = t
-        self.unplugged = True
-        self.counts["unplugged"] += 1
 
     def feed(self, direction: str, data: bytes, t: float) -> list[tuple[float, bytes]]:
         if direction == "unit" and data.startswith(b"ok") and t >= self.down_until:
