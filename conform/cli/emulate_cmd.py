@@ -30,7 +30,7 @@ class _EmulateGroup(click.Group):
 
 
 @click.group(cls=_EmulateGroup,
-             subcommand_metavar="[serve] VARIANT [OPTIONS] | control SOCKET WORDS...")
+             subcommand_metavar="[serve] VARIANT [OPTIONS] | control SOCKET WORDS... | judge RECORDING")
 def cli() -> None:
     """Serve the reference unit model on a pty or TCP, or control a running one.
 
@@ -111,3 +111,42 @@ def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
     click.echo(reply)
     if not reply.startswith("ok"):
         sys.exit(1)
+
+
+@cli.command("judge")
+@click.argument("recording", type=click.Path(dir_okay=False), metavar="RECORDING")
+@click.option("--variant", type=VARIANT, default=None,
+              help="The reference variant to judge (default: the one the capture names).")
+@click.option("--settle", type=NON_NEGATIVE, default=3.0, show_default=True,
+              help="Seconds the reference is given after the last host write.")
+@click.option("--json", "as_json", is_flag=True, help="Print the verdict as one JSON object.")
+def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool) -> None:
+    """Play what a host wrote to a real unit into the reference unit and compare the answers.
+
+    RECORDING is an MCAP capture of a session with real firmware (`conform proxy -o`) or a
+    text transcript (`SECONDS > LINE` for the host, `SECONDS < LINE` for the unit; see
+    docs/architecture.md). Exit 0 when every recorded answer line is matched, 1 when they
+    differ: the differences are listed with the host line they followed.
+
+    \b
+    Examples:
+      conform emulate judge real-session.mcap
+      conform emulate judge tests/data/marlin/facts-2.1.2.4.transcript --variant marlin-2.1
+    """
+    import json
+
+    from conform.emulator.judge import judge, read_transcript, render
+    from conform.families import family_for_variant
+
+    transcript = read_transcript(recording)
+    name = variant or transcript.variant
+    if not name:
+        raise UserError(f"{recording}: the recording names no variant: give --variant")
+    fam = family_for_variant(name)
+    verdict = judge(transcript, fam.make_unit(name), fam.judge_mask(name), name, settle)
+    if as_json:
+        click.echo(json.dumps(verdict.to_dict()))
+    else:
+        for line in render(verdict):
+            click.echo(line)
+    sys.exit(0 if verdict.agrees else 1)

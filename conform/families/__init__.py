@@ -18,7 +18,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
@@ -88,6 +88,10 @@ class AnalysisResult(Protocol):
         """Its row of a fleet summary: the engine's columns (``duration_s``, ``exchanges``,
         ``exchanges_per_s``, ``findings``, ``rtt_p50_ms``...) and the family's
         (``Family.fleet_columns``)."""
+
+
+def _whole_line(line: str) -> str:
+    return line
 
 
 class Family:
@@ -169,6 +173,12 @@ class Family:
         """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
         ``now``."""
         raise self.lacks("a reference unit")
+
+    def judge_mask(self, variant: str) -> Callable[[str], str]:
+        """What ``conform emulate judge`` compares of one answer line: the line with what
+        differs from run to run of the same firmware (temperatures, build dates) masked.
+        The default compares lines whole."""
+        return _whole_line
 
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""

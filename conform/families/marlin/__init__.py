@@ -9,7 +9,7 @@ detection), ``unit`` (the reference unit, its faults, control requests and ``ser
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from conform.families import Detection, Family, VariantInfo
@@ -47,6 +47,11 @@ class MarlinFamily(Family):
 
         spec = self.load_tables()
         return make(spec.variant(variant), spec, t0=t0, **options)
+
+    def judge_mask(self, variant: str) -> Callable[[str], str]:
+        from conform.families.marlin.protocol.codec import mask_volatile
+
+        return mask_volatile
 
     def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
                **family_values: Any) -> Any:

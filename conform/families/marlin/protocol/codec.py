@@ -109,3 +109,19 @@ def detect(host: bytes, unit: bytes) -> Detection:
     if gcode >= 3 and oks and b"<Idle" not in unit and b"Grbl" not in unit:
         return Detection("marlin", 0.4, "G-code lines answered ok (could be another firmware)")
     return Detection("marlin", 0.0, "no Marlin traffic")
+
+
+_NUMBER = re.compile(r"-?\d+(?:\.\d+)?")
+_BUILD = ("echo: Last Updated:", "echo: Compiled:", "echo: Free Memory:")
+
+
+def mask_volatile(line: str) -> str:
+    """An answer line with what differs between two runs of the same build masked: the
+    readings in a temperature report (``T:21.50 /0.00 B:…`` from M105, M155, M109) and the
+    build's date and free memory in the boot banner (MarlinCore.cpp setup)."""
+    if "T:" in line:
+        return _NUMBER.sub("#", line)
+    for prefix in _BUILD:
+        if line.startswith(prefix):
+            return prefix + " #"
+    return line
