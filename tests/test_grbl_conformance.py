@@ -77,14 +77,16 @@ def test_conform_run_on_the_emulator_writes_reports(tmp_path):
 
 
 def test_characterize_reads_what_the_build_does(tmp_path):
-    from conform.families.grbl.conformance.characterize import characterize, write_profile
+    from conform.conformance.observed import write_profile
+    from conform.families.grbl.conformance.characterize import characterize
 
     obs = {o.name: o for o in characterize(EmuTarget(lambda: BigRing(), "emu:deviant"), V.id)}
     assert obs["rx_buffer"].observed == 256 and not obs["rx_buffer"].same
     assert obs["crlf_is_two_lines"].observed is False
     assert all(obs[n].same for n in ("version", "build", "planner_blocks", "line_max"))
     path = tmp_path / "p.toml"
-    write_profile(list(obs.values()), str(path), target="emu:deviant", variant=V.id)
+    write_profile(list(obs.values()), str(path), target="emu:deviant", variant=V.id,
+                  title="a deviant grbl")
     import tomllib
 
     prof = tomllib.loads(path.read_text())

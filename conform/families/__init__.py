@@ -275,11 +275,26 @@ class Family:
         """What the deviant unit ``name`` does wrong, in a few words."""
         return name
 
-    def characterize(self, target: str, output: str, variant: str | None, **options: Any
-                     ) -> None:
-        """``conform characterize``: probe what the unit does where the source leaves a choice
-        and write the profile."""
-        raise self.lacks("`characterize`")
+    def characterize_probes(self) -> tuple[Callable[[Any, str], list[Any]],
+                                           Callable[[Any], Any]] | None:
+        """For the default ``characterize``: (probe(target, variant) → observations
+        (``conform.conformance.observed.Observation``), stop(target) that halts the unit);
+        None when the family has no probes."""
+        return None
+
+    def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
+                     echo: Callable[[str], Any] = print, **options: Any) -> None:
+        """``conform characterize``: probe what the unit does where builds or the source leave
+        a choice and write the profile. The default runs ``characterize_probes``."""
+        hooks = self.characterize_probes()
+        if hooks is None:
+            raise self.lacks("`characterize`")
+        from conform.conformance.observed import characterize_target
+
+        probe, stop = hooks
+        characterize_target(self, target, output, variant, baud=baud, probe=probe, stop=stop,
+                            echo=echo, title=f"what this {self.name} build does, probed by "
+                                             "conform characterize")
 
     probe_rank: int = 100
     """``ports --probe`` asks the families in this order: a family whose question could

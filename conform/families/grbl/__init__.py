@@ -112,11 +112,11 @@ class GrblFamily(Family):
 
         return GRBL
 
-    def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
-                     echo: Any = print, **_options: Any) -> None:
-        from conform.families.grbl.conformance.characterize import run
+    def characterize_probes(self) -> Any:
+        from conform.families.grbl.conformance.characterize import characterize
+        from conform.families.grbl.conformance.checks import _stop
 
-        run(target, output, variant, baud, echo=echo)
+        return characterize, _stop
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:

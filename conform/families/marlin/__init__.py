@@ -108,12 +108,11 @@ class MarlinFamily(Family):
 
         return MARLIN
 
-    def characterize(self, target: str, output: str, variant: str | None, **_options: Any
-                     ) -> None:
-        from conform.errors import UserError
+    def characterize_probes(self) -> Any:
+        from conform.families.marlin.conformance.characterize import characterize
+        from conform.families.marlin.conformance.checks import halt
 
-        raise UserError("characterize: Marlin leaves no choice this suite probes yet; its "
-                        "configuration is read from M115 (conform run --check '*/m115/*')")
+        return characterize, halt
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:

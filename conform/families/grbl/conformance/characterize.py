@@ -9,26 +9,11 @@ nothing is written to the EEPROM.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from conform.errors import UserError
-from conform.families.grbl.conformance.checks import Session, _stop
+from conform.conformance.observed import Observation
+from conform.families.grbl.conformance.checks import Session
 from conform.families.grbl.spec.load import load_grbl
-from conform.stops import halting
-
-
-@dataclass
-class Observation:
-    name: str
-    table: Any
-    observed: Any
-    evidence: str
-
-    @property
-    def same(self) -> bool:
-        return self.observed == self.table
 
 
 def characterize(target: Any, vid: str) -> list[Observation]:
@@ -64,50 +49,3 @@ def characterize(target: Any, vid: str) -> list[Observation]:
     out.append(Observation("line_max", n, longest,
                            f"a line of {n} characters and one of {n + 1}"))
     return out
-
-
-def write_profile(obs: list[Observation], path: str, *, target: str, variant: str) -> None:
-    def val(x: Any) -> str:
-        if isinstance(x, bool):
-            return "true" if x else "false"
-        if isinstance(x, int):
-            return str(x)
-        return '"' + str(x).replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-    lines = ["# what this grbl build does, probed by conform characterize",
-             f"target = {val(target)}", f"variant = {val(variant)}", "", "[observed]"]
-    lines += [f"{o.name} = {val(o.observed)}" for o in obs if o.observed is not None]
-    lines += ["", "[table]"] + [f"{o.name} = {val(o.table)}" for o in obs]
-    lines += ["", "[evidence]"] + [f"{o.name} = {val(o.evidence)}" for o in obs]
-    try:
-        Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
-
-
-def run(target_text: str, output: str, variant: str | None, baud: int,
-        echo: Any = print) -> None:
-    """The command: open the target, probe, print one line per item, write the profile."""
-    from conform.conformance.target import EmuTarget, open_link, parse_target
-    from conform.families import family
-
-    kind, what, _ = parse_target(target_text)
-    spec = load_grbl()
-    vid = variant or (what if kind == "emu" else None) or next(iter(spec.variants))
-    spec.variant(vid)
-    if kind == "emu":
-        target: Any = EmuTarget(lambda: family("grbl").make_unit(vid), f"emu:{vid}", baud=baud)
-    else:
-        target = open_link(target_text, baud=baud)
-    try:
-        with halting(None if target.emulated else lambda: _stop(target)):
-            obs = characterize(target, vid)
-    finally:
-        target.close()
-    for o in obs:
-        mark = "=" if o.same else "!"
-        echo(f"{o.name:>18} {mark} {o.observed!s:<12} (table: {o.table}) — {o.evidence}")
-    write_profile(obs, output, target=target_text, variant=vid)
-    differ = [o.name for o in obs if not o.same]
-    echo(f"{output}: {len(differ)} item(s) differ from the tables"
-         + (": " + ", ".join(differ) if differ else ""))

@@ -1,0 +1,56 @@
+"""``conform characterize`` on a Marlin unit: the build's configuration read by harmless probes,
+each observed value beside the tables' (which cite Marlin's Configuration.h and queue.cpp)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+
+import pytest
+
+from conform.conformance.target import EmuTarget
+from conform.families import family
+from conform.families.marlin.conformance.characterize import characterize
+
+
+def observed(variant: str, mutant: str | None = None) -> dict:
+    fam = family("marlin")
+    options = {"mutant": mutant} if mutant else {}
+    target = EmuTarget(lambda: fam.make_unit(variant, **options), f"emu:{variant}")
+    return {o.name: o for o in characterize(target, variant)}
+
+
+@pytest.mark.parametrize("variant", ["marlin-2.1", "marlin-2.1-adv"])
+def test_the_reference_units_are_what_their_tables_say(variant) -> None:
+    obs = observed(variant)
+    assert [n for n, o in obs.items() if not o.same] == []
+    assert obs["max_cmd_size"].observed == 96 and obs["keepalive"].observed == 2
+    assert obs["advanced_ok"].observed is (variant == "marlin-2.1-adv")
+    # ADVANCED_OK's ok of an idle unit tells the queue and planner sizes
+    assert ("bufsize" in obs) is (variant == "marlin-2.1-adv")
+    assert obs["cap.EEPROM"].observed == 1            # EEPROM_SETTINGS (linux_native)
+
+
+@pytest.mark.parametrize(("mutant", "item", "value"), [
+    ("no-keepalive", "keepalive", 0),
+    ("answers-duplicate", "repeat_is_silent", False),
+])
+def test_a_deviant_build_is_told_apart(mutant, item, value) -> None:
+    obs = observed("marlin-2.1", mutant)
+    assert obs[item].observed == value and not obs[item].same
+
+
+def test_over_a_pty_the_profile_is_written(tmp_path, emulate) -> None:
+    _, path = emulate("serve", "marlin-2.1", "--baud", "115200")
+    out = tmp_path / "unit.toml"
+    r = subprocess.run([sys.executable, "-m", "conform", "characterize", path, "--variant",
+                        "marlin-2.1", "--baud", "115200", "-o", str(out)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert f"{out}: 0 item(s) differ from the tables" in r.stdout
+    prof = tomllib.loads(out.read_text())
+    assert prof["variant"] == "marlin-2.1"
+    assert prof["observed"]["keepalive"] == prof["table"]["keepalive"] == 2
+    assert prof["observed"]["cap.AUTOREPORT_TEMP"] == 1
+    assert "busy: lines at" in prof["evidence"]["keepalive"]
