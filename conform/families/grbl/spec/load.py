@@ -7,7 +7,6 @@ new grbl variant or a corrected code is a data change that either loads or says 
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import Any
 
 from conform.errors import UserError
 from conform.families import table_folder
+from conform.families.rows import Rows, read_table
 
 SPEC_PACKAGE = "conform.families.grbl.spec"
 FILES = ("variants", "codes", "settings", "protocol", "status", "examples")
@@ -170,53 +170,11 @@ class GrblSpec:
         return "unknown", None
 
 
-class _Rows:
-    """Typed field access with one-line errors naming file, row and field."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, row: str, msg: str) -> UserError:
-        return UserError(f"{self.path}: [{row}] {msg}")
-
-    def get(self, row: str, d: Any, key: str, kind: type | tuple[type, ...],
-            default: Any = ...) -> Any:
-        if not isinstance(d, dict):
-            raise self.fail(row, "is not a table")
-        if key not in d:
-            if default is ...:
-                raise self.fail(row, f"field {key!r} is missing")
-            return default
-        value = d[key]
-        if isinstance(value, bool) and kind in (int, float, (int, float)):
-            raise self.fail(row, f"field {key!r}: expected a number, got {value!r}")
-        if not isinstance(value, kind):
-            name = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
-            raise self.fail(row, f"field {key!r}: expected {name}, got {value!r}")
-        return value
-
-    def regex(self, row: str, text: str) -> re.Pattern[str]:
-        try:
-            return re.compile(text)
-        except re.error as exc:
-            raise self.fail(row, f"pattern {text!r} is not a regular expression: {exc}") from None
+def _read(root: Path, name: str) -> tuple[Rows, dict[str, Any]]:
+    return read_table(root, name)
 
 
-def _read(root: Path, name: str) -> tuple[_Rows, dict[str, Any]]:
-    path = root / f"{name}.toml"
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise UserError(f"{path}: not UTF-8 text at byte {exc.start}") from None
-    try:
-        return _Rows(path), tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: {exc}") from None
-
-
-def _codes(rows: _Rows, data: dict[str, Any], section: str) -> dict[int, Code]:
+def _codes(rows: Rows, data: dict[str, Any], section: str) -> dict[int, Code]:
     out = {}
     for key, d in data.get(section, {}).items():
         row = f"{section}.{key}"
@@ -233,7 +191,7 @@ def _codes(rows: _Rows, data: dict[str, Any], section: str) -> dict[int, Code]:
     return dict(sorted(out.items()))
 
 
-def _setting(rows: _Rows, row: str, number: int, d: dict[str, Any], prefix: str = "") -> Setting:
+def _setting(rows: Rows, row: str, number: int, d: dict[str, Any], prefix: str = "") -> Setting:
     kind = rows.get(row, d, "type", str)
     if kind not in SETTING_TYPES:
         raise rows.fail(row, f"field 'type': {kind!r} is not one of {', '.join(SETTING_TYPES)}")
@@ -251,7 +209,7 @@ def _setting(rows: _Rows, row: str, number: int, d: dict[str, Any], prefix: str 
                    tuple(int(x) for x in rows.get(row, d, "needs", list, [])))
 
 
-def _settings(rows: _Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[int, Setting]:
+def _settings(rows: Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[int, Setting]:
     out: dict[int, Setting] = {}
     for key, d in data.get("setting", {}).items():
         if not key.isdigit():
@@ -265,7 +223,7 @@ def _settings(rows: _Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[
     return dict(sorted(out.items()))
 
 
-def _variant(rows: _Rows, vid: str, d: dict[str, Any]) -> Variant:
+def _variant(rows: Rows, vid: str, d: dict[str, Any]) -> Variant:
     row = f'variant."{vid}"'
     g = rows.get
     refresh = g(row, d, "status_refresh", dict)
@@ -290,7 +248,7 @@ def _variant(rows: _Rows, vid: str, d: dict[str, Any]) -> Variant:
     return v
 
 
-def _unescape_key(rows: _Rows, row: str, key: str) -> int:
+def _unescape_key(rows: Rows, row: str, key: str) -> int:
     try:
         b = int(key, 16)
     except ValueError:

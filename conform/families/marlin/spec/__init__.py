@@ -8,7 +8,6 @@ field of its base and overrides what it names (``options`` merged switch by swit
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Any
 
 from conform.errors import UserError
 from conform.families import table_folder
+from conform.families.rows import Rows, read_table
 
 FILES = ("variants", "messages", "commands", "caps")
 KINDS = ("move", "dwell", "sync", "home", "report_temp", "report_pos", "firmware",
@@ -121,39 +121,8 @@ class MarlinSpec:
         return c
 
 
-class _Rows:
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, row: str, msg: str) -> UserError:
-        return UserError(f"{self.path}: [{row}] {msg}")
-
-    def get(self, row: str, d: Any, key: str, kind: type | tuple[type, ...], default: Any = ...
-            ) -> Any:
-        if not isinstance(d, dict):
-            raise self.fail(row, "is not a table")
-        if key not in d:
-            if default is ...:
-                raise self.fail(row, f"field {key!r} is missing")
-            return default
-        value = d[key]
-        numeric = kind in (int, float, (int, float))
-        if (isinstance(value, bool) and numeric) or not isinstance(value, kind):
-            name = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
-            raise self.fail(row, f"field {key!r}: expected {name}, got {value!r}")
-        return value
-
-
-def _read(root: Path, name: str) -> tuple[_Rows, dict[str, Any]]:
-    path = root / f"{name}.toml"
-    try:
-        return _Rows(path), tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise UserError(f"{path}: missing (marlin tables need {', '.join(FILES)})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML: {exc}") from None
+def _read(root: Path, name: str) -> tuple[Rows, dict[str, Any]]:
+    return read_table(root, name, ", ".join(f"{f}.toml" for f in FILES))
 
 
 def _variants(root: Path) -> dict[str, Variant]:
