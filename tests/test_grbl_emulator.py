@@ -4,7 +4,6 @@ by `conform analyze`."""
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import time
@@ -13,38 +12,20 @@ import pytest
 import serial
 
 from conform.families.grbl.spec.load import load_grbl
+from tests import emulated
+from tests.emulated import stop
 
 G = load_grbl()
 V = G.variant("grbl-1.1f")
 
 
 def start(*args):
-    proc = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", "grbl-1.1f",
-                             "--baud", "115200", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    path = proc.stdout.readline().strip()
-    info = proc.stderr.readline()
-    assert path.startswith("/"), info
+    proc, path, _ = emulated.serve("serve", "grbl-1.1f", "--baud", "115200", *args)
     return proc, path
 
 
-def stop(proc):
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-        raise AssertionError("the emulator did not stop on SIGTERM") from None
-    return proc.stderr.read()
-
-
 def read_lines(port, n, timeout=3.0):
-    buf = b""
-    end = time.monotonic() + timeout
-    while buf.count(b"\r\n") < n and time.monotonic() < end:
-        buf += port.read(4096)
-    return buf.decode("latin-1").split("\r\n")[:-1]
+    return emulated.read_lines(port, n, timeout, eol=b"\r\n")
 
 
 @pytest.fixture

@@ -17,6 +17,8 @@ from conform.conformance.results import Grade
 from conform.families.marlin.conformance.checks import mutant_report, run_targets
 from conform.families.marlin.conformance.mutants import MUTANTS
 from conform.families.marlin.protocol.codec import frame
+from tests import emulated
+from tests.emulated import stop
 
 
 @pytest.mark.parametrize("vid", ["marlin-2.1", "marlin-2.1-adv"])
@@ -47,33 +49,11 @@ def test_cli_run_and_mutant_target(tmp_path):
 
 
 def start(variant="marlin-2.1", *args):
-    proc = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", variant,
-                             "--baud", "250000", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    path = proc.stdout.readline().strip()
-    info = proc.stderr.readline()
-    assert path.startswith("/"), info
-    control = info.rsplit("control: ", 1)[-1].strip()
-    return proc, path, control
-
-
-def stop(proc):
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-        raise AssertionError("the emulator did not stop on SIGTERM") from None
-    return proc.stderr.read()
+    return emulated.serve("serve", variant, "--baud", "250000", *args)
 
 
 def read_lines(port, n, timeout=3.0):
-    buf = b""
-    end = time.monotonic() + timeout
-    while buf.count(b"\n") < n and time.monotonic() < end:
-        buf += port.read(4096)
-    return buf.decode("latin-1").splitlines()
+    return emulated.read_lines(port, n, timeout)
 
 
 @pytest.mark.slow
