@@ -78,11 +78,17 @@ def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str) -> str:
 
 
 def thin_points(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every ``step``-th point of long arrays (at most ``MAX_POINTS`` and one), the last
+    point always kept: a line ends where its data ends, and the largest value of a sorted
+    series (a CDF's tail) is not cut off the axis."""
     n = len(arrays[0])
     if n <= MAX_POINTS:
         return arrays
     step = int(np.ceil(n / MAX_POINTS))
-    return tuple(a[::step] for a in arrays)
+    idx = np.arange(0, n, step)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    return tuple(np.asarray(a)[idx] for a in arrays)
 
 
 def draw(a: Any, makers: Iterable[tuple[str, Callable[[Any], str | None]]]) -> dict[str, str]:
