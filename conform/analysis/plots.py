@@ -67,13 +67,15 @@ def limit(ax: Any, a: Any) -> None:
         ax.set_xlim(left=lo if np.isfinite(lo) else None, right=hi if np.isfinite(hi) else None)
 
 
-def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str) -> str:
-    """Labels, the report's time range and the legend of a plot over time; its PNG."""
+def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str, legend: bool = True) -> str:
+    """Labels, the report's time range and the legend of a plot over time (``legend``
+    False: the caller placed it, e.g. for twin axes); its PNG."""
     ax.set_xlabel("s from the start")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     limit(ax, a)
-    legend_beside(ax)
+    if legend:
+        legend_beside(ax)
     return to_png(fig)
 
 
