@@ -66,18 +66,24 @@ def test_errors_and_alarms_are_findings():
     assert next(f for f in a.findings if f.kind == "alarm").message.startswith("ALARM:5")
 
 
+def slow_moves(u, host, t, n, wait):  # noqa: ANN001
+    """``n`` moves from ``t`` on, each followed ``wait`` s later by a status poll (sent to
+    the unit ``u`` and kept in ``host``); the time after the last."""
+    for i in range(n):
+        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
+        u.receive(host[-1][1], t)
+        t += wait
+        host.append((t, b"?"))
+        u.receive(b"?", t)
+        t += 0.1
+    return t
+
+
 def test_starved_planner_is_seen_in_status_reports():
     host, unit = [], []
     u = GrblUnit(V, G)
     u.poll(0.0)
-    t = 0.0
-    for i in range(4):                  # a sender that waits far too long between moves
-        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
-        u.receive(host[-1][1], t)
-        t += 3.0
-        host.append((t, b"?"))
-        u.receive(b"?", t)
-        t += 0.1
+    t = slow_moves(u, host, 0.0, 4, 3.0)  # a sender that waits far too long between moves
     unit = u.poll(t + 10)
     a = analyze_streams(host, unit)
     assert a.kinds().get("planner-starved", 0) >= 1
@@ -277,14 +283,7 @@ def test_every_plot_is_on_the_session_time_axis(monkeypatch):
     for t in (0.0, 1.0):                       # polled while idle, before any line
         host.append((t, b"?"))
         u.receive(b"?", t)
-    t = 2.0
-    for i in range(6):
-        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
-        u.receive(host[-1][1], t)
-        t += 0.5
-        host.append((t, b"?"))
-        u.receive(b"?", t)
-        t += 0.1
+    t = slow_moves(u, host, 2.0, 6, 0.5)
     a = analyze_streams(host, u.poll(t + 10), spec=G)
     for name, draw in (("machine", htmlreport.machine_plot), ("buffer", htmlreport.buffer_plot),
                        ("latency", htmlreport.latency_plot)):
