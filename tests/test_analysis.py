@@ -335,3 +335,56 @@ def test_parquet_streams_in_row_groups(tmp_path: Path) -> None:
     assert ex["command"].iloc[1] == a.host_text(1)
     t = ex["t_cmd_first"].to_numpy()
     assert np.allclose(t, a.exchanges["t_cmd_first"].to_numpy() - a.t0, equal_nan=True)
+
+
+def _figure_of(monkeypatch: pytest.MonkeyPatch, draw, a):  # noqa: ANN001
+    """The matplotlib figure ``draw(a)`` makes (kept instead of turned into a PNG)."""
+    from conform.families.gve.analysis import plots
+
+    kept = []
+    monkeypatch.setattr(plots, "to_png", lambda fig: kept.append(fig) or "png")
+    assert draw(a) == "png"
+    return kept[0]
+
+
+def test_latency_cdf_shows_the_slowest_host_turnaround(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A long session with one host turnaround of 500 ms among 2 ms ones: thinning the
+    CDF for drawing keeps it and the axis reaches beyond it (it was cut off)."""
+    import pandas as pd
+
+    from conform.analysis.plots import MAX_POINTS
+    from conform.families.gve.analysis.plots import latency_plots
+
+    n = 2 * MAX_POINTS + 1   # thinned to every 3rd point: the last one fell out
+    host = np.full(n, 0.002)
+    host[n // 2] = 0.5
+    ex = pd.DataFrame({"status": "answered", "rtt": np.full(n, 0.002),
+                       "unit_time": np.full(n, 0.0003), "host_time": host})
+
+    class Whole:
+        whole = True
+        exchanges = ex
+
+    fig = _figure_of(monkeypatch, latency_plots, Whole())
+    cdf = fig.axes[1]
+    line, = (ln for ln in cdf.get_lines() if ln.get_label() == "host turnaround")
+    assert max(line.get_xdata()) == pytest.approx(500.0)
+    assert cdf.get_xlim()[1] > 500.0
+
+
+def test_path_plot_leaves_the_path_visible_on_a_long_job(monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    """usb-latency's circle has 475 junctions and 167 stops: junctions are not dotted (only
+    a few are), stops are thinned to at most MARKERS and the legend says so."""
+    from conform.families.gve.analysis.plots import MARKERS, path_plot
+
+    a = analyze(str(Path(__file__).resolve().parent.parent / "captures" / "usb-latency.mcap"))
+    fig = _figure_of(monkeypatch, path_plot, a)
+    lines = fig.axes[0].get_lines()
+    labels = [ln.get_label() for ln in lines]
+    assert not any(lb.startswith("junction") for lb in labels), labels
+    marked = [ln for ln in lines if ln.get_marker() not in ("None", None, "")]
+    assert marked and all(len(ln.get_xdata()) <= MARKERS for ln in marked)
+    assert sum(len(ln.get_xdata()) for ln in marked) < 200
+    stopped, = (lb for lb in labels if lb.startswith("stopped"))
+    assert stopped == "stopped (167, 1 in 2 drawn)"

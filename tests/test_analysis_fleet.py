@@ -136,3 +136,79 @@ def test_one_machine_is_said_in_the_singular(tmp_path, capsys):
     assert "2 sessions on 1 machine</h1>" in html
     assert (tmp_path / "fleet" / "summary.md").read_text().startswith(
         "# Fleet analysis: 2 sessions on 1 machine\n")
+
+
+def _md_table(text: str, heading: str) -> list[dict[str, str]]:
+    """The rows of the Markdown table under ``## heading`` as dicts by column name."""
+    table = text.split(f"## {heading}\n", 1)[1].strip().split("\n\n", 1)[0]
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in table.splitlines()]
+    head, body = rows[0], rows[2:]
+    return [dict(zip(head, r, strict=True)) for r in body]
+
+
+def test_fleet_cli_writes_every_table_session_reports_and_a_styled_report(tmp_path, capsys,
+                                                                         monkeypatch):
+    """`--report fleet/ --parquet t/` on a folder: each session's own report under the
+    fleet's folder, linked from its row; a dataset per table the README lists; the verdict,
+    badges and plots of the analysis report's look; no `t//` anywhere."""
+    import re
+
+    root = tmp_path / "caps" / "mill-1"
+    root.mkdir(parents=True)
+    for n in ("careless-noisy", "good-rs232"):
+        shutil.copy(CAPTURES / f"{n}.mcap", root / f"{n}.mcap")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as ex:
+        main(["analyze", "caps/", "--report", "fleet/", "--parquet", "t/", "--jobs", "1",
+              "--no-progress"])
+    assert ex.value.code == 0
+    cap = capsys.readouterr()
+    said = cap.out + cap.err
+    assert "t/exchanges" in said and "//" not in said, said
+    for table in ("exchanges", "frames_host", "frames_unit", "series", "queue_depth"):
+        df = pd.read_parquet(tmp_path / "t" / table)
+        assert set(df["machine"].astype(str)) == {"mill-1"}, table
+        assert set(df["session"].astype(str)) == {"careless-noisy", "good-rs232"}, table
+    fleet = tmp_path / "fleet"
+    html = (fleet / "index.html").read_text()
+    for name in ("index.html", "summary.md", "fleet.json"):  # the plots' base64 aside
+        text = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", (fleet / name).read_text())
+        assert "//" not in text, name
+    assert '<p class="verdict HAZARD"><strong>HAZARD</strong>: 5 hazards on mill-1</p>' in html
+    assert 'class="badge sev-hazard">hazard: 5<' in html
+    assert len(re.findall(r'<img alt="[^"]+" src="data:image/png;base64,', html)) == 2
+    links = re.findall(r'<a class="session-report" href="([^"]+)">([^<]+)</a>', html)
+    assert sorted(s for _h, s in links) == ["careless-noisy", "good-rs232"]
+    for href, session in links:
+        page = (fleet / href).read_text()
+        assert f"caps/mill-1/{session}.mcap" in page and "Session analysis" in page
+    doc = json.loads((fleet / "fleet.json").read_text())
+    assert doc["verdict"]["word"] == "HAZARD"
+    assert (fleet / "sessions" / "mill-1" / "careless-noisy" / "findings.json").exists()
+
+
+def test_a_machines_starved_time_is_its_sessions_starved_time(tmp_path, capsys):
+    """usb-latency's queue runs dry (the session report's starvations and starved seconds):
+    the machine's row says the same starved seconds as its sessions' rows and the session's
+    own report, and standstill (a longer, different figure) is named and explained apart."""
+    root = tmp_path / "caps" / "mill-1"
+    root.mkdir(parents=True)
+    for n in ("usb-latency", "good-rs232"):
+        shutil.copy(CAPTURES / f"{n}.mcap", root / f"{n}.mcap")
+    with pytest.raises(SystemExit) as ex:
+        main(["analyze", str(tmp_path / "caps"), "--report", str(tmp_path / "fleet"),
+              "--jobs", "1", "--no-progress"])
+    assert ex.value.code == 0
+    capsys.readouterr()
+    md = (tmp_path / "fleet" / "summary.md").read_text()
+    machine, = _md_table(md, "Machines")
+    sessions = _md_table(md, "Sessions")
+    own = json.loads((tmp_path / "fleet" / "sessions" / "mill-1" / "usb-latency" /
+                      "findings.json").read_text())["metrics"]["queue"]
+    assert own["starvations"] > 0 and own["starved_s"] > 0
+    assert machine["starved s"] == f"{own['starved_s']:.3f}"
+    assert sum(float(r["starved s"]) for r in sessions) == pytest.approx(
+        float(machine["starved s"]), abs=1e-3)
+    assert float(machine["standstill s"]) > float(machine["starved s"])
+    assert "starved s: time the replayed queue stood empty" in md
+    assert "standstill s: from the queue running empty" in md

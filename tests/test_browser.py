@@ -215,4 +215,24 @@ def test_fleet_report_loads_and_names_its_counts(browser, tmp_path, capsys):
     assert _load(browser, out / "index.html", "fleet") == []
     heading = _on_first_screen(browser, "h1")
     assert heading.startswith("Fleet analysis: ") and " 1 machines" not in heading
-    assert "machine" in _on_first_screen(browser, "table")
+    # styled as a session's report: the verdict and the counts first, then the plots
+    verdict = _on_first_screen(browser, ".verdict")
+    assert verdict.startswith("HAZARD: 5 hazards on "), verdict   # careless-noisy's five
+    assert "hazard: 5" in _on_first_screen(browser, ".badge.sev-hazard")
+    assert "exchanges" in _on_first_screen(browser, "table.fleet")
+    background = browser.execute_script(
+        "return getComputedStyle(document.querySelector('.verdict')).backgroundColor")
+    assert background == "rgb(248, 208, 208)"   # the hazard colour of the shared stylesheet
+    plots = browser.execute_script(
+        "return [...document.images].map(i => [i.alt, i.complete && i.naturalWidth > 0])")
+    assert len(plots) == 2 and all(ok for _alt, ok in plots), plots
+    assert plots[0][0].startswith("sessions over time")
+    # a session's name opens that session's own report
+    link = browser.find_element("css selector", "a.session-report")
+    session = link.text
+    link.click()
+    assert browser.current_url.endswith(f"/sessions/captures/{session}/index.html")
+    assert [e for e in browser.get_log("browser") if e.get("level") == "SEVERE"] == []
+    own = _on_first_screen(browser, "h1")
+    assert own.startswith("Session analysis: ") and own.endswith(f"{session}.mcap"), own
+    _on_first_screen(browser, "table.session")

@@ -66,18 +66,24 @@ def test_errors_and_alarms_are_findings():
     assert next(f for f in a.findings if f.kind == "alarm").message.startswith("ALARM:5")
 
 
+def slow_moves(u, host, t, n, wait):  # noqa: ANN001
+    """``n`` moves from ``t`` on, each followed ``wait`` s later by a status poll (sent to
+    the unit ``u`` and kept in ``host``); the time after the last."""
+    for i in range(n):
+        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
+        u.receive(host[-1][1], t)
+        t += wait
+        host.append((t, b"?"))
+        u.receive(b"?", t)
+        t += 0.1
+    return t
+
+
 def test_starved_planner_is_seen_in_status_reports():
     host, unit = [], []
     u = GrblUnit(V, G)
     u.poll(0.0)
-    t = 0.0
-    for i in range(4):                  # a sender that waits far too long between moves
-        host.append((t, b"G1X-%d.0F500\n" % (i + 1)))
-        u.receive(host[-1][1], t)
-        t += 3.0
-        host.append((t, b"?"))
-        u.receive(b"?", t)
-        t += 0.1
+    t = slow_moves(u, host, 0.0, 4, 3.0)  # a sender that waits far too long between moves
     unit = u.poll(t + 10)
     a = analyze_streams(host, unit)
     assert a.kinds().get("planner-starved", 0) >= 1
@@ -259,3 +265,33 @@ def test_analyze_json_on_a_grbl_capture_and_on_an_empty_one(tmp_path):
         assert "empty capture" in (q.stderr if args else q.stdout)
         assert "gve" not in (q.stdout + q.stderr).lower()
     assert json.loads(q.stdout)["empty"] is True
+
+
+def test_every_plot_is_on_the_session_time_axis(monkeypatch):
+    """Status polls two seconds before the first line: the state plot, the buffer plot and
+    the latency plot all count seconds from the session's first byte (as the findings and
+    the other families' plots do), so a line and the state it caused line up."""
+    from conform.analysis import plots
+    from conform.families.grbl.analysis import htmlreport
+
+    kept = []
+    for mod in (plots, htmlreport):
+        monkeypatch.setattr(mod, "to_png", lambda fig: kept.append(fig) or "png", raising=False)
+    u = GrblUnit(V, G)
+    u.poll(0.0)
+    host = []
+    for t in (0.0, 1.0):                       # polled while idle, before any line
+        host.append((t, b"?"))
+        u.receive(b"?", t)
+    t = slow_moves(u, host, 2.0, 6, 0.5)
+    a = analyze_streams(host, u.poll(t + 10), spec=G)
+    for name, draw in (("machine", htmlreport.machine_plot), ("buffer", htmlreport.buffer_plot),
+                       ("latency", htmlreport.latency_plot)):
+        kept.clear()
+        assert draw(a) == "png", name
+        ax = kept[0].axes[0]
+        assert ax.get_xlabel() == "s from the start", name
+        first = min(ax.get_lines()[0].get_xdata())  # the state, bytes in flight, latency
+        want = a.reports[0][0] if name == "machine" else 2.0
+        assert first == pytest.approx(want, abs=0.05), name
+    assert a.t0 == 0.0 and a.metrics["duration_s"] > 5.0

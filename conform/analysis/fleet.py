@@ -5,11 +5,13 @@
 
 Every capture is analysed on its own (one task per file) by a pool of local processes or by
 the workers of an existing Dask distributed scheduler; each task writes its tables into one
-Parquet dataset (``DIR/exchanges/machine=M/session=S.parquet``, hive partitioned, so pandas,
-polars or DuckDB read the whole fleet as one table) and returns a small summary row. The
+Parquet dataset per table (``DIR/<table>/machine=M/S.parquet`` for every table a single
+analysis writes: exchanges, frames_host, frames_unit, series, queue_depth; hive partitioned,
+so pandas, polars or DuckDB read the whole fleet as one table) and returns a small summary row. The
 rows become the fleet summary (per machine and session: duration, exchanges, throughput,
 latency percentiles, findings, and the columns each family declares, ``Family.fleet_columns``)
-as HTML, Markdown and JSON.
+as HTML, Markdown and JSON. With a report folder each session's own report is written under
+it too (``sessions/<machine>/<session>/index.html``), linked from the session's row.
 
 A file that cannot be analysed is a row with its error, not the end of the run. Workers of a
 distributed scheduler must see the files and the output folder at the same paths.
@@ -29,9 +31,11 @@ from typing import Any
 from conform.errors import UserError
 from conform.families import FleetColumn, default_family, families, family
 
-SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "duration_s", "exchanges",
-                "exchanges_per_s", "findings", "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms",
-                "rtt_max_ms")  # every family's; then the families' own (``fleet_columns``)
+SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "started",
+                "duration_s", "exchanges", "exchanges_per_s", "findings", "severities",
+                "rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms", "rtt_max_ms", "report"
+                )  # every family's; then the families' own (``fleet_columns``)
+SEVERITIES = ("hazard", "error", "warning", "info")
 
 
 def fleet_columns() -> list[FleetColumn]:
@@ -70,41 +74,97 @@ def machine_of(path: Path, metadata: dict[str, dict[str, str]]) -> str:
     return str(session.get("machine") or path.parent.name or session.get("hostname") or "-")
 
 
-def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any]) -> dict[str, Any]:
-    """One fleet task: analyse ``path``, write its Parquet part, return its summary row."""
+def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any],
+                report_dir: str | None = None) -> dict[str, Any]:
+    """One fleet task: analyse ``path``, write its Parquet parts (and, with ``report_dir``,
+    its own report under ``report_dir/sessions/``), return its summary row."""
     from conform.analysis import analyze
 
     p = Path(path)
     row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS) | dict.fromkeys(
         c.key for c in fleet_columns())
-    row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error")
-    other = _other_family(p, parquet_dir, options, row)
+    row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error",
+               started=_mtime(p))
+    other = _other_family(p, parquet_dir, options, row, report_dir)
     if other is not None:
         return other
     row["family"] = default_family().name
     sink = None
-    if parquet_dir:  # this capture's exchanges: one file of the fleet's dataset, as it streams
+    if parquet_dir:  # this capture's tables: one file of each of the fleet's datasets
         from conform.analysis.tables import ParquetStream
 
-        root = Path(parquet_dir)
-        part = root / "exchanges" / f"machine={_safe(row['machine'])}" / f"{_safe(p.stem)}.parquet"
-        sink = ParquetStream(root, only=("exchanges",), files={"exchanges": part},
+        sink = ParquetStream(Path(parquet_dir), part=Path(f"machine={_safe(row['machine'])}",
+                                                          f"{_safe(p.stem)}.parquet"),
                              const={"session": p.stem, "t0": None})
     a = _attempt(row, lambda: analyze(p, whatif_replays=False, parquet=sink, **options))
     if a is None:
         return row
-    row.update(a.fleet_row())
-    row["machine"] = machine_of(p, a.raw.metadata)
+    _fill(row, a, machine_of(p, a.raw.metadata), a.raw.metadata.get("conform.session", {}))
     if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
-        d = Path(parquet_dir) / "exchanges" / f"machine={_safe(row['machine'])}"
-        d.mkdir(parents=True, exist_ok=True)
-        for path in a.tables.values():
+        for name, path in a.tables.items():
+            d = Path(parquet_dir) / name / f"machine={_safe(row['machine'])}"
+            d.mkdir(parents=True, exist_ok=True)
             path.replace(d / path.name)
+    _session_report(row, a, report_dir, default_family().name)
     return row
 
 
+def _fill(row: dict[str, Any], a: Any, machine: str, meta: dict[str, Any]) -> None:
+    """A row from an analysis: its ``fleet_row()``, the machine, the findings per severity
+    and the session's start (its metadata's ``started``, else the file's time)."""
+    row.update(a.fleet_row())
+    row["machine"] = machine
+    sev = dict.fromkeys(SEVERITIES, 0)
+    for f in getattr(a, "findings", []):
+        sev[f.severity] = sev.get(f.severity, 0) + 1
+    row["severities"] = sev
+    started = _iso_seconds(meta.get("started"))
+    if started is not None:
+        row["started"] = started
+
+
+def _mtime(p: Path) -> float | None:
+    try:
+        return p.stat().st_mtime
+    except OSError:
+        return None
+
+
+def _iso_seconds(text: Any) -> float | None:
+    """An ISO time (``2026-11-25T10:00:00+00:00``) as Unix seconds; None if it is not one."""
+    from datetime import datetime
+
+    try:
+        return datetime.fromisoformat(str(text)).timestamp() if text else None
+    except ValueError:
+        return None
+
+
+def session_folder(row: dict[str, Any]) -> Path:
+    """Where a session's own report goes in a fleet's report folder (relative)."""
+    return Path("sessions", _safe(str(row["machine"])), _safe(str(row["session"])))
+
+
+def _session_report(row: dict[str, Any], a: Any, report_dir: str | None, family: str) -> None:
+    """The session's own report (with its diagnosis at the top, as ``conform analyze FILE``
+    writes it) under the fleet's report folder; the row's ``report``: its relative path. One
+    that cannot be written is said in the row's error, the analysis stands."""
+    if not report_dir:
+        return
+    from conform.diagnosis import headline_for
+
+    rel = session_folder(row)
+    try:
+        headline_for(row["path"], a, family, lambda _text: None)
+        a.write_report(str(Path(report_dir) / rel))
+    except Exception as exc:  # noqa: BLE001 - said in the row: the other sessions go on
+        row["error"] = f"its report could not be written: {type(exc).__name__}: {exc}"
+        return
+    row["report"] = (rel / "index.html").as_posix()
+
+
 def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
-                  row: dict[str, Any]) -> dict[str, Any] | None:
+                  row: dict[str, Any], report_dir: str | None = None) -> dict[str, Any] | None:
     """A capture of another family's traffic (conform.families.capture_hook decides, as for
     one file), analysed by that family: its ``fleet_row()`` fills the row and its tables go
     to ``DIR/<family>/<table>/machine=M/<session>.parquet``. None: the default family's."""
@@ -123,8 +183,7 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
                                                         detected=d.why))
     if a is None:
         return row
-    row.update(a.fleet_row())
-    row["machine"] = machine_of(p, {"conform.session": meta})
+    _fill(row, a, machine_of(p, {"conform.session": meta}), meta)
     if parquet_dir:
         base = Path(parquet_dir) / d.family
         tmp = base / f".{_safe(row['machine'])}-{_safe(p.stem)}"
@@ -133,6 +192,7 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
             dest.parent.mkdir(parents=True, exist_ok=True)
             table.replace(dest)
         shutil.rmtree(tmp, ignore_errors=True)
+    _session_report(row, a, report_dir, d.family)
     return row
 
 
@@ -148,22 +208,20 @@ def _attempt(row: dict[str, Any], run: Callable[[], Any]) -> Any:
     return None
 
 
-Runner = Callable[[list[str], str | None, dict[str, Any]], list[dict[str, Any]]]
-
-
 def run_local(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
-              jobs: int | None = None) -> list[dict[str, Any]]:
+              jobs: int | None = None, report_dir: str | None = None) -> list[dict[str, Any]]:
     """Every file on a pool of local processes (all cores by default)."""
     jobs = jobs or os.cpu_count() or 1
     if jobs == 1 or len(paths) == 1:
-        return [analyze_one(p, parquet_dir, options) for p in paths]
-    with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
-        return list(pool.map(analyze_one, paths, [parquet_dir] * len(paths),
-                             [options] * len(paths)))
+        return [analyze_one(p, parquet_dir, options, report_dir) for p in paths]
+    n = len(paths)
+    with ProcessPoolExecutor(max_workers=min(jobs, n)) as pool:
+        return list(pool.map(analyze_one, paths, [parquet_dir] * n, [options] * n,
+                             [report_dir] * n))
 
 
 def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
-             scheduler: Any) -> list[dict[str, Any]]:
+             scheduler: Any, report_dir: str | None = None) -> list[dict[str, Any]]:
     """Every file as a task on Dask distributed (``scheduler``: an address or a cluster)."""
     try:
         from dask.distributed import Client
@@ -176,7 +234,7 @@ def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
         raise UserError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
     try:
         futures = client.map(analyze_one, paths, parquet_dir=parquet_dir, options=options,
-                             pure=False)
+                             report_dir=report_dir, pure=False)
         return client.gather(futures)
     finally:
         client.close()
@@ -184,22 +242,27 @@ def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
 
 def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
                   options: dict[str, Any] | None = None, jobs: int | None = None,
-                  scheduler: Any = None) -> dict[str, Any]:
-    """Analyse every capture in ``inputs``; the fleet summary (see ``summarise``)."""
+                  scheduler: Any = None, report_dir: str | None = None) -> dict[str, Any]:
+    """Analyse every capture in ``inputs``; the fleet summary (see ``summarise``). With
+    ``report_dir`` each session's own report is written under it (``sessions/``) and its
+    row links it (``report``); ``write_fleet_report`` adds the fleet's."""
     paths = [str(p.resolve()) for p in expand_inputs(inputs)]
-    if parquet_dir:
-        Path(parquet_dir).mkdir(parents=True, exist_ok=True)
+    for d in (parquet_dir, report_dir):
+        if d:
+            Path(d).mkdir(parents=True, exist_ok=True)
     opts = dict(options or {})
     if scheduler is not None:
-        rows = run_dask(paths, parquet_dir, opts, scheduler)
+        rows = run_dask(paths, parquet_dir, opts, scheduler, report_dir)
     else:
-        rows = run_local(paths, parquet_dir, opts, jobs)
+        rows = run_local(paths, parquet_dir, opts, jobs, report_dir)
     return summarise(rows)
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Sessions sorted by machine and session, one aggregate row per machine and the
-    fleet's totals; ``columns``: the families' columns (``fleet_columns``) as plain dicts."""
+    fleet's totals (findings per severity summed in ``severities``); ``columns``: the
+    families' columns (``fleet_columns``) as plain dicts; ``verdict``: the fleet in a word
+    and a sentence (``verdict``)."""
     cols = fleet_columns()
     totals = [c.key for c in cols if c.total]
     rows = sorted(rows, key=lambda r: (str(r["machine"]), str(r["session"])))
@@ -208,6 +271,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         m = machines.setdefault(r["machine"], {
             "machine": r["machine"], "sessions": 0, "errors": 0, "damaged": 0,
             "duration_s": 0.0, "exchanges": 0, **dict.fromkeys(totals, 0),
+            "severities": dict.fromkeys(SEVERITIES, 0),
             "rtt_p95_ms_worst": None, "rtt_p99_ms_worst": None})
         m["sessions"] += 1
         if r["state"] == "error":
@@ -216,6 +280,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         m["damaged"] += r["state"] == "damaged"
         for k in ("duration_s", "exchanges", *totals):
             m[k] += r.get(k) or 0
+        for k, n in (r.get("severities") or {}).items():
+            m["severities"][k] = m["severities"].get(k, 0) + n
         for k in ("rtt_p95_ms", "rtt_p99_ms"):
             v = r.get(k)
             if v is not None:
@@ -227,12 +293,45 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         for c in cols:
             if c.total and c.rate:
                 m[c.rate] = m[c.key] / d if d > 0 else None
-    return {"sessions": rows, "machines": list(machines.values()),
-            "totals": {"sessions": len(rows), "machines": len(machines),
-                       "errors": sum(r["state"] == "error" for r in rows),
-                       **{k: sum(r.get(k) or 0 for r in rows) for k in totals},
-                       "exchanges": sum(r.get("exchanges") or 0 for r in rows)},
-            "columns": [asdict(c) for c in cols]}
+    sev = {k: sum(m["severities"].get(k, 0) for m in machines.values()) for k in SEVERITIES}
+    out = {"sessions": rows, "machines": list(machines.values()),
+           "totals": {"sessions": len(rows), "machines": len(machines),
+                      "errors": sum(r["state"] == "error" for r in rows),
+                      "damaged": sum(r["state"] == "damaged" for r in rows),
+                      **{k: sum(r.get(k) or 0 for r in rows) for k in totals},
+                      "exchanges": sum(r.get("exchanges") or 0 for r in rows),
+                      "severities": sev},
+           "columns": [asdict(c) for c in cols]}
+    out["verdict"] = verdict(out)
+    return out
+
+
+def verdict(s: dict[str, Any]) -> dict[str, str]:
+    """The fleet in a word (``INCOMPLETE``: a capture damaged or not analysed; ``HAZARD``:
+    a finding of that severity; ``ERROR``: one of that; else ``CLEAN``) and a sentence
+    naming the machines concerned."""
+    t = s["totals"]
+    sev = t["severities"]
+
+    def where(test: Callable[[dict[str, Any]], Any]) -> str:
+        names = [str(m["machine"]) for m in s["machines"] if test(m)]
+        return f"on {', '.join(names[:5])}{' …' if len(names) > 5 else ''}"
+
+    if t["errors"] or t["damaged"]:
+        word = "INCOMPLETE"
+        text = (f"{count(t['errors'], 'capture')} not analysed and {t['damaged']} damaged "
+                + where(lambda m: m["errors"] or m["damaged"]))
+    elif sev.get("hazard"):
+        word = "HAZARD"
+        text = (f"{count(sev['hazard'], 'hazard')} "
+                + where(lambda m: m["severities"].get("hazard")))
+    elif sev.get("error"):
+        word = "ERROR"
+        text = (f"{count(sev['error'], 'error finding')} "
+                + where(lambda m: m["severities"].get("error")))
+    else:
+        word, text = "CLEAN", "no hazard and no error finding in any session"
+    return {"word": word, "text": text}
 
 
 def totals_text(counts: dict[str, Any], columns: list[dict[str, Any]]) -> str:
@@ -243,18 +342,33 @@ def totals_text(counts: dict[str, Any], columns: list[dict[str, Any]]) -> str:
 
 
 def write_fleet_report(summary: dict[str, Any], out_dir: str | Path) -> dict[str, Path]:
-    """``fleet.json``, ``summary.md`` and a self-contained ``index.html``."""
+    """``fleet.json``, ``summary.md`` and a self-contained ``index.html`` (the page pieces
+    and look of a session's analysis report: the verdict first, then the plots and the
+    tables, each session's row linking its own report when one was written)."""
+    from conform.analysis.fleetplots import fleet_plots
     from conform.analysis.report import _clean, _env, report_folder
 
     d = report_folder(out_dir)
     doc = _clean(summary)
     env = _env()
     paths = {"json": d / "fleet.json", "markdown": d / "summary.md", "html": d / "index.html"}
+    plots = fleet_plots(doc)
     paths["json"].write_text(json.dumps(doc, indent=1), "utf-8")
-    ctx = {"s": doc, "fmt": _fmt, "count": count}
+    ctx = {"s": doc, "fmt": _fmt, "count": count, "plots": plots}
     paths["markdown"].write_text(env.get_template("fleet.md.j2").render(**ctx), "utf-8")
     paths["html"].write_text(env.get_template("fleet.html.j2").render(**ctx), "utf-8")
     return paths
+
+
+def fleet_datasets(parquet_dir: str | Path) -> list[str]:
+    """The datasets a fleet run wrote into ``parquet_dir`` (each table's folder, a family's
+    under its name), as paths to say: ``t/exchanges``, never ``t//exchanges``."""
+    root = Path(parquet_dir)
+    out = []
+    for d in sorted(q for q in root.glob("*") if q.is_dir() and not q.name.startswith(".")):
+        subs = [q for q in sorted(d.iterdir()) if q.is_dir() and not q.name.startswith(("machine=", "."))]
+        out.extend(str(q) for q in subs) if subs else out.append(str(d))
+    return out or [str(root)]
 
 
 def count(n: int, noun: str) -> str:

@@ -67,22 +67,30 @@ def limit(ax: Any, a: Any) -> None:
         ax.set_xlim(left=lo if np.isfinite(lo) else None, right=hi if np.isfinite(hi) else None)
 
 
-def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str) -> str:
-    """Labels, the report's time range and the legend of a plot over time; its PNG."""
+def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str, legend: bool = True) -> str:
+    """Labels, the report's time range and the legend of a plot over time (``legend``
+    False: the caller placed it, e.g. for twin axes); its PNG."""
     ax.set_xlabel("s from the start")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     limit(ax, a)
-    legend_beside(ax)
+    if legend:
+        legend_beside(ax)
     return to_png(fig)
 
 
 def thin_points(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every ``step``-th point of long arrays (at most ``MAX_POINTS`` and one), the last
+    point always kept: a line ends where its data ends, and the largest value of a sorted
+    series (a CDF's tail) is not cut off the axis."""
     n = len(arrays[0])
     if n <= MAX_POINTS:
         return arrays
     step = int(np.ceil(n / MAX_POINTS))
-    return tuple(a[::step] for a in arrays)
+    idx = np.arange(0, n, step)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    return tuple(np.asarray(a)[idx] for a in arrays)
 
 
 def draw(a: Any, makers: Iterable[tuple[str, Callable[[Any], str | None]]]) -> dict[str, str]:

@@ -147,15 +147,18 @@ class ParquetStream:
     capture whose earliest byte comes later in the file, rewritten a row group at a time."""
 
     def __init__(self, out_dir: str | Path, only: tuple[str, ...] | None = None,
-                 files: dict[str, Path] | None = None, const: dict[str, Any] | None = None
-                 ) -> None:
+                 files: dict[str, Path] | None = None, const: dict[str, Any] | None = None,
+                 part: Path | None = None) -> None:
         """``only``: the tables to write (all by default); ``files``: a path per table
-        instead of ``DIR/NAME.parquet``; ``const``: columns of one value put first in the
-        exchange table (a fleet's ``session``), and a ``t0`` column if it names one.
-        ``coded``: the text columns written dictionary-encoded (a family adds its own)."""
+        instead of ``DIR/NAME.parquet``; ``part``: every table as ``DIR/NAME/part`` instead
+        (a fleet's ``machine=M/S.parquet``: one file of a dataset per table); ``const``:
+        columns of one value put first in every table (a fleet's ``session``), and a ``t0``
+        column if it names one. ``coded``: the text columns written dictionary-encoded (a
+        family adds its own)."""
         from conform.errors import UserError
 
         self.only, self.files, self.const = only, files or {}, dict(const or {})
+        self.part = part
         self.dir = Path(out_dir)
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
@@ -167,6 +170,8 @@ class ParquetStream:
         self.times = dict(TIMES)
 
     def path(self, name: str) -> Path:
+        if self.part is not None:
+            return self.files.get(name, self.dir / name / self.part)
         return self.files.get(name, self.dir / f"{name}.parquet")
 
     def _put(self, name: str, df: pd.DataFrame) -> None:
@@ -175,7 +180,7 @@ class ParquetStream:
             return
         for c in self.times.get(name, ()):
             df[c] = df[c].to_numpy() - self.t0
-        if name == "exchanges" and self.const:
+        if self.const:
             for k, v in reversed(self.const.items()):
                 df.insert(0, k, self.t0 if k == "t0" else v)
         t = _arrow(df, self.coded)
@@ -226,14 +231,14 @@ class ParquetStream:
         if t0 != self.t0:
             for name, path in out.items():
                 _shift(path, self.times.get(name, ()), self.t0 - t0,
-                       t0 if name == "exchanges" and "t0" in self.const else None)
+                       t0 if "t0" in self.const else None)
         return out
 
 
 def _shift(path: Path, cols: tuple[str, ...], by: float, t0: float | None = None) -> None:
     """Add ``by`` to the time columns of a Parquet file, a row group at a time (and set its
     ``t0`` column, if given)."""
-    if not cols:
+    if not cols and t0 is None:
         return
     f = pq.ParquetFile(path)
     tmp = path.with_suffix(".tmp")

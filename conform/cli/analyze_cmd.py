@@ -175,11 +175,17 @@ def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | No
            variant: str | None, baud: float | None, dialect: str | None, jobs: int | None,
            scheduler: str | None, echo, as_json: bool,  # noqa: ANN001
            fail_on: str = "never") -> None:
-    from conform.analysis.fleet import analyze_fleet, count, totals_text, write_fleet_report
+    from conform.analysis.fleet import (
+        analyze_fleet,
+        count,
+        fleet_datasets,
+        totals_text,
+        write_fleet_report,
+    )
 
     options = {"variant": variant, "baud": baud, "dialect": dialect}
     s = analyze_fleet(files, parquet_dir=parquet_dir, options=options, jobs=jobs,
-                      scheduler=scheduler)
+                      scheduler=scheduler, report_dir=report_dir)
     t = s["totals"]
     echo(f"{count(t['sessions'], 'capture')} on {count(t['machines'], 'machine')}: "
          f"{count(t['exchanges'], 'exchange')}{totals_text(t, s['columns'])}, "
@@ -198,7 +204,8 @@ def _fleet(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | No
         echo(f"report: {paths['report']}")
     if parquet_dir:
         paths["parquet"] = parquet_dir
-        echo(f"tables: {parquet_dir}/exchanges (one dataset, partitioned by machine)")
+        echo(f"tables: {', '.join(fleet_datasets(parquet_dir))} (a dataset each, partitioned "
+             "by machine)")
     if as_json:
         echo_json(s | paths)
     if any(r["state"] != "clean" for r in s["sessions"]):

@@ -57,7 +57,7 @@ class FleetColumn:
     over the fleet; ``rate``: a per-second column, this total over the duration, under that
     key; ``machines`` / ``sessions``: shown in that table; ``flag``: a session or machine
     with a non-zero value is marked; ``summary``: its total is said in the command's lines;
-    ``spec``: number format."""
+    ``spec``: number format; ``note``: what it means, said under the report's tables."""
 
     key: str
     label: str
@@ -69,6 +69,7 @@ class FleetColumn:
     sessions: bool = True
     flag: bool = False
     summary: bool = False
+    note: str = ""
 
 
 class AnalysisResult(Protocol):

@@ -122,8 +122,13 @@ class GveFamily(Family):
                     rate_label="vectors/s", machines=False, sessions=False),
         FleetColumn("hazards", "hazards", total=True, flag=True, summary=True),
         FleetColumn("starvations", "starvations", total=True, summary=True),
-        FleetColumn("starved_s", "starved s", ".3f", total=True, machines=False),
-        FleetColumn("standstill_s", "standstill s", ".3f", total=True, sessions=False),
+        FleetColumn("starved_s", "starved s", ".3f", total=True,
+                    note="starved s: time the replayed queue stood empty while the job had "
+                         "vectors still to come (a session report's starvations, summed per "
+                         "machine)"),
+        FleetColumn("standstill_s", "standstill s", ".3f", total=True,
+                    note="standstill s: from the queue running empty to the next vector's "
+                         "start (the starved time plus the braking to rest and the restart)"),
     )
 
     def characterize(self, target: str, output: str, variant: str | None, **options: Any

@@ -65,6 +65,7 @@ class GrblAnalysis:
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
     reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
     complete: bool = True  # the capture file was whole (not truncated or damaged)
+    t0: float = 0.0  # the session's start (its first byte either way): findings' and plots' 0
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -349,7 +350,8 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "hazards": out.counts.get("rx-overflow-hazard", 0),
     }
     return GrblAnalysis(path, "grbl", v.id, detected, exchanges, findings, metrics,
-                        realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports)
+                        realtime=[(ht[r.offset], r.byte) for r in realtime], reports=reports,
+                        t0=t0)
 
 
 def is_job_line(text: str) -> bool:

@@ -10,15 +10,17 @@ from typing import Any
 
 import numpy as np
 
-from conform.analysis.plots import legend_beside, new_figure, thin_points, to_png
+from conform.analysis.plots import legend_beside, new_figure, over_time, thin_points
 
 HERE = Path(__file__).resolve().parent
 SHARED = HERE.parents[2] / "report" / "templates"   # conform/report/templates
 
 
 def _times(a: Any) -> tuple[float, np.ndarray, np.ndarray]:
+    """(the session's start, each line's time from it, its line-to-answer time): the
+    session-time axis of every plot, as the findings' times and the engine's plots."""
     ex = a.exchanges
-    t0 = min((e.t_sent for e in ex), default=0.0)
+    t0 = a.t0
     t = np.fromiter((e.t_sent - t0 for e in ex), float, len(ex))
     lat = np.fromiter((np.nan if e.t_answer is None else e.t_answer - e.t_sent for e in ex),
                       float, len(ex))
@@ -39,10 +41,7 @@ def buffer_plot(a: Any) -> str | None:
     over = b > limit
     if over.any():
         ax.plot(t[over], b[over], "x", color="tab:red", ms=4, label="over the buffer")
-    ax.set_xlabel("time from the first line (s)")
-    ax.set_ylabel("bytes")
-    legend_beside(ax)
-    return to_png(fig)
+    return over_time(fig, ax, a, "bytes", "Bytes in flight per line")
 
 
 def latency_plot(a: Any) -> str | None:
@@ -58,10 +57,7 @@ def latency_plot(a: Any) -> str | None:
         t0 = _t0
         ax.plot([e.t_sent - t0 for e in errs], [(e.t_answer - e.t_sent) * 1000 for e in errs],
                 "o", color="tab:red", ms=4, label="error:N")
-    ax.set_xlabel("time from the first line (s)")
-    ax.set_ylabel("ms")
-    legend_beside(ax)
-    return to_png(fig)
+    return over_time(fig, ax, a, "ms", "Line to answer")
 
 
 STATE_ROWS = ("Idle", "Run", "Jog", "Hold", "Door", "Home", "Check", "Alarm", "Sleep")
@@ -72,7 +68,7 @@ def machine_plot(a: Any) -> str | None:
     and receive-buffer bytes in use (where starvation and a full buffer show)."""
     if not a.reports:
         return None
-    t0 = min((e.t_sent for e in a.exchanges), default=a.reports[0][0])
+    t0 = a.t0
     t, state, blocks, rx = [], [], [], []
     for when, text in a.reports:
         fields = text.strip("<>").split("|")
@@ -85,7 +81,7 @@ def machine_plot(a: Any) -> str | None:
     fig, ax = new_figure(7.5, 2.6 if all(b is None for b in blocks) else 3.6)
     ax.plot(t, state, "|", ms=10, label="state")
     ax.set_yticks(range(len(STATE_ROWS)), STATE_ROWS, fontsize=8)
-    ax.set_xlabel("time from the first line (s)")
+    ax2 = None
     if any(b is not None for b in blocks):
         ax2 = ax.twinx()
         ax2.step(t, [np.nan if b is None else b for b in blocks], where="post", color="tab:green",
@@ -96,9 +92,9 @@ def machine_plot(a: Any) -> str | None:
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
         legend_beside(ax2, h1 + h2, l1 + l2)
-    else:
-        legend_beside(ax)
-    return to_png(fig)
+        ax2.get_legend().set_bbox_to_anchor((1.12, 1.0))  # beyond the right axis's labels
+    return over_time(fig, ax, a, "", "Machine state from the status reports",
+                     legend=ax2 is None)
 
 
 def _in_use(a: Any, bf: list[str] | None, i: int) -> float | None:

@@ -57,13 +57,17 @@ def latency_plots(a: Any) -> str | None:
     h.set_xlabel("round trip, ms (clipped at p99.5)")
     h.set_ylabel("exchanges")
     h.set_title("Latency histogram")
+    top = 0.0
     for col, label, color in (("rtt", "round trip", "#4477aa"), ("unit_time", "unit", "#228833"),
                               ("host_time", "host turnaround", "#cc6677")):
         v, k = _latency_values(a, col)
         if len(v):
             xs, ys = thin_points(v, np.cumsum(k) / k.sum())
             c.plot(xs, ys, label=label, color=color)
+            top = max(top, float(v[-1]))
     c.set_xscale("symlog", linthresh=0.1)
+    if top > 0:  # room beyond the slowest value of any curve: none cut off the axis
+        c.set_xlim(right=top * 1.5)
     c.set_xlabel("ms")
     c.set_ylabel("fraction")
     c.set_title("Latency CDF")
@@ -247,8 +251,8 @@ def _path_summary(a: Any) -> str | None:
     ax.plot(x, y, color="#4477aa", lw=0.8,
             label="path" + (f" (every {ps.step}th junction)" if ps.step > 1 else ""))
     if len(stops):
-        ax.plot(stops[:, 0], stops[:, 1], "o", ms=3, color="#cc3311",
-                label=f"stopped ({ps.n_stops})")
+        sx, sy, every = sparse_markers(stops[:, 0], stops[:, 1])
+        ax.plot(sx, sy, "o", ms=3, color="#cc3311", label=f"stopped ({ps.n_stops}" + _drawn(every))
     return _path_png(fig, ax, "X/Y path, junctions where the motion stopped")
 
 
@@ -267,9 +271,9 @@ def path_plot(a: Any) -> str | None:
     fig, ax = new_figure(8.0, 6.0)
     xs, ys = thin_points(x, y)
     ax.plot(xs, ys, color="#4477aa", lw=0.8, label="path")
-    if len(x) > 2:  # every junction (a vector's end where the next one starts)
-        jx, jy = thin_points(x[1:-1], y[1:-1])
-        ax.plot(jx, jy, ".", ms=2, color="#88aacc", label=f"junction ({len(x) - 2})")
+    if 2 < len(x) <= JUNCTION_MARKERS + 2:  # every junction (a vector's end where the next
+        ax.plot(x[1:-1], y[1:-1], ".", ms=2, color="#88aacc",  # starts), while few
+                label=f"junction ({len(x) - 2})")
     if len(rep.done_rows):
         # exit speed of every finished vector marks the junction at its end
         idx = np.searchsorted(rows, rep.done_rows)
@@ -283,9 +287,26 @@ def path_plot(a: Any) -> str | None:
         for mask, color, label in ((slow, "#ddaa33", "slowed"), (stop, "#cc3311", "stopped")):
             k = idx[mask] + 1
             if len(k):
-                kx, ky = thin_points(x[k], y[k])
-                ax.plot(kx, ky, "o", ms=3, color=color, label=f"{label} ({int(mask.sum())})")
+                kx, ky, every = sparse_markers(x[k], y[k])
+                ax.plot(kx, ky, "o", ms=3, color=color, label=f"{label} ({int(mask.sum())}"
+                        + _drawn(every))
     return _path_png(fig, ax, "X/Y path, junctions where the motion stopped or slowed")
+
+
+JUNCTION_MARKERS = 100  # junctions drawn as dots only up to this many: more hide the path
+MARKERS = 150  # stopped or slowed junctions drawn, at most: every k-th of more
+
+
+def sparse_markers(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """At most ``MARKERS`` of the points (every k-th, evenly along the path) and k, so
+    markers on a long job leave the path visible."""
+    every = max(1, int(np.ceil(len(x) / MARKERS)))
+    return x[::every], y[::every], every
+
+
+def _drawn(every: int) -> str:
+    """The end of a marker's legend label: how many of them are drawn."""
+    return f", 1 in {every} drawn)" if every > 1 else ")"
 
 
 PLOTS = (("latency", latency_plots), ("latency_time", latency_time_plot),
