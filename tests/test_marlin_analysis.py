@@ -142,3 +142,26 @@ def test_nearest_rank_percentiles_are_exact_then_within_a_tenth_of_a_percent():
         else:
             assert got[0] == o[0] and got[-1] == o[-1]
             assert np.allclose(got, want, rtol=1e-3, atol=0)
+
+
+def test_first_acceptances_kept_on_disk_read_back_after_eviction():
+    """Seen keeps a record per line number in a file behind a few cached blocks: what was
+    written and evicted reads back the same; a second text under one number is kept too."""
+    import random
+
+    from conform.families.marlin.analysis.core import Seen
+
+    s = Seen()
+    r = random.Random(1)
+    ns = [r.randrange(0, 2_000_000) for _ in range(5000)]
+    for k, n in enumerate(ns):
+        s.first(n, n * 7 + 1, k * 0.5, k % 5, k % 2 == 0)
+    assert len(s.blocks) == Seen.CACHED
+    first = {}
+    for k, n in enumerate(ns):
+        first.setdefault(n, (k * 0.5, k % 5, k % 2 == 0))
+    assert all(s.get(n, n * 7 + 1) == first[n] for n in ns)
+    assert s.get(ns[0], 12345) is None
+    s.first(ns[0], 12345, 9.0, 3, True)
+    assert s.get(ns[0], 12345) == (9.0, 3, True) and s.get(ns[0], ns[0] * 7 + 1) == first[ns[0]]
+    s.close()

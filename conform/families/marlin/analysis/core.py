@@ -6,7 +6,8 @@ whose fate is not known yet (taken but not answered); the resend requests of the
 being gathered; the findings, ``MAX_KEPT`` of each group listed and the rest counted; and,
 for lines run twice and never, the first acceptance of each (line number, text), kept as a
 64-bit hash of the text, its time, numbering and whether its ok came: 21 bytes per line
-number in numpy columns (:class:`Seen`), the one thing that grows with the capture.
+number in a temporary file read through a few cached blocks (:class:`Seen`), so the memory
+stays flat; the disk it takes grows with the highest line number.
 
 A line's fate is settled when its ok comes, when an ``Error:... Last Line:`` says it was
 not taken, at a restart, or at the end; it then goes to the lines table (in send order) and
@@ -16,6 +17,9 @@ to the ran-twice and never-ran bookkeeping. Taken lines settle in the order they
 from __future__ import annotations
 
 import math
+import os
+import struct
+import tempfile
 from bisect import bisect_right
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -34,40 +38,75 @@ STORM_MIN = 3              # requests that make a storm
 RESEND_TIMEOUT = 1.0       # s without an ok before a sender's repeat counts as a timeout resend
 MAX_ASKED = 10_000         # distinct numbers counted per storm (min and max stay exact)
 GROUPS = ("loop", "storm", "twice", "never", "busy")   # the order findings are listed in
-_DENSE = 1 << 24           # line numbers kept in the columns; others (rare) in a dict
+_DENSE = 1 << 31           # line numbers kept in Seen's file; others (rare) in a dict
 
 
 class Seen:
-    """The first acceptance of each (line number, text hash): (t, numbering, answered)."""
+    """The first acceptance of each (line number, text hash): (t, numbering, answered).
+
+    A fixed-size record per line number in a temporary file, read and written through a
+    few cached blocks of ``BLOCK`` records (the numbers a session uses move slowly), so the
+    memory it takes does not grow with the capture; a second text under a number already
+    kept (rare) goes to a dict."""
+
+    REC = struct.Struct("<qdib")        # text hash, time, numbering + 1 (0: empty), answered
+    BLOCK = 1 << 16
+    CACHED = 4
 
     def __init__(self) -> None:
-        self.h = np.zeros(1024, np.int64)
-        self.t = np.zeros(1024)
-        self.epoch = np.full(1024, -1, np.int32)
-        self.ok = np.zeros(1024, bool)
+        self.file: Any = None
+        self.blocks: dict[int, bytearray] = {}       # in use order, the last used last
+        self.dirty: set[int] = set()
+        self.top = -1                                 # the highest number kept
         self.other: dict[tuple[int, int], tuple[float, int, bool]] = {}
 
+    def _block(self, b: int) -> bytearray:
+        buf = self.blocks.pop(b, None)
+        if buf is None:
+            size = self.BLOCK * self.REC.size
+            if self.file is None:
+                self.file = tempfile.TemporaryFile(prefix="conform-seen-")
+            data = os.pread(self.file.fileno(), size, b * size)
+            buf = bytearray(data) + bytearray(size - len(data))
+            if len(self.blocks) >= self.CACHED:
+                old = next(iter(self.blocks))
+                self._write(old, self.blocks.pop(old))
+        self.blocks[b] = buf
+        return buf
+
+    def _write(self, b: int, buf: bytearray) -> None:
+        if b in self.dirty:
+            os.pwrite(self.file.fileno(), buf, b * len(buf))
+            self.dirty.discard(b)
+
     def get(self, n: int, h: int) -> tuple[float, int, bool] | None:
-        if 0 <= n < len(self.epoch) and self.epoch[n] >= 0 and self.h[n] == h:
-            return float(self.t[n]), int(self.epoch[n]), bool(self.ok[n])
-        return self.other.get((n, h))
+        if 0 <= n <= self.top and n < _DENSE:
+            b, i = divmod(n, self.BLOCK)
+            kh, t, e, ok = self.REC.unpack_from(self._block(b), i * self.REC.size)
+            if e and kh == h:
+                return t, e - 1, bool(ok)
+        return self.other.get((n, h)) if self.other else None
 
     def first(self, n: int, h: int, t: float, epoch: int, ok: bool) -> None:
         """Keep (n, h) unless it is kept already."""
         if 0 <= n < _DENSE:
-            if n >= len(self.epoch):
-                size = max(n + 1, 2 * len(self.epoch))
-                grow = size - len(self.epoch)
-                self.h = np.concatenate([self.h, np.zeros(grow, np.int64)])
-                self.t = np.concatenate([self.t, np.zeros(grow)])
-                self.epoch = np.concatenate([self.epoch, np.full(grow, -1, np.int32)])
-                self.ok = np.concatenate([self.ok, np.zeros(grow, bool)])
-            if self.epoch[n] < 0:
-                self.h[n], self.t[n], self.epoch[n], self.ok[n] = h, t, epoch, ok
+            b, i = divmod(n, self.BLOCK)
+            buf = self._block(b)
+            kh, _, e, _ = self.REC.unpack_from(buf, i * self.REC.size)
+            if not e:
+                self.REC.pack_into(buf, i * self.REC.size, h, t, epoch + 1, ok)
+                self.dirty.add(b)
+                self.top = max(self.top, n)
                 return
-            if self.h[n] == h:
+            if kh == h:
                 return
         self.other.setdefault((n, h), (t, epoch, ok))
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+        self.blocks.clear()
 
 
 @dataclass
@@ -358,6 +397,7 @@ class Analyser:
                                      f"{self.busy_periods} busy periods, {self.busy_s:.1f} s in "
                                      "all", "gcode.cpp host_keepalive"))
         self._flush_latency()
+        self.seen.close()
         p50, p95, p99, top = (round(v * 1000.0, 3) if self.latency.n else None
                               for v in self.latency.nearest([0.5, 0.95, 0.99, 1.0]))
         duration = t_last - self.t0
