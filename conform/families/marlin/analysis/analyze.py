@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -141,10 +142,8 @@ def analyze_streams(host: Iterable[Chunk], unit: Iterable[Chunk], *,
     core = Analyser(t0, keepalive, planner_blocks,
                     on_line if keep_lines or table is not None else None)
 
-    def again(first: Any, rest: Any) -> Any:
-        if first is not None:
-            yield first
-        yield from rest
+    def again(first: Any, rest: Iterator[Any]) -> Iterator[Any]:
+        return chain([first], rest) if first is not None else rest
 
     t_last = t0
     try:

@@ -58,9 +58,12 @@ class Seen:
         self.blocks: dict[int, bytearray] = {}       # in use order, the last used last
         self.dirty: set[int] = set()
         self.top = -1                                 # the highest number kept
+        self.last = -1                                # the block used last
         self.other: dict[tuple[int, int], tuple[float, int, bool]] = {}
 
     def _block(self, b: int) -> bytearray:
+        if b == self.last:                # the block in use (nearly always)
+            return self.blocks[b]
         buf = self.blocks.pop(b, None)
         if buf is None:
             size = self.BLOCK * self.REC.size
@@ -72,6 +75,7 @@ class Seen:
                 old = next(iter(self.blocks))
                 self._write(old, self.blocks.pop(old))
         self.blocks[b] = buf
+        self.last = b
         return buf
 
     def _write(self, b: int, buf: bytearray) -> None:
@@ -107,6 +111,7 @@ class Seen:
             self.file.close()
             self.file = None
         self.blocks.clear()
+        self.last = -1
 
 
 @dataclass
@@ -179,7 +184,8 @@ class Analyser:
         self._tick(t)
         x.seq = self.host_lines
         self.host_lines += 1
-        self.window.append(x)
+        if self.on_line is not None:
+            self.window.append(x)
         x.epoch = self.epoch
         if x.n is None:
             x.accepted = True
@@ -308,9 +314,7 @@ class Analyser:
                 if other is None or other.seq > x.seq:
                     self.never[key] = x
         while self.window and self.window[0].done:
-            y = self.window.popleft()
-            if self.on_line is not None:
-                self.on_line(y)
+            self.on_line(self.window.popleft())  # type: ignore[misc]  # (window only with it)
 
     def _taken(self, x: HostLine) -> None:
         """A numbered line taken: lines run twice (as ``_twice`` judged them over the whole
