@@ -139,6 +139,7 @@ class MarlinUnit:
         self.queue.clear()
         self.planner.clear()
         self.cur = None
+        self.wait = None
         self.rx.clear()
         self.halted = True
 
