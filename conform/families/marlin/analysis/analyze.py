@@ -20,6 +20,7 @@ capture ended first.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from itertools import chain
@@ -173,11 +174,13 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
                     **_ignored: Any) -> MarlinAnalysis:
     """Analyse a capture file of Marlin traffic (``analyze_streams`` says what
     ``keep_lines`` and ``parquet`` do)."""
-    from conform.analysis.stream import read_raw
+    from conform.analysis.stream import RawStream
     from conform.families.marlin.spec import load_marlin
 
-    raw = read_raw(path)
-    session = raw.metadata.get("conform.session", {})
+    rs = RawStream(path)
+    parts = rs.parts()
+    head = next(parts, None)   # the session metadata comes before the first raw chunk
+    session = rs.capture().metadata.get("conform.session", {})
     spec = load_marlin()
     vid = variant or str(session.get("variant", "") or "")
     notes = []
@@ -186,22 +189,35 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
             notes.append(f"variant {vid!r} is not a Marlin variant; analysed as {DEFAULT_VARIANT}")
         vid = DEFAULT_VARIANT
     v = spec.variant(vid)
+    waiting: dict[str, deque[Any]] = {"host": deque(), "unit": deque()}
+    if head is not None:
+        waiting[head.name].append(head)
 
-    def chunks(d: Any) -> Iterator[Chunk]:
-        data = d.data.tobytes()
-        for lo in range(0, len(d.start), 65536):   # a block of reads at a time as Python
-            hi = lo + 65536
-            for s, n, r in zip(d.start[lo:hi].tolist(), d.length[lo:hi].tolist(),
-                               d.t_read[lo:hi].tolist(), strict=True):
-                yield float(r), data[s:s + n]
+    def chunks(name: str) -> Iterator[Chunk]:
+        """One direction's reads in order, the file's parts taken as they come (the other
+        direction's parts wait for its reader)."""
+        while True:
+            while waiting[name]:
+                d = waiting[name].popleft()
+                data = d.data.tobytes()
+                for s, n, r in zip(d.start.tolist(), d.length.tolist(), d.t_read.tolist(),
+                                   strict=True):
+                    yield float(r), data[s:s + n]
+            part = next(parts, None)
+            if part is None:
+                return
+            waiting[part.name].append(part)
 
-    a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, path=path,
+    a = analyze_streams(chunks("host"), chunks("unit"), variant=vid, path=path,
                         detected=detected, keepalive=float(v.keepalive or 2),
                         planner_blocks=v.planner_blocks, keep_lines=keep_lines, parquet=parquet)
+    for _ in parts:            # the rest of the file (its status), if a direction ended first
+        pass
     a.notes += notes
-    if not raw.status.complete:
+    status = rs.capture().status
+    if not status.complete:
         a.complete = False
-        a.notes.append(f"capture incomplete: {raw.status.problem}")
+        a.notes.append(f"capture incomplete: {status.problem}")
     return a
 
 
