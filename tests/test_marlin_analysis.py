@@ -165,3 +165,22 @@ def test_first_acceptances_kept_on_disk_read_back_after_eviction():
     s.first(ns[0], 12345, 9.0, 3, True)
     assert s.get(ns[0], 12345) == (9.0, 3, True) and s.get(ns[0], ns[0] * 7 + 1) == first[ns[0]]
     s.close()
+
+
+def test_a_fleet_streams_a_marlin_captures_tables_in_one_pass(storm, tmp_path, monkeypatch):
+    """In a fleet the family's analysis writes its tables as it goes: one pass per capture,
+    the lines table in the fleet's dataset."""
+    from conform.analysis.fleet import analyze_one
+    from conform.families.marlin.analysis import analyze as marlin_analyze
+
+    _, path = storm
+    passes = []
+    real = marlin_analyze.analyze_streams
+    monkeypatch.setattr(marlin_analyze, "analyze_streams",
+                        lambda *a, **k: passes.append(1) or real(*a, **k))
+    row = analyze_one(str(path), str(tmp_path / "t"), {})
+    assert row["family"] == "marlin" and not row.get("error") and len(passes) == 1
+    tables = sorted((tmp_path / "t" / "marlin").rglob("*.parquet"))
+    assert [p.parent.parent.name for p in tables] == ["findings", "lines"]
+    assert pq.read_table(tables[1]).num_rows == row["exchanges"]
+    assert not [p for p in (tmp_path / "t" / "marlin").iterdir() if p.name.startswith(".")]
