@@ -82,3 +82,105 @@ def test_a_lost_ok_is_a_possible_double_or_nothing():
     assert sum(u.truth.executed.values()) == len(JOB)      # this sender never resends unasked
     assert a.metrics["twice_confirmed"] == 0 and a.metrics["never_confirmed"] == 0
     assert a.metrics["oks"] < len(JOB)
+
+
+def test_the_tables_stream_as_lines_settle_and_match_the_lines_kept(storm, tmp_path):
+    """lines.parquet written a row group at a time during the pass holds one row per host
+    line in send order, the same rows as the lines kept in memory."""
+    from conform.families.marlin.analysis import report
+
+    _, path = storm
+    kept = analyze_capture(str(path), keep_lines=True)
+    old, report.ROWS = report.ROWS, 37      # many row groups
+    try:
+        streamed = analyze_capture(str(path), parquet=tmp_path / "s")
+    finally:
+        report.ROWS = old
+    assert streamed.lines == [] and streamed.metrics == kept.metrics
+    f = pq.ParquetFile(tmp_path / "s" / "lines.parquet")
+    assert f.num_row_groups > 5
+    rows = f.read().to_pydict()
+    assert rows["n"] == [x.n for x in kept.lines]
+    assert rows["accepted"] == [x.accepted for x in kept.lines]
+    assert sum(rows["repeat"]) == kept.metrics["repeats"]
+    # asked afterwards for another folder: the same files; an analysis that kept nothing and
+    # wrote nothing reads its capture again
+    again = streamed.write_tables(str(tmp_path / "copy"))
+    assert pq.read_table(again["lines"]).num_rows == kept.metrics["host_lines"]
+    late = analyze_capture(str(path)).write_tables(str(tmp_path / "late"))
+    assert pq.read_table(late["findings"]).num_rows == len(kept.findings)
+
+
+def test_findings_past_the_listed_number_are_counted(monkeypatch):
+    from conform.families.marlin.analysis import core
+
+    monkeypatch.setattr(core, "MAX_KEPT", 10)
+    u, r = session(restart_at=100)
+    a = analyze_streams(r.host, r.unit)
+    assert a.metrics["twice_confirmed"] == 100 and a.kinds()["ran-twice"] == 100
+    assert sum(f.kind == "ran-twice" for f in a.findings) == 10
+    assert any("90 findings not listed" in n for n in a.notes)
+
+
+def test_nearest_rank_percentiles_are_exact_then_within_a_tenth_of_a_percent():
+    import numpy as np
+
+    from conform.analysis.summaries import Quantiles
+
+    rng = np.random.default_rng(5)
+    v = rng.lognormal(-4, 1, 250_000)
+    small, big = Quantiles(), Quantiles()
+    small.add(v[:1000])
+    for part in np.array_split(v, 9):
+        big.add(part)
+    for q_obj, vals in ((small, v[:1000]), (big, v)):
+        o = np.sort(vals)
+        want = [o[min(len(o) - 1, int(q * len(o)))] for q in (0.0, 0.5, 0.95, 0.99, 1.0)]
+        got = q_obj.nearest([0.0, 0.5, 0.95, 0.99, 1.0])
+        if q_obj is small:
+            assert got == [float(x) for x in want]
+        else:
+            assert got[0] == o[0] and got[-1] == o[-1]
+            assert np.allclose(got, want, rtol=1e-3, atol=0)
+
+
+def test_first_acceptances_kept_on_disk_read_back_after_eviction():
+    """Seen keeps a record per line number in a file behind a few cached blocks: what was
+    written and evicted reads back the same; a second text under one number is kept too."""
+    import random
+
+    from conform.families.marlin.analysis.core import Seen
+
+    s = Seen()
+    r = random.Random(1)
+    ns = [r.randrange(0, 2_000_000) for _ in range(5000)]
+    for k, n in enumerate(ns):
+        s.first(n, n * 7 + 1, k * 0.5, k % 5, k % 2 == 0)
+    assert len(s.blocks) == Seen.CACHED
+    first = {}
+    for k, n in enumerate(ns):
+        first.setdefault(n, (k * 0.5, k % 5, k % 2 == 0))
+    assert all(s.get(n, n * 7 + 1) == first[n] for n in ns)
+    assert s.get(ns[0], 12345) is None
+    s.first(ns[0], 12345, 9.0, 3, True)
+    assert s.get(ns[0], 12345) == (9.0, 3, True) and s.get(ns[0], ns[0] * 7 + 1) == first[ns[0]]
+    s.close()
+
+
+def test_a_fleet_streams_a_marlin_captures_tables_in_one_pass(storm, tmp_path, monkeypatch):
+    """In a fleet the family's analysis writes its tables as it goes: one pass per capture,
+    the lines table in the fleet's dataset."""
+    from conform.analysis.fleet import analyze_one
+    from conform.families.marlin.analysis import analyze as marlin_analyze
+
+    _, path = storm
+    passes = []
+    real = marlin_analyze.analyze_streams
+    monkeypatch.setattr(marlin_analyze, "analyze_streams",
+                        lambda *a, **k: passes.append(1) or real(*a, **k))
+    row = analyze_one(str(path), str(tmp_path / "t"), {})
+    assert row["family"] == "marlin" and not row.get("error") and len(passes) == 1
+    tables = sorted((tmp_path / "t" / "marlin").rglob("*.parquet"))
+    assert [p.parent.parent.name for p in tables] == ["findings", "lines"]
+    assert pq.read_table(tables[1]).num_rows == row["exchanges"]
+    assert not [p for p in (tmp_path / "t" / "marlin").iterdir() if p.name.startswith(".")]

@@ -179,14 +179,18 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
     if d.family == "unknown":
         row["error"] = f"protocol unknown ({d.why})"
         return row
-    a = _attempt(row, lambda: family(d.family).analyze(str(p), variant=options.get("variant"),
-                                                        detected=d.why))
+    machine = machine_of(p, {"conform.session": meta})
+    base = Path(parquet_dir or ".") / d.family
+    tmp = base / f".{_safe(machine)}-{_safe(p.stem)}"
+    a = _attempt(row, lambda: family(d.family).analyze(  # a family may stream its tables there
+        str(p), variant=options.get("variant"), detected=d.why,
+        parquet=str(tmp) if parquet_dir else None))
     if a is None:
+        if parquet_dir:
+            shutil.rmtree(tmp, ignore_errors=True)
         return row
-    _fill(row, a, machine_of(p, {"conform.session": meta}), meta)
+    _fill(row, a, machine, meta)
     if parquet_dir:
-        base = Path(parquet_dir) / d.family
-        tmp = base / f".{_safe(row['machine'])}-{_safe(p.stem)}"
         for table in a.write_tables(str(tmp)).values():
             dest = base / table.stem / f"machine={_safe(row['machine'])}" / f"{_safe(p.stem)}.parquet"
             dest.parent.mkdir(parents=True, exist_ok=True)

@@ -103,6 +103,26 @@ class Quantiles:
             out.append(float(min(max(x, self.lo), self.hi)))
         return out
 
+    def nearest(self, qs: list[float]) -> list[float]:
+        """Nearest-rank percentiles: the value at index ``min(n - 1, int(q * n))`` of the
+        values in order. Exact while the values are kept; from the grid, the middle of the
+        bin holding that rank, clamped to the exact minimum and maximum (within 0.1 %), the
+        first and last rank being the exact minimum and maximum."""
+        if self.n == 0:
+            return [float("nan")] * len(qs)
+        ranks = [min(self.n - 1, int(q * self.n)) for q in qs]
+        if self.parts is not None:
+            v = np.sort(self.values())
+            return [float(v[k]) for k in ranks]
+        vals, counts = self.grid()
+        cum = np.cumsum(counts)
+        out = []
+        for k in ranks:
+            x = self.lo if k == 0 else self.hi if k == self.n - 1 else \
+                float(vals[int(np.searchsorted(cum, k, side="right"))])
+            out.append(float(min(max(x, self.lo), self.hi)))
+        return out
+
     def grid(self) -> tuple[np.ndarray, np.ndarray]:
         """(value, count) in ascending value: every value while exact, else the grid bins
         that hold anything (at their middles)."""

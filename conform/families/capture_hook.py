@@ -69,7 +69,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     fam = family(d.family)
     echo(f"{path}: protocol family {d.family} ({d.why})")
     a = fam.analyze(path, variant=variant if variant and d.family == fam.name else None,
-                    detected=d.why)
+                    detected=d.why, parquet=parquet_dir)   # a family may stream its tables
     from conform.diagnosis import headline_for
 
     headline_for(path, a, fam.name, echo)

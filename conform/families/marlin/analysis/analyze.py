@@ -20,44 +20,26 @@ capture ended first.
 
 from __future__ import annotations
 
-import re
+from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
-from functools import reduce
-from operator import xor
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
-MAX_LISTED = 50
+from conform.families.marlin.analysis.core import MAX_KEPT, MAX_LISTED, Analyser, merged
+from conform.families.marlin.analysis.records import (
+    CLAUSE_Q,
+    Chunk,
+    Finding,
+    HostLine,
+    iter_lines,
+    parse_host,
+)
+
+__all__ = ["CLAUSE_Q", "Finding", "HostLine", "MarlinAnalysis", "analyze_capture",
+           "analyze_streams", "iter_lines", "timed_lines"]
 DEFAULT_VARIANT = "marlin-2.1"
-STORM_WINDOW = 0.5         # s: resend requests this close together belong to one storm
-STORM_MIN = 3              # requests that make a storm
-RESEND_TIMEOUT = 1.0       # s without an ok before a sender's repeat counts as a timeout resend
-Chunk = tuple[float, bytes]
-CLAUSE_Q = "queue.cpp get_serial_commands / gcode_line_error"
-
-
-@dataclass
-class Finding:
-    kind: str
-    t: float
-    severity: str         # info | warning | error | hazard
-    message: str
-    clause: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass(slots=True)
-class HostLine:
-    t: float
-    n: int | None
-    text: str              # the command (after N, before *)
-    raw_size: int
-    checksum_ok: bool | None
-    epoch: int = 0
-    accepted: bool = False
-    t_ok: float | None = None
-    repeat: bool = False   # the same number sent again (a resend)
 
 
 @dataclass
@@ -71,6 +53,9 @@ class MarlinAnalysis:
     notes: list[str] = field(default_factory=list)
     family: str = "marlin"
     complete: bool = True
+    motion: int = 0                     # motion lines taken (G0-G3)
+    lines_kept: bool = False            # ``lines`` holds every host line
+    tables: dict[str, Path] | None = None   # the tables written as the capture streamed
 
     def kinds(self) -> dict[str, int]:
         return dict(self.metrics.get("finding_counts", {}))
@@ -103,14 +88,20 @@ class MarlinAnalysis:
         return write_report(self, directory)
 
     def write_tables(self, directory: str) -> dict[str, Path]:
+        """The tables in ``directory``: those written as the capture streamed when they went
+        there, else written from the lines kept, else the capture analysed again into it."""
         from conform.families.marlin.analysis.report import write_parquet
 
+        if self.tables is None and not self.lines_kept and self.path:
+            again = analyze_capture(self.path, variant=self.variant, detected=self.detected,
+                                    parquet=directory)
+            assert again.tables is not None
+            return again.tables
         return write_parquet(self, directory)
 
     def fleet_row(self) -> dict[str, Any]:
         m = self.metrics
-        motion = sum(1 for x in self.lines if x.accepted and x.text[:2] in ("G0", "G1", "G2",
-                                                                            "G3"))
+        motion = self.motion
         d = m["duration_s"]
         return {"family": self.family, "state": "clean" if self.complete else "damaged",
                 "duration_s": d, "exchanges": m["host_lines"], "vectors_accepted": motion,
@@ -121,308 +112,75 @@ class MarlinAnalysis:
                 "starvations": m["planner_empty"]}
 
 
-def iter_lines(chunks: Iterable[tuple[float, bytes]]) -> Iterator[tuple[float, bytes]]:
-    """Lines (ended by LF or CR, empty ones dropped) with the time of the chunk that ended
-    them, one at a time."""
-    rest = b""
-    for t, data in chunks:
-        buf = rest + data
-        parts = buf.replace(b"\r", b"\n").split(b"\n")
-        rest = parts.pop()
-        for p in parts:
-            if p:
-                yield t, p
-
-
-def timed_lines(chunks: Iterable[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
+def timed_lines(chunks: Iterable[Chunk]) -> list[Chunk]:
     return list(iter_lines(chunks))
 
 
-_NUMBERED = re.compile(rb"N(-?\d*)")
-_SECOND_N = re.compile(rb"N(-?\d+)")
+def analyze_streams(host: Iterable[Chunk], unit: Iterable[Chunk], *,
+                    variant: str = DEFAULT_VARIANT, path: str = "", detected: str = "",
+                    keepalive: float = 2.0, planner_blocks: int = 15, keep_lines: bool = False,
+                    parquet: str | Path | None = None) -> MarlinAnalysis:
+    """One pass over both directions (``core.Analyser``). ``keep_lines``: keep every host
+    line in ``lines`` (a short session, as check-sender's); ``parquet``: write the lines
+    table to that folder as the lines settle, and the findings table at the end."""
+    from conform.families.marlin.analysis.report import LineTable
 
+    hosts = (parse_host(t, raw) for t, raw in iter_lines(host))
+    units = iter_lines(unit)
+    first_h = next(hosts, None)
+    first_u = next(units, None)
+    t0 = min([x.t for x in (first_h,) if x is not None]
+             + [u[0] for u in (first_u,) if u is not None], default=0.0)
+    kept: list[HostLine] = []
+    table = LineTable(Path(parquet), first_h.t if first_h else 0.0) if parquet else None
 
-def _parse(t: float, raw: bytes) -> HostLine:
-    """What queue.cpp sees of one host line: the comment cut at ';' (a checksum after it is
-    gone), N and the checksum checked."""
-    cut = raw.find(b";")
-    body = (raw if cut < 0 else raw[:cut]).lstrip(b" ")
-    star = body.rfind(b"*")
-    text = body if star < 0 else body[:star]
-    if body[:1] != b"N":
-        return HostLine(t, None, text.decode("latin-1").strip(), len(raw), None)
-    m = _NUMBERED.match(body)
-    digits = m.group(1) if m else b""
-    n = int(digits) if digits not in (b"", b"-") else 0
-    if b"M110" in body:
-        second = _SECOND_N.search(body, 4)
-        if second:
-            n = int(second.group(1))
-    ok = False
-    if star >= 0:
-        tail = body[star + 1:].strip()
-        ok = tail.isdigit() and int(tail) == reduce(xor, body[:star], 0)
-    return HostLine(t, n, text[m.end() if m else 1:].decode("latin-1").strip(), len(raw), ok)
+    def on_line(x: HostLine) -> None:
+        if keep_lines:
+            kept.append(x)
+        if table is not None:
+            table.add(x)
 
+    core = Analyser(t0, keepalive, planner_blocks,
+                    on_line if keep_lines or table is not None else None)
 
-def _pct_ms(ordered: list[float], q: float) -> float | None:
-    if not ordered:
-        return None
-    return round(ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0, 3)
+    def again(first: Any, rest: Iterator[Any]) -> Iterator[Any]:
+        return chain([first], rest) if first is not None else rest
 
-
-def analyze_streams(host: list[Chunk], unit: list[Chunk], *, variant: str = DEFAULT_VARIANT,
-                    path: str = "", detected: str = "", keepalive: float = 2.0,
-                    planner_blocks: int = 15) -> MarlinAnalysis:
-    hl = [_parse(t, raw) for t, raw in iter_lines(host)]
-    ul = iter_lines(unit)
-    findings: list[Finding] = []
-    first_unit = next(ul, None)
-    starts = [x.t for x in hl[:1]] + ([first_unit[0]] if first_unit else [])
-    t0 = min(starts, default=0.0)
-    last_n = 0
-    epoch = 0
-    sent_max = 0
-    asked: int | None = None          # the number the last Resend: asked for
-    pending: list[HostLine] = []      # accepted or unnumbered, waiting for their ok
-    in_error = 0                      # ok lines that belong to an error triple
-    resends: list[tuple[float, int]] = []
-    oks = errors_cs = errors_ln = errors_nocs = 0
-    busy: list[float] = []
-    planner_free: list[int] = []
-    latency: list[float] = []
     t_last = t0
-    for t, kind, x, line in _merged(hl, first_unit, ul):
-        t_last = t
-        if kind == 1:
-            x.epoch = epoch
-            if x.n is None:
-                x.accepted = True
-                pending.append(x)
-                continue
-            if x.n <= sent_max and not x.text.startswith("M110"):
-                x.repeat = True
-                if asked is None or x.n < asked:
-                    findings.append(Finding("repeat-unasked", t - t0, "warning",
-                                            f"N{x.n} sent again without a Resend: asking for it "
-                                            "(the unit ignores the last two numbers silently)",
-                                            CLAUSE_Q))
-            elif x.n > sent_max + 1 and sent_max and not x.text.startswith("M110"):
-                findings.append(Finding("number-gap", t - t0, "error",
-                                        f"N{x.n} sent after N{sent_max}: numbers skipped",
-                                        CLAUSE_Q))
-            sent_max = max(sent_max, x.n) if not x.text.startswith("M110") else x.n
-            m110 = x.text.startswith("M110") or " M110" in x.text
-            if (x.n == last_n + 1 or m110) and x.checksum_ok:
-                last_n = x.n
-                x.accepted = True
-                pending.append(x)
-                if m110:
-                    epoch += 1
-            continue
-        if line.startswith("ok"):
-            oks += 1
-            if in_error:
-                in_error -= 1
-                continue
-            if " P" in line and " B" in line:
-                try:
-                    planner_free.append(int(line.split(" P", 1)[1].split()[0]))
-                except ValueError:
-                    pass
-            if pending:
-                x = pending.pop(0)
-                x.t_ok = t
-                latency.append(t - x.t)
-        elif line.startswith("Error:"):
-            if "Last Line:" in line:
-                try:
-                    last = int(line.rsplit("Last Line:", 1)[1])
-                except ValueError:
-                    continue
-                if "checksum" in line:
-                    errors_cs += 1
-                elif "Line Number" in line:
-                    errors_ln += 1
-                else:
-                    errors_nocs += 1
-                for x in pending[:]:
-                    if x.n is not None and x.n > last and x.t_ok is None:
-                        x.accepted = False
-                        pending.remove(x)
-                last_n = last
-                in_error += 1
-            elif "halted" in line:
-                findings.append(Finding("halted", t - t0, "error", "the unit halted (M112 or "
-                                        "kill()): it answers nothing until reset",
-                                        "MarlinCore.cpp kill()"))
-        elif line.startswith("Resend:"):
-            try:
-                asked = int(line.split(":", 1)[1])
-            except ValueError:
-                continue
-            resends.append((t, asked))
-        elif line.startswith("echo:busy:"):
-            busy.append(t)
-        elif line == "start":
-            epoch += 1
-            last_n = sent_max = 0
-            asked = None
-            pending.clear()
-            findings.append(Finding("reset", t - t0, "warning", "the unit restarted (start): "
-                                    "line numbers begin again at 1, queued lines are lost",
-                                    "MarlinCore.cpp setup()"))
-    duration = t_last - t0
-    findings += _storms(resends, hl, t0)
-    twice_c, twice_p = _twice(hl, findings, t0)
-    never_c, never_p = _never(hl, findings, t0)
-    periods, busy_s = _busy(busy, keepalive)
-    empty = sum(1 for p in planner_free if p >= planner_blocks)
-    if periods:
-        findings.append(Finding("busy", (busy[0] - t0), "info", f"{periods} busy periods, "
-                                f"{busy_s:.1f} s in all", "gcode.cpp host_keepalive"))
-    numbered = sum(1 for x in hl if x.n is not None)
-    latency.sort()
-    counts: dict[str, int] = {}
-    for f in findings:
-        counts[f.kind] = counts.get(f.kind, 0) + 1
-    metrics = {
-        "host_lines": len(hl), "numbered": numbered, "accepted": sum(x.accepted for x in hl),
-        "oks": oks, "duration_s": round(duration, 6),
-        "lines_per_s": round(len(hl) / duration, 3) if duration > 0 else 0.0,
-        "ok_p50_ms": _pct_ms(latency, 0.5), "ok_p95_ms": _pct_ms(latency, 0.95),
-        "ok_p99_ms": _pct_ms(latency, 0.99), "ok_max_ms": _pct_ms(latency, 1.0),
-        "resends": len(resends),
-        "resend_ratio": round(len(resends) / numbered, 6) if numbered else 0.0,
-        "storms": counts.get("resend-storm", 0), "checksum_errors": errors_cs,
-        "line_number_errors": errors_ln, "no_checksum_errors": errors_nocs,
-        "busy_periods": periods, "busy_s": round(busy_s, 3), "planner_empty": empty,
-        "twice_confirmed": twice_c, "twice_possible": twice_p, "never_confirmed": never_c,
-        "never_possible": never_p, "repeats": sum(x.repeat for x in hl),
-        "hazards": twice_c + never_c, "finding_counts": counts,
-    }
-    return MarlinAnalysis(path, variant, detected, hl, findings, metrics)
-
-
-def _merged(hl: list[HostLine], first: tuple[float, bytes] | None,
-            rest: Iterator[tuple[float, bytes]]) -> Iterator[tuple[float, int, Any, str]]:
-    """Both directions in time order, the unit's line first at the same time (a host answering
-    it cannot have sent before it came): (t, 0, None, unit line) or (t, 1, host line, "")."""
-    u = first
-    i = 0
-    n = len(hl)
-    while i < n or u is not None:
-        if u is not None and (i >= n or u[0] <= hl[i].t):
-            yield u[0], 0, None, u[1].decode("latin-1")
-            u = next(rest, None)
-        else:
-            yield hl[i].t, 1, hl[i], ""
-            i += 1
-
-
-def _storms(resends: list[tuple[float, int]], hl: list[HostLine], t0: float) -> list[Finding]:
-    """Runs of Resend: requests (each within STORM_WINDOW of the last) in which the unit took
-    fewer lines than it asked to be sent again: the link makes no progress."""
-    from bisect import bisect_left, bisect_right
-
-    taken_at = [x.t for x in hl if x.accepted and x.n is not None] if resends else []
-    out = []
-    i = 0
-    while i < len(resends):
-        j = i
-        while j + 1 < len(resends) and resends[j + 1][0] - resends[j][0] <= STORM_WINDOW:
-            j += 1
-        taken = (bisect_right(taken_at, resends[j][0]) - bisect_left(taken_at, resends[i][0])
-                 if j > i else 0)
-        if j - i + 1 >= STORM_MIN and taken < j - i + 1:
-            asked = [n for _, n in resends[i:j + 1]]
-            out.append(Finding("resend-storm", resends[i][0] - t0, "error",
-                               f"{j - i + 1} Resend: requests in {resends[j][0] - resends[i][0]:.2f}"
-                               f" s (asked for N{min(asked)}..N{max(asked)}, most N"
-                               f"{max(set(asked), key=asked.count)})", CLAUSE_Q,
-                               {"start": resends[i][0] - t0, "end": resends[j][0] - t0,
-                                "requests": j - i + 1, "asked": sorted(set(asked))[:MAX_LISTED]}))
-        i = j + 1
-    return out
-
-
-def _twice(hl: list[HostLine], findings: list[Finding], t0: float) -> tuple[int, int]:
-    seen: dict[tuple[int, str], HostLine] = {}
-    confirmed = possible = 0
-    prev: HostLine | None = None
-    for x in hl:
-        if not x.accepted or x.n is None:
-            continue
-        key = (x.n, x.text)
-        first = seen.get(key)
-        if first is not None and first.epoch != x.epoch and not x.text.startswith("M110"):
-            sure = first.t_ok is not None
-            confirmed += sure
-            possible += not sure
-            findings.append(Finding("ran-twice", x.t - t0, "hazard" if sure else "warning",
-                                    f"N{x.n} {x.text!r} ran {'twice' if sure else 'possibly twice'}"
-                                    f" (taken at {first.t - t0:.3f} s"
-                                    f"{', answered ok' if sure else ', its ok never came'}, "
-                                    f"again after the numbering began anew)", CLAUSE_Q,
-                                    {"n": x.n, "confirmed": sure}))
-        elif (prev is not None and prev.text == x.text and prev.n is not None
-              and x.n == prev.n + 1 and (prev.t_ok is None or prev.t_ok > x.t)
-              and x.t - prev.t >= RESEND_TIMEOUT):
-            possible += 1
-            findings.append(Finding("ran-twice", x.t - t0, "warning",
-                                    f"N{x.n} repeats N{prev.n}'s {x.text!r} after "
-                                    f"{x.t - prev.t:.1f} s without an ok: possibly run twice",
-                                    CLAUSE_Q, {"n": x.n, "confirmed": False}))
-        seen.setdefault(key, x)
-        prev = x
-    return confirmed, possible
-
-
-def _never(hl: list[HostLine], findings: list[Finding], t0: float) -> tuple[int, int]:
-    taken = {(x.n, x.text) for x in hl if x.accepted and x.n is not None}
-    last_taken_t = max((x.t for x in hl if x.accepted), default=0.0)
-    reported: set[tuple[int, str]] = set()
-    confirmed = possible = 0
-    for x in hl:
-        if x.n is None or x.accepted or (x.n, x.text) in taken or (x.n, x.text) in reported:
-            continue
-        if x.text.startswith("M110"):
-            continue
-        reported.add((x.n, x.text))
-        sure = x.t < last_taken_t
-        confirmed += sure
-        possible += not sure
-        findings.append(Finding("never-ran", x.t - t0, "hazard" if sure else "warning",
-                                f"N{x.n} {x.text!r} was sent but never taken"
-                                + ("" if sure else " (the capture ends first)"), CLAUSE_Q,
-                                {"n": x.n, "confirmed": sure}))
-    return confirmed, possible
-
-
-def _busy(times: list[float], interval: float) -> tuple[int, float]:
-    periods = 0
-    total = 0.0
-    start = prev = None
-    for t in times:
-        if prev is None or t - prev > interval * 1.5:
-            if start is not None:
-                total += prev - start + interval
-            periods += 1
-            start = t
-        prev = t
-    if start is not None and prev is not None:
-        total += prev - start + interval
-    return periods, total
+    try:
+        for t, x, line in merged(again(first_h, hosts), again(first_u, units)):
+            t_last = t
+            if x is not None:
+                core.host(x)
+            else:
+                core.unit(t, line)
+        findings, metrics = core.finish(t_last)
+    finally:
+        if table is not None:
+            table.close()
+    a = MarlinAnalysis(path, variant, detected, kept, findings, metrics)
+    a.motion = core.motion
+    a.lines_kept = keep_lines
+    if core.dropped:
+        a.notes.append(f"{core.dropped} findings not listed (counted in finding_counts; "
+                       f"the first {MAX_KEPT} of each group are listed)")
+    if table is not None:
+        a.tables = table.finish_findings(findings)
+    return a
 
 
 def analyze_capture(path: str, *, variant: str | None = None, detected: str = "",
+                    keep_lines: bool = False, parquet: str | Path | None = None,
                     **_ignored: Any) -> MarlinAnalysis:
-    """Analyse a capture file of Marlin traffic."""
-    from conform.analysis.stream import read_raw
+    """Analyse a capture file of Marlin traffic (``analyze_streams`` says what
+    ``keep_lines`` and ``parquet`` do)."""
+    from conform.analysis.stream import RawStream
     from conform.families.marlin.spec import load_marlin
 
-    raw = read_raw(path)
-    session = raw.metadata.get("conform.session", {})
+    rs = RawStream(path)
+    parts = rs.parts()
+    head = next(parts, None)   # the session metadata comes before the first raw chunk
+    session = rs.capture().metadata.get("conform.session", {})
     spec = load_marlin()
     vid = variant or str(session.get("variant", "") or "")
     notes = []
@@ -431,19 +189,35 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
             notes.append(f"variant {vid!r} is not a Marlin variant; analysed as {DEFAULT_VARIANT}")
         vid = DEFAULT_VARIANT
     v = spec.variant(vid)
+    waiting: dict[str, deque[Any]] = {"host": deque(), "unit": deque()}
+    if head is not None:
+        waiting[head.name].append(head)
 
-    def chunks(d: Any) -> list[Chunk]:
-        data = d.data.tobytes()
-        return [(float(r), data[s:s + n]) for s, n, r in
-                zip(d.start.tolist(), d.length.tolist(), d.t_read.tolist(), strict=True)]
+    def chunks(name: str) -> Iterator[Chunk]:
+        """One direction's reads in order, the file's parts taken as they come (the other
+        direction's parts wait for its reader)."""
+        while True:
+            while waiting[name]:
+                d = waiting[name].popleft()
+                data = d.data.tobytes()
+                for s, n, r in zip(d.start.tolist(), d.length.tolist(), d.t_read.tolist(),
+                                   strict=True):
+                    yield float(r), data[s:s + n]
+            part = next(parts, None)
+            if part is None:
+                return
+            waiting[part.name].append(part)
 
-    a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, path=path,
+    a = analyze_streams(chunks("host"), chunks("unit"), variant=vid, path=path,
                         detected=detected, keepalive=float(v.keepalive or 2),
-                        planner_blocks=v.planner_blocks)
+                        planner_blocks=v.planner_blocks, keep_lines=keep_lines, parquet=parquet)
+    for _ in parts:            # the rest of the file (its status), if a direction ended first
+        pass
     a.notes += notes
-    if not raw.status.complete:
+    status = rs.capture().status
+    if not status.complete:
         a.complete = False
-        a.notes.append(f"capture incomplete: {raw.status.problem}")
+        a.notes.append(f"capture incomplete: {status.problem}")
     return a
 
 

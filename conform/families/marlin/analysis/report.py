@@ -51,29 +51,97 @@ def write_report(a: Any, directory: str) -> dict[str, Path]:
     return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
 
-def write_parquet(a: Any, directory: str) -> dict[str, Path]:
+LINE_SCHEMA = (("t_sent", "float64"), ("n", "int64"), ("text", "string"), ("bytes", "int64"),
+               ("checksum_ok", "bool_"), ("epoch", "int64"), ("accepted", "bool_"),
+               ("repeat", "bool_"), ("t_ok", "float64"))
+ROWS = 65_536   # rows per row group of lines.parquet
+
+
+class LineTable:
+    """lines.parquet written ``ROWS`` host lines at a time as their fate settles (one row per
+    line in send order, times from the first host line), findings.parquet at the end."""
+
+    def __init__(self, directory: Path, t0: float) -> None:
+        import pyarrow as pa
+
+        self.dir, self.t0 = directory, t0
+        self.schema = pa.schema([(k, getattr(pa, v)()) for k, v in LINE_SCHEMA])
+        self.cols: dict[str, list[Any]] = {k: [] for k, _ in LINE_SCHEMA}
+        self.writer: Any = None
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"{directory}: cannot create the folder: {exc.strerror}") from None
+
+    def add(self, h: Any) -> None:
+        c = self.cols
+        c["t_sent"].append(h.t - self.t0)
+        c["n"].append(h.n)
+        c["text"].append(h.text)
+        c["bytes"].append(h.raw_size)
+        c["checksum_ok"].append(h.checksum_ok)
+        c["epoch"].append(h.epoch)
+        c["accepted"].append(h.accepted)
+        c["repeat"].append(h.repeat)
+        c["t_ok"].append(None if h.t_ok is None else h.t_ok - self.t0)
+        if len(c["n"]) >= ROWS:
+            self.flush()
+
+    def flush(self) -> None:
+        import pyarrow as pa
+
+        from conform.analysis.tables import open_writer
+
+        try:
+            if self.writer is None:
+                self.writer = open_writer(self.dir / "lines.parquet", self.schema)
+            self.writer.write_table(pa.table(self.cols, schema=self.schema))
+        except OSError as exc:
+            raise UserError(f"{self.dir}: cannot write the tables: {exc.strerror or exc}"
+                            ) from None
+        self.cols = {k: [] for k in self.cols}
+
+    def close(self) -> None:
+        if self.cols["n"] or self.writer is None:
+            self.flush()
+        self.writer.close()
+
+    def finish_findings(self, findings: list[Any]) -> dict[str, Path]:
+        _write_findings(self.dir, findings)
+        return {"lines": self.dir / "lines.parquet", "findings": self.dir / "findings.parquet"}
+
+
+def _write_findings(d: Path, findings: list[Any]) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    d = Path(directory)
-    x = a.lines
-    t0 = min((h.t for h in x), default=0.0)
-    tables = {
-        "lines": pa.table({
-            "t_sent": [h.t - t0 for h in x], "n": [h.n for h in x], "text": [h.text for h in x],
-            "bytes": [h.raw_size for h in x], "checksum_ok": [h.checksum_ok for h in x],
-            "epoch": [h.epoch for h in x], "accepted": [h.accepted for h in x],
-            "repeat": [h.repeat for h in x],
-            "t_ok": [None if h.t_ok is None else h.t_ok - t0 for h in x]}),
-        "findings": pa.table({
-            "t": [f.t for f in a.findings], "kind": [f.kind for f in a.findings],
-            "severity": [f.severity for f in a.findings],
-            "message": [f.message for f in a.findings], "clause": [f.clause for f in a.findings]}),
-    }
+    table = pa.table({"t": [f.t for f in findings], "kind": [f.kind for f in findings],
+                      "severity": [f.severity for f in findings],
+                      "message": [f.message for f in findings],
+                      "clause": [f.clause for f in findings]})
     try:
-        d.mkdir(parents=True, exist_ok=True)
-        for name, table in tables.items():
-            pq.write_table(table, d / f"{name}.parquet")
+        pq.write_table(table, d / "findings.parquet")
     except OSError as exc:
         raise UserError(f"{d}: cannot write the tables: {exc.strerror or exc}") from None
-    return {name: d / f"{name}.parquet" for name in tables}
+
+
+def write_parquet(a: Any, directory: str) -> dict[str, Path]:
+    """The tables of ``a`` in ``directory`` (see ``MarlinAnalysis.write_tables``)."""
+    import shutil
+
+    d = Path(directory)
+    if a.tables is not None:
+        src = a.tables["lines"].parent
+        if src.resolve() != d.resolve():
+            d.mkdir(parents=True, exist_ok=True)
+            for p in a.tables.values():
+                shutil.copyfile(p, d / p.name)
+        return {k: d / p.name for k, p in a.tables.items()}
+    if a.lines_kept:
+        table = LineTable(d, min((h.t for h in a.lines), default=0.0))
+        for h in a.lines:
+            table.add(h)
+        table.close()
+        return table.finish_findings(a.findings)
+    raise UserError("the Marlin analysis kept no lines and wrote no tables: ask for the "
+                    "tables when analysing (parquet=)")

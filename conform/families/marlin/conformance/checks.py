@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import fnmatch
 import os
+import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any
 
 from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
@@ -289,6 +291,138 @@ def m108_breaks_m109(s: Session) -> Outcome:
     return s.oks(got.lines) == 2, "M109's ok and M108's ok within 2 s", got.text()
 
 
+_W = re.compile(r" W:(\?|\d+)$")
+_HEATERS = {"M109": (0, "t", "M104 S0"), "M190": (1, "b", "M140 S0")}
+
+
+def _temperature(s: Session, group: str) -> float | None:
+    """The heater's temperature from M105 (``t`` hotend, ``b`` bed)."""
+    got = s.talk(b"M105\n")
+    hit = s.spec.messages["ok_temp"].pattern.match(got.lines[0]) if got.lines else None
+    temps = hit and s.spec.messages["temps"].pattern.match(hit.group("temps"))
+    value = temps.group(group) if temps else None
+    return float(value) if value is not None else None
+
+
+def _wait_for_temperature(s: Session, code: str, m108_after: float | None = None
+                          ) -> tuple[Talk | None, str]:
+    """``code S<now + 5>`` (a small step, gentle on a real heater), collected until its ok
+    (and M108's, when ``m108_after`` seconds into the wait it is sent); the heater switched
+    off after. (None, why) when the temperature could not be read."""
+    h, group, off = _HEATERS[code]
+    now = _temperature(s, group)
+    if now is None:
+        return None, "no temperature in M105's answer"
+    residency = s.v.temp_residency if h == 0 else s.v.temp_bed_residency
+    s.target.send(f"{code} S{round(now) + 5}\n".encode())
+    first = Talk([], s.target.now(), s.target.now())
+    if m108_after is not None:
+        first = s.wait(m108_after)
+        s.target.send(b"M108\n")
+    oks = 1 if m108_after is None else 2
+    got = s.collect(until=lambda ls: s.oks(first.lines + ls) >= oks, timeout=residency * 2 + 120,
+                    linger=0.1)
+    s.talk(f"{off}\n".encode())
+    return Talk(first.lines + got.lines, first.t0, got.t, first.times + got.times), ""
+
+
+def _countdown(s: Session, got: Talk) -> tuple[list[tuple[float, str]], float | None]:
+    """The wait's reports (time, W: field) and the time of the first ok."""
+    reports = [(t, m.group(1)) for t, x in zip(got.times, got.lines, strict=True)
+               if s.spec.classify(x)[0] == "temps" and (m := _W.search(x))]
+    ok_t = next((t for t, x in zip(got.times, got.lines, strict=True) if _ok_kind(s, x)), None)
+    return reports, ok_t
+
+
+def _residency_problems(s: Session, code: str, reports: list[tuple[float, str]],
+                        ok_t: float | None) -> list[str]:
+    residency = s.v.temp_residency if code == "M109" else s.v.temp_bed_residency
+    problems = []
+    before = [r for r in reports if ok_t is None or r[0] <= ok_t]
+    if ok_t is None:
+        problems.append("no ok")
+    if len(before) < 2:
+        return problems + [f"{len(before)} W: reports before the ok"]
+    if before[0][1] != "?":
+        problems.append(f"first report W:{before[0][1]} (the timer is not set yet: W:?)")
+    gaps = [b[0] - a[0] for a, b in pairwise(before)]
+    if not all(0.8 <= g <= 1.3 for g in gaps):
+        problems.append(f"reports {min(gaps):.2f}..{max(gaps):.2f} s apart")
+    counts = [int(w) for _, w in before if w != "?"]
+    if not counts:
+        return problems + ["no W:<seconds> report: the residency timer never ran"]
+    if not residency - 1 <= counts[0] <= -(-residency * 4 // 3):
+        problems.append(f"the countdown starts at W:{counts[0]}")
+    if any(b != a - 1 for a, b in pairwise(counts)) or counts[-1] != 0:
+        problems.append("W: does not count down by one to 0: " + ",".join(map(str, counts)))
+    if ok_t is not None and not 0 <= ok_t - before[-1][0] <= 1.3:
+        problems.append(f"ok {ok_t - before[-1][0]:.2f} s after W:0")
+    return problems
+
+
+def waits_residency(code: str) -> Callable[[Session], Outcome]:
+    def run(s: Session) -> Outcome:
+        """M109 / M190 S: a temperature report with W: every second, ok only when the
+        temperature stayed TEMP_(BED_)RESIDENCY_TIME s within the window."""
+        got, why = _wait_for_temperature(s, code)
+        residency = s.v.temp_residency if code == "M109" else s.v.temp_bed_residency
+        want = (f" T:.. /.. B:.. /.. @:.. B@:.. W:? every second, then W:{residency - 1} (up to "
+                f"{-(-residency * 4 // 3)}) counting down to W:0, then ok")
+        if got is None:
+            return False, want, why
+        reports, ok_t = _countdown(s, got)
+        problems = _residency_problems(s, code, reports, ok_t)
+        return not problems, want, "; ".join(problems) or \
+            f"{len(reports)} reports, W:{reports[0][1]}..W:{reports[-1][1]}, then ok"
+    run.__name__ = f"{code.lower()}_waits_residency"
+    return run
+
+
+def busy_while_heating(s: Session) -> Outcome:
+    """BUSY_WHILE_HEATING (on by default): busy: processing goes on during M109's wait; off,
+    wait_for_hotend sets KEEPALIVE_STATE(NOT_BUSY) and the wait says nothing but reports."""
+    got, why = _wait_for_temperature(s, "M109")
+    on = s.v.on("BUSY_WHILE_HEATING") and s.v.on("HOST_KEEPALIVE_FEATURE") and s.v.keepalive
+    want = (f"echo:busy: processing every {s.v.keepalive} s while waiting" if on else
+            "no busy: processing while waiting")
+    if got is None:
+        return False, want, why
+    reports, ok_t = _countdown(s, got)
+    busy = sum(1 for t, x in zip(got.times, got.lines, strict=True)
+               if s.spec.classify(x)[0] == "busy" and (ok_t is None or t <= ok_t))
+    span = (ok_t or got.t) - got.t0
+    expect = int(span // s.v.keepalive) if on else 0
+    ok = busy >= max(1, expect - 1) if on else busy == 0
+    return ok, want, f"{busy} busy lines in a {span:.1f} s wait"
+
+
+def m108_waits_behind_m109(s: Session) -> Outcome:
+    """Without EMERGENCY_PARSER nothing is read while M109 waits: M108 stays in the receive
+    buffer, the wait runs its full residency, then M108 is read (and has nothing to end)."""
+    got, why = _wait_for_temperature(s, "M109", m108_after=1.5)
+    want = "M109's wait counts down to W:0 and ok, then M108's ok"
+    if got is None:
+        return False, want, why
+    reports, ok_t = _countdown(s, got)
+    problems = _residency_problems(s, "M109", reports, ok_t)
+    if s.oks(got.lines) < 2:
+        problems.append(f"{s.oks(got.lines)} ok (M109 and M108: 2)")
+    return not problems, want, "; ".join(problems) or "M108 waited for the end of the wait"
+
+
+def m876(s: Session) -> Outcome:
+    """M876 (host prompt response) exists only with HOST_PROMPT_SUPPORT; without it the line
+    is an unknown command, also where EMERGENCY_PARSER is on (its M876 states are compiled
+    only with HOST_PROMPT_SUPPORT)."""
+    got = s.talk(s.numbered("M876 S1"))
+    if s.v.on("HOST_PROMPT_SUPPORT"):
+        return _expect_ok(s, got, 1), f"{_ok_text(s, 1)} (the prompt answered, no output)", \
+            got.text()
+    want = 'echo:Unknown command: "M876 S1"'
+    return (got.lines[:1] == [want] and len(got.lines) == 2 and _ok_kind(s, got.lines[1]),
+            f"{want} | {_ok_text(s, 1)}", got.text())
+
+
 def reset_banner(s: Session) -> Outcome:
     s.talk(s.numbered("G90"))
     s.target.reset()
@@ -367,6 +501,27 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
         MarlinCheck(f"{vid}/G0_G1.cpp/motion/move-m400-m114", cmd["M400"] + "; " + cmd["M114"],
                     "G1 X10, M400 waits, M114 shows it", move_and_wait, motion=True),
     ]
+    temp = v.cite["temp_residency"]
+    out += [
+        MarlinCheck(f"{vid}/temperature.cpp/heat/m109-residency", cmd["M109"] + "; " + temp,
+                    "M109 S: W: reports every second, ok after the residency",
+                    waits_residency("M109"), heat=True),
+        MarlinCheck(f"{vid}/temperature.cpp/heat/m190-residency", cmd["M190"] + "; " +
+                    v.cite["temp_bed_residency"], "M190 S: W: reports every second, ok after "
+                    "the residency", waits_residency("M190"), heat=True),
+        MarlinCheck(f"{vid}/temperature.cpp/keepalive/busy-while-heating", v.cite["options"] +
+                    "; " + c["busy"], "busy: processing during M109's wait as BUSY_WHILE_HEATING"
+                    " says", busy_while_heating, heat=True),
+        MarlinCheck(f"{vid}/{'e_parser.h' if v.on('EMERGENCY_PARSER') else 'gcode.cpp'}/reply/"
+                    f"m876-{'prompt' if v.on('HOST_PROMPT_SUPPORT') else 'unknown'}",
+                    cmd["M876"], "M876 S1 as HOST_PROMPT_SUPPORT says", m876),
+    ]
+    if not v.on("EMERGENCY_PARSER"):
+        out.append(MarlinCheck(f"{vid}/{Q}/heat/m108-waits-behind-m109", "queue.cpp "
+                               "get_serial_commands (not called while wait_for_hotend loops: "
+                               "M108 waits in the buffer); " + cmd["M108"],
+                               "M108 cannot end M109's wait without the emergency parser",
+                               m108_waits_behind_m109, heat=True))
     # M112 leaves a unit dead until it is reset: the halt checks come last (stable sort)
     if v.on("AUTO_REPORT_TEMPERATURES"):
         out.append(MarlinCheck(f"{vid}/M155.cpp/report/m155", cmd["M155"],

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from conform.families.marlin.spec import MarlinSpec, Variant
-from conform.families.marlin.unit.unit import MarlinUnit, Queued
+from conform.families.marlin.unit.unit import HeatWait, MarlinUnit, Queued, _code
 
 
 class ResendOffByOne(MarlinUnit):
@@ -81,6 +81,42 @@ class SilentUnknown(MarlinUnit):
         return None
 
 
+class SilentHeatingWait(MarlinUnit):
+    """Waits for the temperature without a report each second."""
+
+    def _plan_wait(self, h: int, t: float) -> HeatWait:
+        w = super()._plan_wait(h, t)
+        w.reports = 1 << 30              # the first report is never due
+        return w
+
+
+class OkOnReaching(MarlinUnit):
+    """Answers M109 / M190 as soon as the temperature is in the window (no residency)."""
+
+    def _plan_wait(self, h: int, t: float) -> HeatWait:
+        w = super()._plan_wait(h, t)
+        w.end = max(t, min(w.end, w.window_at))
+        return w
+
+
+class IdleWhileHeating(MarlinUnit):
+    """Says no busy: processing while waiting for a temperature (as without
+    BUSY_WHILE_HEATING) although the configuration has it."""
+
+    def _start(self, q: Queued) -> None:
+        super()._start(q)
+        if self.wait is not None:
+            self.cur_busy = False
+
+
+class PromptWithoutSupport(MarlinUnit):
+    """Takes M876 as a known command although HOST_PROMPT_SUPPORT is off."""
+
+    def _unknown(self, q: Queued, t: float) -> None:
+        if _code(q.text) != "M876":
+            super()._unknown(q, t)
+
+
 MUTANTS: dict[str, type[MarlinUnit]] = {
     "resend-off-by-one": ResendOffByOne,
     "no-ok-after-resend": NoOkAfterResend,
@@ -91,6 +127,10 @@ MUTANTS: dict[str, type[MarlinUnit]] = {
     "no-keepalive": NoKeepalive,
     "answers-after-halt": AnswersAfterHalt,
     "silent-unknown": SilentUnknown,
+    "silent-heating-wait": SilentHeatingWait,
+    "ok-on-reaching": OkOnReaching,
+    "idle-while-heating": IdleWhileHeating,
+    "prompt-without-support": PromptWithoutSupport,
 }
 
 

@@ -3,7 +3,7 @@ unit's lines until enough answers came (an ``ok``) or the time is up."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from conform.conformance.target import HarnessError
@@ -16,6 +16,7 @@ class Talk:
     lines: list[str]
     t0: float
     t: float
+    times: list[float] = field(default_factory=list)   # when each line was read
 
     def kinds(self, spec: MarlinSpec) -> list[str]:
         return [spec.classify(x)[0] for x in self.lines]
@@ -75,6 +76,7 @@ class Session:
         t0 = t.now()
         deadline = t0 + timeout
         lines: list[str] = []
+        times: list[float] = []
         done_at: float | None = None
         while True:
             if done_at is None and until is not None and until(lines):
@@ -89,7 +91,8 @@ class Session:
             if chunk:
                 got, self._rest = split_lines(self._rest + chunk)
                 lines += [g.decode("latin-1") for g in got]
-        return Talk(lines, t0, t.now())
+                times += [t.now()] * len(got)
+        return Talk(lines, t0, t.now(), times)
 
     def wait(self, seconds: float) -> Talk:
         return self.collect(timeout=seconds, linger=seconds)

@@ -65,7 +65,8 @@ def _settle(s: Any, unit: Any, truth: MarlinTruth) -> None:
 def _analyze(capture: Any, variant_id: str) -> Any:
     from conform.families.marlin.analysis.analyze import analyze_capture
 
-    return analyze_capture(str(capture), variant=variant_id, detected="recorded by check-sender")
+    return analyze_capture(str(capture), variant=variant_id, detected="recorded by check-sender",
+                           keep_lines=True)
 
 
 def _truth_findings(s: Any) -> list[dict[str, Any]]:

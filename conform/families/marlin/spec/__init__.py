@@ -20,9 +20,9 @@ from conform.families.rows import Rows, read_table
 FILES = ("variants", "messages", "commands", "caps")
 KINDS = ("move", "dwell", "sync", "home", "report_temp", "report_pos", "firmware",
          "autoreport_temp", "autoreport_pos", "line_no", "halt", "quickstop", "break_wait",
-         "set_temp", "wait_temp", "set", "position", "eeprom")
+         "set_temp", "wait_temp", "set", "position", "eeprom", "host_prompt")
 _NUMBERS = ("baud", "bufsize", "max_cmd_size", "rx_buffer", "block_buffer", "keepalive",
-            "extruders")
+            "extruders", "temp_residency", "temp_bed_residency", "temp_window")
 _TEXTS = ("title", "firmware", "machine_name", "uuid", "protocol_version", "source_url")
 
 
@@ -38,6 +38,9 @@ class Variant:
     block_buffer: int
     keepalive: int
     extruders: int
+    temp_residency: int
+    temp_bed_residency: int
+    temp_window: int
     steps_per_mm: tuple[float, ...]
     max_feedrate: tuple[float, ...]
     machine_name: str

@@ -28,7 +28,8 @@ BACKSPACE = 0x08
 AMBIENT = 25.0
 HEAT_RATE = (4.0, 1.5)        # °C/s of the hotend and the bed (an assumption: a fast machine)
 COOL_RATE = (1.0, 0.3)
-TEMP_WINDOW = 1.0             # Configuration.h TEMP_WINDOW / TEMP_BED_WINDOW (°C)
+COOLING_SLOPE = ((1.5, 60.0), (1.0, 60.0))   # temperature.cpp MIN_COOLING_SLOPE_DEG/_TIME
+                                             # (hotend) and ..._BED: °C that must drop in s
 ACCEL = 3000.0                # Configuration.h DEFAULT_ACCELERATION (mm/s²)
 DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
 HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
@@ -45,6 +46,33 @@ class Queued:
 
 
 @dataclass
+class HeatWait:
+    """A running M109 / M190 (temperature.cpp wait_for_hotend / wait_for_bed): a report every
+    second from its start, the residency timer set at ``set_at`` to start at ``window_at``,
+    the end (``ok`` follows). The heater model rises or falls linearly (HEAT_RATE, COOL_RATE)
+    and never leaves the window once in it, so TEMP_HYSTERESIS never restarts the timer."""
+
+    h: int
+    t0: float
+    set_at: float
+    window_at: float
+    residency: float
+    end: float
+    reports: int = 0
+
+    def next_report(self) -> float:
+        return self.t0 + self.reports
+
+    def w(self, p: float) -> str:
+        """The W: field at report time ``p``: ? before the timer is set, else the whole
+        seconds left (from ms, as the firmware's integer division)."""
+        if p <= self.set_at:
+            return "?"
+        left = round(self.residency * 1000) - (round(p * 1000) - round(self.window_at * 1000))
+        return str(max(left, 0) // 1000)
+
+
+@dataclass
 class Truth:
     """What the unit did: every command run, and how often each numbered line ran."""
 
@@ -53,6 +81,7 @@ class Truth:
     resends: list[tuple[float, int, str]] = field(default_factory=list)   # (t, asked, why)
     dropped: list[tuple[float, int]] = field(default_factory=list)   # duplicates ignored
     resets: list[float] = field(default_factory=list)
+    prompt_responses: list[tuple[float, int]] = field(default_factory=list)   # M876 S<n> taken
 
     def to_dict(self) -> dict[str, Any]:
         return {"executed": {str(k): v for k, v in sorted(self.executed.items())},
@@ -99,6 +128,7 @@ class MarlinUnit:
         self.halted = False
         self.booting_until = t + boot
         self.ep_state = ""                  # emergency parser: the command seen so far
+        self.wait: HeatWait | None = None   # M109 / M190 waiting
         self._say(self.booting_until, *self._banner())
 
     def power_off(self, t: float) -> None:
@@ -109,6 +139,7 @@ class MarlinUnit:
         self.queue.clear()
         self.planner.clear()
         self.cur = None
+        self.wait = None
         self.rx.clear()
         self.halted = True
 
@@ -178,6 +209,8 @@ class MarlinUnit:
     # -- the main loop -----------------------------------------------------------------------
     def _next_event(self) -> float | None:
         times = [self.next_temp, self.next_pos]
+        if self.wait is not None and self.wait.next_report() <= self.wait.end:
+            times.append(self.wait.next_report())
         if self.cur is not None:
             times.append(self.cur_done)
             if self.cur_busy:
@@ -207,6 +240,10 @@ class MarlinUnit:
         if self.cur is not None and self.cur_busy and self.next_busy <= t < self.cur_done:
             self._say(t, "echo:busy: processing")
             self.next_busy = t + self.v.keepalive
+        w = self.wait
+        if w is not None and w.next_report() <= min(t, w.end):
+            self._say(t, f"{self._temps_line()} W:{w.w(t)}")
+            w.reports += 1
         if self.next_temp <= t:
             self._say(t, self._temps_line())
             self.next_temp = t + self.temp_every
@@ -318,6 +355,9 @@ class MarlinUnit:
     def _e_parser(self, b: int, t: float) -> None:
         c = chr(b).upper()
         s = self.ep_state
+        if s.startswith("M8") and self.v.on("HOST_PROMPT_SUPPORT"):
+            self._e_parser_m876(c, t)
+            return
         if c in "\r\n":
             if s in ("M108", "M112", "M410"):
                 {"M108": self._break_wait, "M112": self._kill, "M410": self._quickstop}[s](t)
@@ -332,6 +372,8 @@ class MarlinUnit:
             self.ep_state = "M"
         elif s == "M" and c == " ":
             return
+        elif s == "M" and c == "8" and self.v.on("HOST_PROMPT_SUPPORT"):
+            self.ep_state = "M8"
         elif s in ("M108", "M112", "M410"):
             return                       # anything to the end of the line (a checksum)
         elif len(s) < 4 and any(k.startswith(s + c) for k in ("M108", "M112", "M410")):
@@ -339,8 +381,28 @@ class MarlinUnit:
         else:
             self.ep_state = "!"          # not one of its commands: ignore to the end of line
 
+    def _e_parser_m876(self, c: str, t: float) -> None:
+        """e_parser.h with HOST_PROMPT_SUPPORT: M8 -> M87 -> M876 -> M876S -> M876S<digit>.
+        As the source has it: an end of line in M8, M87 or M876 leads to ignoring up to the
+        next one (it does not reset), in M876S it is not looked at (the state stays), and only
+        M876S<digit> acts at the end of its line (hostui.handle_response)."""
+        s = self.ep_state
+        if s in ("M8", "M87"):
+            want = "7" if s == "M8" else "6"
+            self.ep_state = s + want if c == want else "!"
+        elif s == "M876":
+            self.ep_state = s if c == " " else "M876S" if c == "S" else "!"
+        elif s == "M876S":
+            if c.isdigit():
+                self.ep_state = "M876S" + c
+        elif c in "\r\n":
+            self.truth.prompt_responses.append((t, int(s[5:])))
+            self.ep_state = ""
+
     def _break_wait(self, t: float) -> None:
-        if self.cur is not None and self.cur.text and _code(self.cur.text) in ("M109", "M190"):
+        """wait_for_heatup = false: a heating wait ends (its reports with it)."""
+        if self.wait is not None and self.cur is not None:
+            self.wait.end = min(self.wait.end, t)
             self.cur_done = min(self.cur_done, t + self.line_time)
 
     def _quickstop(self, t: float) -> None:
@@ -357,6 +419,7 @@ class MarlinUnit:
         self._say(t, "Error:Printer halted. kill() called!")
         self.halted = True
         self.cur = None
+        self.wait = None
         self.queue.clear()
         self.planner.clear()
 
@@ -381,11 +444,12 @@ class MarlinUnit:
                 self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
                 self.position[:3] = [0.0, 0.0, 0.0]
             done = end + self.line_time
-        elif kind == "wait_temp":
+        elif kind == "wait_temp" and ("S" in words or "R" in words):
             h = 0 if code == "M109" else 1
-            if "S" in words or "R" in words:
-                self._set_target(h, words.get("S", words.get("R", 0.0)), t)
-            done = max(t, self._reached(h)) + self.line_time
+            self._set_target(h, words.get("S", words.get("R", 0.0)), t)
+            if not ("S" in words and self.heat[h][1] < self.temp(h, t)):   # S: no wait to cool
+                self.wait = self._plan_wait(h, t)
+                done = self.wait.end + self.line_time
         elif kind == "set_temp":
             self._set_target(0 if code == "M104" else 1, words.get("S", 0.0), t)
         elif kind == "position":
@@ -407,8 +471,9 @@ class MarlinUnit:
             self.last_n = int(words["N"])
         elif kind == "quickstop":
             self._quickstop(t)
-        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE"):
-            self.cur_busy = True
+        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not (
+                self.wait is not None and not self.v.on("BUSY_WHILE_HEATING")):
+            self.cur_busy = True        # (a heating wait is NOT_BUSY without BUSY_WHILE_HEATING)
             self.next_busy = t + self.v.keepalive
         self.cur_done = done
         self._kind = kind
@@ -418,6 +483,7 @@ class MarlinUnit:
         assert q is not None
         self.cur, self.cur_busy = None, False
         self.next_busy = math.inf
+        self.wait = None
         self._settle(t)
         if self._kind == "_stall":
             return
@@ -437,6 +503,10 @@ class MarlinUnit:
             self._say(t, *self._m115())
         elif kind == "eeprom":
             self._say(t, "echo:Settings Stored (616 bytes; crc 12345)")
+        elif kind == "host_prompt" and not self.v.on("EMERGENCY_PARSER"):
+            words = _words(q.text)      # M876.cpp: S<n> answers the prompt
+            if "S" in words:
+                self.truth.prompt_responses.append((t, int(words["S"])))
         elif not kind:
             self._unknown(q, t)
         self._ok(q, t)
@@ -505,18 +575,42 @@ class MarlinUnit:
     def _set_target(self, h: int, target: float, t: float) -> None:
         self.heat[h] = (self.temp(h, t), max(0.0, target), t)
 
-    def _reached(self, h: int) -> float:
-        now_temp, target, t0 = self.heat[h]
-        if target <= 0 or abs(now_temp - target) <= TEMP_WINDOW:
-            return t0
-        rate = HEAT_RATE[h] if target > now_temp else COOL_RATE[h]
-        return t0 + max(0.0, abs(target - now_temp) - TEMP_WINDOW) / rate
+    def _plan_wait(self, h: int, t: float) -> HeatWait:
+        """When wait_for_hotend / wait_for_bed started at ``t`` ends on this heater model:
+        the residency timer starts when |target - temp| < TEMP_WINDOW (a third of the
+        residency later when already so on the first pass), the wait ends a residency after;
+        a cooling wait also ends when the temperature fell less than the minimum slope in a
+        slope period (a target below what the heater can cool to)."""
+        v = self.v
+        residency = float(v.temp_residency if h == 0 else v.temp_bed_residency)
+        win = float(v.temp_window)
+        temp, target = self.temp(h, t), self.heat[h][1]
+        if abs(target - temp) < win:
+            return HeatWait(h, t, t, t + residency / 3, residency, t + residency * 4 / 3)
+        if target > temp:
+            at = t + (target - win - temp) / HEAT_RATE[h]
+        elif max(target, AMBIENT) < target + win:
+            at = t + (temp - target - win) / COOL_RATE[h]
+        else:
+            at = math.inf
+        end = at + residency
+        if target < temp:
+            slope, period = COOLING_SLOPE[h]
+            k = 1
+            while t + k * period < end:
+                tk = t + k * period
+                if self.temp(h, tk - period) - self.temp(h, tk) < slope:
+                    end = tk
+                    break
+                k += 1
+        return HeatWait(h, t, at, at, residency, end)
 
     def _temps_line(self) -> str:
         t = self.now
         (_, th, _), (_, tb, _) = self.heat
-        hp = 127 if th > self.temp(0, t) + TEMP_WINDOW else 0
-        bp = 127 if tb > self.temp(1, t) + TEMP_WINDOW else 0
+        win = float(self.v.temp_window)
+        hp = 127 if th > self.temp(0, t) + win else 0
+        bp = 127 if tb > self.temp(1, t) + win else 0
         return (f" T:{self.temp(0, t):.2f} /{th:.2f} B:{self.temp(1, t):.2f} /{tb:.2f} "
                 f"@:{hp} B@:{bp}")
 
