@@ -54,3 +54,12 @@ def test_over_a_pty_the_profile_is_written(tmp_path, emulate) -> None:
     assert prof["observed"]["keepalive"] == prof["table"]["keepalive"] == 2
     assert prof["observed"]["cap.AUTOREPORT_TEMP"] == 1
     assert "busy: lines at" in prof["evidence"]["keepalive"]
+
+
+def test_the_emergency_parser_is_told_by_m108_ending_m0() -> None:
+    assert observed("marlin-2.1")["emergency_parser"].observed is False      # M0 unknown
+    ep = observed("marlin-2.1-adv")["emergency_parser"]
+    assert ep.observed is True and ep.same and "M108 sent at 0.5 s" in ep.evidence
+    # a build whose M0 waits out its time although M108 came: no emergency parser at work
+    deaf = observed("marlin-2.1-adv", "user-wait-always")["emergency_parser"]
+    assert deaf.observed is False and not deaf.same

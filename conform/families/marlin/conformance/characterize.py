@@ -3,8 +3,9 @@
 Marlin's protocol is fixed by its source, but what a sender may assume depends on the build:
 the firmware and protocol version and the capabilities M115 reports, ADVANCED_OK (and through
 its ``P``/``B`` the planner and command-queue sizes), MAX_CMD_SIZE, the host keepalive
-interval, and how this version treats a repeated line number. Each probe is harmless: no
-motion, no heat, no EEPROM write (M115, G4 dwells, an unknown command, numbered M105s)."""
+interval, the emergency parser, and how this version treats a repeated line number. Each probe is harmless: no
+motion, no heat, no EEPROM write (M115, G4 dwells, an unknown command, numbered M105s, M0
+with a time limit ended by M108)."""
 
 from __future__ import annotations
 
@@ -114,6 +115,30 @@ def _repeat(s: Session) -> Observation:
                        f"the same numbered line again: {again.text()[:60]}")
 
 
+def _emergency_parser(s: Session, v: Variant) -> Observation:
+    """M0 S3, then M108 half a second later. M0 exists only with HAS_RESUME_CONTINUE (with no
+    display: EMERGENCY_PARSER); the emergency parser acts on M108 as its bytes arrive and ends
+    the wait at once (e_parser.h, MarlinCore.cpp wait_for_user_response); without it M108
+    waits in the queue behind M0."""
+    target = s.target
+    target.send(s.numbered("M0 S3"))
+    t0 = target.now()
+    first = s.collect(timeout=0.5, linger=0.5)
+    target.send(b"M108\n")
+    rest = s.collect(until=lambda ls: s.oks(first.lines + ls) >= 2, timeout=5.0)
+    lines = first.lines + rest.lines
+    if any(x.startswith('echo:Unknown command: "M0') for x in lines):
+        return Observation("emergency_parser", v.on("EMERGENCY_PARSER"), False,
+                           "M0 is unknown: no HAS_RESUME_CONTINUE, so no emergency parser")
+    if s.oks(lines) < 2:
+        return Observation("emergency_parser", v.on("EMERGENCY_PARSER"), None,
+                           f"M0 S3 then M108: {' | '.join(lines)[:60] or '(silence)'}")
+    took = rest.t - t0 if s.oks(first.lines) == 0 else first.t - t0
+    ended = took < 2.0
+    return Observation("emergency_parser", v.on("EMERGENCY_PARSER"), ended,
+                       f"M0 S3 ended {took:.1f} s after it was sent (M108 sent at 0.5 s)")
+
+
 def characterize(target: Any, vid: str) -> list[Observation]:
     spec = load_marlin()
     v = spec.variant(vid)
@@ -123,4 +148,5 @@ def characterize(target: Any, vid: str) -> list[Observation]:
     out.append(_max_cmd_size(s, v))
     out.append(_keepalive(s, v))
     out.append(_repeat(s))
+    out.append(_emergency_parser(s, v))
     return out

@@ -410,6 +410,27 @@ def m108_waits_behind_m109(s: Session) -> Outcome:
     return not problems, want, "; ".join(problems) or "M108 waited for the end of the wait"
 
 
+def m0_user_wait(s: Session) -> Outcome:
+    """M0 exists only with HAS_RESUME_CONTINUE (no display: EMERGENCY_PARSER). With it, M0 S3
+    waits, ``busy: paused for user`` while it does, and M108 (acted on by the emergency
+    parser as it arrives) ends the wait at once; without it M0 is an unknown command."""
+    t0 = s.target.now()
+    if not s.v.on("EMERGENCY_PARSER"):
+        got = s.talk(s.numbered("M0 S3"))
+        want = 'echo:Unknown command: "M0 S3"'
+        return (got.lines[:1] == [want] and len(got.lines) == 2 and _ok_kind(s, got.lines[1]),
+                f"{want} | {_ok_text(s, 1)}", got.text())
+    s.target.send(s.numbered("M0 S3"))
+    first = s.collect(timeout=2.5, linger=2.5)
+    s.target.send(b"M108\n")
+    rest = s.collect(until=lambda ls: s.oks(ls) >= 2, timeout=3.0)
+    took = rest.t - t0
+    busy = [x for x in first.lines if x == "echo:busy: paused for user"]
+    ok = s.oks(first.lines) == 0 and len(busy) == 1 and s.oks(rest.lines) == 2 and took < 2.9
+    return ok, "no ok for 2.5 s, one echo:busy: paused for user at 2 s, then M108: two oks " \
+        "before the 3 s are up", f"{first.text()} ; M108 ; {rest.text()} ({took:.1f} s)"
+
+
 def m876(s: Session) -> Outcome:
     """M876 (host prompt response) exists only with HOST_PROMPT_SUPPORT; without it the line
     is an unknown command, also where EMERGENCY_PARSER is on (its M876 states are compiled
@@ -530,6 +551,10 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
         out.append(MarlinCheck(f"{vid}/e_parser.h/halt/m108-breaks-m109", v.cite["options"] +
                                "; " + cmd["M108"], "M108 ends M109's wait at once",
                                m108_breaks_m109, heat=True))
+    out.append(MarlinCheck(f"{vid}/{'e_parser.h' if v.on('EMERGENCY_PARSER') else 'gcode.cpp'}"
+                           f"/reply/m0-{'m108-ends' if v.on('EMERGENCY_PARSER') else 'unknown'}",
+                           cmd["M0"], "M0 S3 as HAS_RESUME_CONTINUE says (M108 ends it)",
+                           m0_user_wait))
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))

@@ -117,6 +117,18 @@ class PromptWithoutSupport(MarlinUnit):
             super()._unknown(q, t)
 
 
+class UserWaitAlways(MarlinUnit):
+    """Has M0/M1 whatever the configuration, and its wait ignores M108 (a fork that compiles
+    M0 without HAS_RESUME_CONTINUE and waits out the time)."""
+
+    def _command(self, code: str) -> Any:
+        return self.spec.commands[code] if code in ("M0", "M1") else super()._command(code)
+
+    def _break_wait(self, t: float) -> None:
+        if self._kind != "user_wait":
+            super()._break_wait(t)
+
+
 MUTANTS: dict[str, type[MarlinUnit]] = {
     "resend-off-by-one": ResendOffByOne,
     "no-ok-after-resend": NoOkAfterResend,
@@ -131,6 +143,7 @@ MUTANTS: dict[str, type[MarlinUnit]] = {
     "ok-on-reaching": OkOnReaching,
     "idle-while-heating": IdleWhileHeating,
     "prompt-without-support": PromptWithoutSupport,
+    "user-wait-always": UserWaitAlways,
 }
 
 

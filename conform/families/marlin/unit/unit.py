@@ -238,7 +238,8 @@ class MarlinUnit:
     def _fire(self) -> None:
         t = self.now
         if self.cur is not None and self.cur_busy and self.next_busy <= t < self.cur_done:
-            self._say(t, "echo:busy: processing")
+            why = "paused for user" if self._kind == "user_wait" else "processing"
+            self._say(t, f"echo:busy: {why}")
             self.next_busy = t + self.v.keepalive
         w = self.wait
         if w is not None and w.next_report() <= min(t, w.end):
@@ -400,9 +401,11 @@ class MarlinUnit:
             self.ep_state = ""
 
     def _break_wait(self, t: float) -> None:
-        """wait_for_heatup = false: a heating wait ends (its reports with it)."""
+        """wait_for_heatup = wait_for_user = false: a heating wait or an M0/M1 wait ends."""
         if self.wait is not None and self.cur is not None:
             self.wait.end = min(self.wait.end, t)
+            self.cur_done = min(self.cur_done, t + self.line_time)
+        elif self.cur is not None and self._kind == "user_wait":     # wait_for_user = false
             self.cur_done = min(self.cur_done, t + self.line_time)
 
     def _quickstop(self, t: float) -> None:
@@ -424,13 +427,17 @@ class MarlinUnit:
         self.planner.clear()
 
     # -- running one command (gcode.cpp process_parsed_command) --------------------------------
+    def _command(self, code: str) -> Any:
+        """The table's command ``code`` when this build has it (None: unknown here)."""
+        return self.spec.command(code, self.v)
+
     def _start(self, q: Queued) -> None:
         t = max(self.now, self.booting_until)
         self.cur, self.cur_start, self.cur_busy = q, t, False
         done = t + self.line_time
         code = _code(q.text)
         words = _words(q.text)
-        cmd = self.spec.command(code, self.v) if code else None
+        cmd = self._command(code) if code else None
         kind = cmd.kind if cmd else ""
         self._settle(t)
         if kind == "move":
@@ -444,6 +451,12 @@ class MarlinUnit:
                 self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
                 self.position[:3] = [0.0, 0.0, 0.0]
             done = end + self.line_time
+        elif kind == "user_wait":
+            # M0_M1.cpp: P ms or S s (none: until M108), after planner.synchronize();
+            # MarlinCore.cpp wait_for_user_response, busy state PAUSED_FOR_USER
+            end = self.planner[-1][0] if self.planner else t
+            wait = words.get("P", 0.0) / 1000.0 if "P" in words else words.get("S", 0.0)
+            done = (end + wait if wait > 0 else math.inf) + self.line_time
         elif kind == "wait_temp" and ("S" in words or "R" in words):
             h = 0 if code == "M109" else 1
             self._set_target(h, words.get("S", words.get("R", 0.0)), t)
