@@ -173,6 +173,19 @@ class GrblFamily(Family):
 
         return resume_state(raw, facts, variant=variant)
 
+    def send_job(self, job: str, target: str, **options: Any) -> None:
+        """``conform send``: the reference streamer (sender/command.py)."""
+        from conform.families.grbl.sender.command import send_job
+
+        send_job(job, target, **options)
+
+    def command_options(self, command: str) -> Sequence[Any]:
+        if command == "send":
+            from conform.families.grbl.sender.command import send_options
+
+            return send_options()
+        return ()
+
     def serve(self, variant: str, **options: Any) -> None:
         from conform.families.grbl.serve import serve
 

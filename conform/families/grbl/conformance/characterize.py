@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.grbl.conformance.checks import Session, _stop
+from conform.families.grbl.conformance.checks import Session, stop_unit
 from conform.families.grbl.spec.load import load_grbl
 from conform.stops import halting
 
@@ -100,7 +100,7 @@ def run(target_text: str, output: str, variant: str | None, baud: int,
     else:
         target = open_link(target_text, baud=baud)
     try:
-        with halting(None if target.emulated else lambda: _stop(target)):
+        with halting(None if target.emulated else lambda: stop_unit(target)):
             obs = characterize(target, vid)
     finally:
         target.close()
