@@ -62,12 +62,39 @@ def ask(path: str, query: bytes, until: bytes) -> str:
 
 @pytest.fixture
 def grbl(emulate, tmp_path):
-    """The emulator on a pty linked at tmp/g.pty, recording what reaches it."""
+    """The emulator on a pty linked at tmp/g.pty, recording what reaches it, its control
+    socket at tmp/c.sock."""
     link = tmp_path / "g.pty"
     proc, path = emulate("serve", "grbl-1.1f", "--baud", "115200", "--link", str(link),
-                         "--record", str(tmp_path / "emu.mcap"))
+                         "--record", str(tmp_path / "emu.mcap"), "--control",
+                         str(tmp_path / "c.sock"))
     assert path == str(link)
     return proc, path
+
+
+def control(tmp_path: Path, *words: str) -> str:
+    """``conform emulate control`` on the emulator's socket: its answer."""
+    p = conform("emulate", "control", str(tmp_path / "c.sock"), *words)
+    assert p.returncode == 0, p.stderr
+    return p.stdout.strip()
+
+
+def truth(tmp_path: Path) -> dict:
+    """The emulator's own state: lines answered, position, planner and receive buffer."""
+    return json.loads(control(tmp_path, "state").removeprefix("ok "))
+
+
+def started(cmd: list[str]) -> tuple[subprocess.Popen, str]:
+    """``conform send`` running, once its first progress line is out."""
+    proc = subprocess.Popen([sys.executable, "-m", "conform", "send", *cmd],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "CONFORM_PROGRESS_SECONDS": "0.2"})
+    seen = ""
+    while "job lines" not in seen:
+        line = proc.stderr.readline()
+        assert line, "no progress line"
+        seen += line
+    return proc, seen
 
 
 def analysed(capture: Path) -> dict:
@@ -95,6 +122,10 @@ def test_a_job_streams_completely(grbl, tmp_path, method, detected):
     assert "<Idle|" in status and f"MPos:{end_x:.3f},0.000,0.000" in status, status
     modal = ask(pty, b"$G\n", b"ok")
     assert all(w in modal for w in ("G1", "G21", "G90", "F3000")), modal
+    unit = truth(tmp_path)
+    # the job's lines, the probe's $I (no --variant: the unit was asked what it is), the $G
+    assert unit["lines_done"] == len(sent) + 2
+    assert unit["position"][:3] == [end_x, 0.0, 0.0] and unit["lost"] == 0
     # the capture, as conform analyze reads it: every line answered ok, the method, the buffer
     m = analysed(capture)
     assert (m["lines"], m["ok"], m["errors"]) == (len(sent), len(sent), 0)
@@ -125,14 +156,7 @@ def test_an_error_stops_with_one_line_naming_the_job_line(grbl, tmp_path):
 def test_sigterm_mid_job_halts_the_unit(grbl, tmp_path):
     proc, pty = grbl
     job = job_file(tmp_path, 200)   # 50 mm: several seconds of motion
-    send = subprocess.Popen([sys.executable, "-m", "conform", "send", str(job), "--target", pty,
-                             "--allow-motion"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env={**os.environ, "CONFORM_PROGRESS_SECONDS": "0.2"})
-    seen = ""
-    while "job lines" not in seen:
-        line = send.stderr.readline()
-        assert line, "no progress line"
-        seen += line
+    send, _ = started([str(job), "--target", pty, "--allow-motion"])
     time.sleep(1.0)
     send.send_signal(signal.SIGTERM)
     _, err = send.communicate(timeout=60)
@@ -141,6 +165,8 @@ def test_sigterm_mid_job_halts_the_unit(grbl, tmp_path):
     status = ask(pty, b"?", b">")
     x = float(re.search(r"MPos:([-\d.]+),", status).group(1))
     assert "<Idle|" in status and 0 < x < 200 * STEP, status   # stopped on the way, standing
+    unit = truth(tmp_path)
+    assert unit["state"] == "Idle" and unit["planner_free"] == V.planner_blocks
     stop_emulator(proc, signal.SIGTERM)
     from conform.capture.reader import open_capture
 
@@ -148,6 +174,30 @@ def test_sigterm_mid_job_halts_the_unit(grbl, tmp_path):
     last_job_line = host.rfind(b"F3000\n")
     tail = host[last_job_line:]
     assert b"!" in tail and b"\x18" in tail[tail.index(b"!"):], tail   # hold, then reset
+
+
+def test_an_alarm_stops_the_send(grbl, tmp_path):
+    _, pty = grbl
+    job = job_file(tmp_path, 200)
+    job.write_text("$21=1\n" + job.read_text())   # hard limits on (the emulator's EEPROM)
+    send, _ = started([str(job), "--target", pty, "--allow-motion"])
+    time.sleep(0.5)
+    assert control(tmp_path, "press", "limit-x").startswith("ok")
+    _, err = send.communicate(timeout=60)
+    assert send.returncode == 1, err
+    last = err.strip().splitlines()[-1]   # after the progress lines, one line says why
+    assert "Traceback" not in err and "ALARM:1 (hard limit) after" in last and "$X" in last, err
+
+
+def test_a_pulled_cable_ends_the_send_in_bounded_time(grbl, tmp_path):
+    _, pty = grbl
+    send, _ = started([str(job_file(tmp_path, 200)), "--target", pty, "--allow-motion"])
+    t = time.monotonic()
+    assert control(tmp_path, "fault", "unplug", "3").startswith("ok")
+    _, err = send.communicate(timeout=60)
+    assert send.returncode == 1 and "Traceback" not in err, err
+    assert "link lost" in err.strip().splitlines()[-1], err
+    assert time.monotonic() - t < 15
 
 
 def test_record_onto_an_existing_file_is_refused(grbl, tmp_path):
