@@ -10,13 +10,9 @@ moment they arrive instead of reading them as part of a line.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 from conform.errors import UserError, read_user_text
-
-_STRIP = re.compile(r"\s|\(.*?\)")   # stream.py's: spaces and (comments)
-_SEMICOLON = re.compile(r";.*$")     # grbl: ';' comments to the end of the line
 
 
 @dataclass(frozen=True)
@@ -34,9 +30,21 @@ class JobLine:
         return f"{path}:{self.number} {self.text.strip()!r}"
 
 
-def strip_block(line: str) -> str:
-    """A job line as grbl reads it: no spaces, no comments, upper case."""
-    return _STRIP.sub("", _SEMICOLON.sub("", line)).upper()
+def strip_block(line: str) -> str | None:
+    """A job line as grbl reads it (protocol.c): spaces and ``(comments)`` left out, a ``;``
+    outside a comment ends the line, upper case; None for a comment left open."""
+    out: list[str] = []
+    in_comment = False
+    for c in line:
+        if in_comment:
+            in_comment = c != ")"
+        elif c == "(":
+            in_comment = True
+        elif c == ";":
+            break
+        elif not c.isspace():
+            out.append(c)
+    return None if in_comment else "".join(out).upper()
 
 
 def load_job(path: str, *, line_max: int, realtime: set[int]) -> list[JobLine]:
@@ -44,10 +52,10 @@ def load_job(path: str, *, line_max: int, realtime: set[int]) -> list[JobLine]:
     lines: list[JobLine] = []
     for n, text in enumerate(read_user_text(path).splitlines(), 1):
         block = strip_block(text)
+        if block is None:
+            raise UserError(f"{path}:{n}: a comment '(' that is not closed on its line")
         if not block:
             continue
-        if "(" in block:
-            raise UserError(f"{path}:{n}: a comment '(' that is not closed on its line")
         bad = next((c for c in block if ord(c) > 0x7F or ord(c) in realtime or ord(c) < 0x20),
                    None)
         if bad is not None:
