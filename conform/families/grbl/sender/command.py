@@ -15,12 +15,12 @@ from typing import Any
 
 import click
 
+from conform.conformance.recorded import RecordedTarget
 from conform.conformance.target import HarnessError
 from conform.errors import LinkError, UserError
 from conform.families.grbl.sender.stream import METHODS, ReadyError, Stats, Streamer
 
 DEFAULT_TIMEOUT = 5.0     # seconds of silence (with '?' asked every second) before the link is lost
-EPOCH = 1_750_000_000.0   # an emulated session's virtual clock starts at this date (as GVE's)
 
 
 def send_options() -> tuple[click.Option, ...]:
@@ -29,47 +29,6 @@ def send_options() -> tuple[click.Option, ...]:
                          show_default=True,
                          help="grbl: character counting (keep unanswered lines within the "
                               "receive buffer) or send-response (one line per ok/error)."),)
-
-
-class Taped:
-    """A target whose traffic also goes to a capture ``Recorder`` (host bytes when written,
-    unit bytes when read: the host end of the cable), with the bytes ``Target.send`` drains
-    before it writes kept for the next read."""
-
-    def __init__(self, target: Any, recorder: Any = None, base: float = 0.0) -> None:
-        self.target = target
-        self.recorder = recorder
-        self.base = base
-        self.emulated = target.emulated
-        self._held = b""
-
-    def now(self) -> float:
-        return self.target.now()
-
-    def _tape(self, direction: str, data: bytes, t: float, t_first: float | None = None) -> None:
-        if self.recorder is not None and data:
-            self.recorder.chunk(direction, data, self.base + t,
-                                None if t_first is None else self.base + t_first)
-
-    def send(self, data: bytes) -> tuple[float, bytes]:
-        t, stray = self.target.send(data)
-        self._tape("unit", stray, t)
-        self._held += stray
-        self._tape("host", data, self.target.now(), t)
-        return t, b""
-
-    def receive(self, deadline: float) -> bytes:
-        if self._held:
-            data, self._held = self._held, b""
-            return data
-        data = self.target.receive(deadline)
-        self._tape("unit", data, self.target.now())
-        return data
-
-    def drain(self) -> bytes:
-        data = self._held + self.target.drain()
-        self._held = b""
-        return data
 
 
 def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_motion: bool,
@@ -91,33 +50,22 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
                         "(nothing was sent)")
     tgt, _ = fam.open_target(target if not emulated else f"emu:{v.id}", baud=baud,
                              permissions=None)
-    recorder = None
     try:
-        from conform.capture.recorder import Recorder, WallClock
-
-        base = EPOCH if emulated else WallClock()() - tgt.now()
-        if record is not None:
-            recorder = Recorder(record, {
-                "capture_method": "conform send (grbl reference streamer)"
-                                  + (", in-process emulator (virtual clock)" if emulated else ""),
-                "variant": v.id, "baud": baud, "sender_method": method, "target": target,
-                "job": Path(job).name,
-                "tap": "host end of the serial cable (host bytes as sent, unit bytes as read)"},
-                clock=lambda: base + tgt.now(), overwrite_part=False)
-        taped = Taped(tgt, recorder, base)
+        taped = RecordedTarget.open(tgt, record, {
+            "capture_method": "conform send (grbl reference streamer)", "variant": v.id,
+            "baud": baud, "sender_method": method, "target": target, "job": Path(job).name})
+    except BaseException:
+        tgt.close()
+        raise
+    try:
         stats = _stream(taped, lines, spec, v, method=method, job=job, quiet=quiet,
                         timeout=DEFAULT_TIMEOUT if timeout is None else timeout, target=target)
     finally:
-        from conform.stops import shield
-
-        with shield():   # the capture is finished even when a second signal comes
-            if recorder is not None:
-                recorder.close({"job_lines": len(lines)})
-            tgt.close()
+        taped.close({"job_lines": len(lines)})
     _summary(stats, lines, target, v.id, method, v.rx_buffer, record)
 
 
-def _stream(taped: Taped, lines: list, spec: Any, v: Any, *, method: str, job: str,
+def _stream(taped: RecordedTarget, lines: list, spec: Any, v: Any, *, method: str, job: str,
             quiet: bool, timeout: float, target: str) -> Stats:
     """Run the streamer; every way it ends that leaves lines of ours in grbl halts the unit."""
     from conform.cli.progress import progress
