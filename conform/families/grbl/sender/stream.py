@@ -147,12 +147,15 @@ class Streamer:
             self.progress(self)
 
     # -- listening -----------------------------------------------------------------------------
-    def _listen(self, poll_every: float = POLL_SILENCE, silence: float | None = None) -> None:
+    def _listen(self, poll_every: float | None = None, silence: float | None = None) -> None:
         """Read what comes within a short while and act on each line; ask ``?`` after
-        ``poll_every`` s of silence; raise ``LinkLost`` after ``silence`` (the timeout)."""
+        ``poll_every`` s of silence (a second, or half the timeout when that is shorter);
+        raise ``LinkLost`` after ``silence`` (the timeout)."""
         t = self.target
         now = t.now()
         limit = self.timeout if silence is None else silence
+        if poll_every is None:
+            poll_every = min(POLL_SILENCE, limit / 2)
         if now - self._heard >= limit:
             raise LinkLost(f"nothing from the unit for {limit:g} s")
         if now - max(self._heard, self._asked) >= poll_every:
