@@ -236,3 +236,22 @@ def test_what_grbl_cannot_take_is_refused_before_sending(tmp_path):
     p = conform("send", str(job_file(tmp_path, 3)), "--target", "/dev/null-no-such-port",
                 "--variant", "grbl-1.1f")
     assert p.returncode == 2 and "--allow-motion" in p.stderr, p.stderr
+
+
+def test_the_emulator_in_process_records_on_its_virtual_clock(tmp_path):
+    """`--target emu:grbl-1.1f`: the reference unit in-process; the recording reads as a
+    counting session within the buffer, dated from the fixed virtual epoch."""
+    from conform.capture.reader import open_capture
+
+    job = job_file(tmp_path, 60)
+    sent = job_lines(job)
+    capture = tmp_path / "emu.mcap"
+    p = conform("send", str(job), "--target", "emu:grbl-1.1f", "--record", str(capture))
+    assert p.returncode == 0, p.stderr
+    assert f"final position: MPos:{60 * STEP:.3f},0.000,0.000 (Idle)" in p.stdout
+    m = analysed(capture)
+    assert (m["lines"], m["ok"], m["streaming_method"]) == (len(sent), len(sent),
+                                                            "character-counting")
+    assert m["max_bytes_in_flight"] <= V.rx_buffer
+    meta = open_capture(capture).metadata["conform.session"]
+    assert meta["variant"] == "grbl-1.1f" and "virtual clock" in meta["capture_method"]
