@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from functools import cache
 from pathlib import Path
 
@@ -82,3 +83,43 @@ def test_proxy_emulator_noisy_recovers_without_hazards() -> None:
     assert "simplex-violation" not in a.kinds() and "baud-mismatch" not in a.kinds()
     assert a.metrics["vectors_accepted"] == 316
     assert a.metrics["positions"]["checked"] >= 1
+
+
+# -- grbl: recorded live through `conform proxy` between `conform send` and `conform emulate
+# -- serve grbl-1.1f` (captures/README.md); expected figures from the job and grbl's tables
+
+ARC = CAPTURES / "jobs" / "grbl-arc.nc"
+
+
+def _arc_lines() -> list[str]:
+    """The job's lines as they go on the wire: comment lines and blank lines left out, the
+    rest without spaces and ';' remarks."""
+    out = []
+    for raw in ARC.read_text().splitlines():
+        text = raw.split(";")[0].strip()
+        if text and not text.startswith("("):
+            out.append(text.replace(" ", ""))
+    return out
+
+
+@pytest.mark.parametrize("name,method", [("grbl-counting", "character-counting"),
+                                         ("grbl-send-response", "send-response")])
+def test_grbl_samples_stream_the_whole_job(name: str, method: str) -> None:
+    from conform.families import family
+    from conform.families.grbl.spec.load import load_grbl
+
+    rx_buffer = load_grbl().variant("grbl-1.1f").rx_buffer
+    a = family("grbl").analyze(str(CAPTURES / f"{name}.mcap"))
+    lines = _arc_lines()
+    m = a.metrics
+    assert (m["lines"], m["ok"], m["errors"], m["alarms"]) == (len(lines), len(lines), 0, 0)
+    assert [e.text for e in a.exchanges] == lines
+    assert m["streaming_method"] == method and m["hazards"] == 0 and a.findings == []
+    longest = max(len(x) + 1 for x in lines)
+    if method == "send-response":
+        assert m["max_lines_in_flight"] == 1 and m["max_bytes_in_flight"] == longest
+    else:   # the buffer filled, and never past its size
+        assert rx_buffer - longest < m["max_bytes_in_flight"] <= rx_buffer
+    # the unit ended where the job's last line leads, standing
+    last = re.search(r"X([-\d.]+)Y([-\d.]+)", lines[-1])
+    assert a.reports[-1][1].startswith(f"<Idle|MPos:{last[1]},{last[2]},0.000|")

@@ -97,13 +97,13 @@ def test_characterize_reads_what_the_build_does(tmp_path):
 
 
 def test_the_stop_is_confirmed_by_the_banner():
-    from conform.families.grbl.conformance.checks import _stop
+    from conform.families.grbl.conformance.checks import stop_unit
 
     target = EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f")
     target.send(b"G1X-20F300\n")
     target.wait(0.5)
     assert target.unit.state == "Run"
-    assert _stop(target).startswith("stopped")
+    assert stop_unit(target).startswith("stopped")
     # held until still, then reset: no ALARM:3, so Idle (not Alarm) and the position is kept
     assert target.unit.state == "Idle" and not target.unit.planner.blocks
     assert -20.0 < target.unit.position[0] < 0.0

@@ -143,7 +143,7 @@ def test_an_unknown_or_other_family_variant_names_every_family(tmp_path):
     job.write_text("C100,0,0\n")
     for args in (["run", "--target", "emu:nope"], ["emulate", "nope"],
                  ["check-sender", "--variant", "nope", "--", "true"],
-                 ["send", str(job), "--target", "emu:grbl-1.1f"]):
+                 ["send", str(job), "--target", "emu:nope"]):
         p = subprocess.run([sys.executable, "-m", "conform", *args], capture_output=True,
                            text=True, timeout=60)
         assert p.returncode == 2 and p.stderr.count("\n") == 1, (args, p.stderr)

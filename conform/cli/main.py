@@ -23,6 +23,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "spec",
     "emulate",
     "run",
+    "send",
     "report",
     "characterize",
     "proxy",

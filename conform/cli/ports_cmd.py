@@ -30,17 +30,10 @@ def listed_ports() -> list[Port]:
 def probe(port: Port, baud: int, timeout: float) -> Port:
     """Ask the port each family's harmless question, in the families' probe order, until one
     family's unit answers (conform.families: ``Family.probe``)."""
-    from conform.families import families
+    from conform.families import identify_port
 
-    tried: list[str] = []
-    for fam in sorted(families(), key=lambda f: f.probe_rank):
-        got = fam.probe(port.device, baud=baud, timeout=timeout)
-        if got.variant:
-            port.answer, port.variant, port.how = got.answer, got.variant, got.how
-            return port
-        port.answer = port.answer or got.answer
-        tried.append(got.how)
-    port.how = "; ".join(tried) or "no family can probe"
+    _, got, _ = identify_port(port.device, baud=baud, timeout=timeout)
+    port.answer, port.variant, port.how = got.answer, got.variant, got.how
     return port
 
 

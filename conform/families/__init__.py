@@ -307,6 +307,21 @@ class Family:
         answered. The default: this family has no probe."""
         return ProbeAnswer(None, None, f"{self.name}: no probe")
 
+    # -- the reference sender: ``conform send`` ----------------------------------------------
+    def send_job(self, job: str, target: str, *, variant: str | None, baud: int,
+                 allow_motion: bool, record: str | None, timeout: float | None, quiet: bool,
+                 **family_values: Any) -> None:
+        """``conform send JOB --target T``: stream the job file to the unit with this family's
+        reference sender and print what happened (``UserError`` with exit 1 for a failed or
+        incomplete send). ``variant``: named by the user or found by the probe (None: the
+        family decides); ``allow_motion``: nothing that moves goes to a non-emulated unit
+        without it; ``record``: an MCAP capture of the session (already checked free, or
+        ``--force`` given); ``timeout``: the answer timeout in seconds (None: the family's);
+        ``family_values``: this family's own ``command_options("send")``. An interruption
+        (Ctrl-C, SIGTERM, SIGHUP: a ``KeyboardInterrupt``) halts the unit before it ends the
+        command."""
+        raise self.lacks("reference sender (`conform send`)")
+
     # -- capture and analysis ------------------------------------------------------------------
     def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
         """Does this traffic look like this family's?"""
@@ -477,6 +492,23 @@ def default_variant() -> str:
 
 def _owner(variant: str) -> Family | None:
     return next((f for f in families() if any(v.id == variant for v in f.variants())), None)
+
+
+def identify_port(device: str, *, baud: int, timeout: float
+                  ) -> tuple[Family | None, ProbeAnswer, list[str]]:
+    """Which family's unit answers on ``device``: each family's harmless question in
+    ``probe_rank`` order until one names its variant (``conform ports --probe``, ``conform
+    send`` given no variant). Returns that family (None when none did), its answer (else the
+    first answer heard) and what each family found."""
+    tried: list[str] = []
+    heard: str | None = None
+    for fam in sorted(families(), key=lambda f: f.probe_rank):
+        got = fam.probe(device, baud=baud, timeout=timeout)
+        if got.variant:
+            return fam, got, tried
+        heard = heard or got.answer
+        tried.append(got.how)
+    return None, ProbeAnswer(None, heard, "; ".join(tried) or "no family can probe"), tried
 
 
 def family_of_tables(root: str | Path) -> Family:

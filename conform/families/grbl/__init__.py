@@ -114,9 +114,9 @@ class GrblFamily(Family):
 
     def characterize_probes(self) -> Any:
         from conform.families.grbl.conformance.characterize import characterize
-        from conform.families.grbl.conformance.checks import _stop
+        from conform.families.grbl.conformance.checks import stop_unit
 
-        return characterize, _stop
+        return characterize, stop_unit
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:
@@ -172,6 +172,19 @@ class GrblFamily(Family):
         from conform.families.grbl.diagnosis.facts import resume_state
 
         return resume_state(raw, facts, variant=variant)
+
+    def send_job(self, job: str, target: str, **options: Any) -> None:
+        """``conform send``: the reference streamer (sender/command.py)."""
+        from conform.families.grbl.sender.command import send_job
+
+        send_job(job, target, **options)
+
+    def command_options(self, command: str) -> Sequence[Any]:
+        if command == "send":
+            from conform.families.grbl.sender.command import send_options
+
+            return send_options()
+        return ()
 
     def serve(self, variant: str, **options: Any) -> None:
         from conform.families.grbl.serve import serve

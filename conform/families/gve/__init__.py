@@ -172,6 +172,12 @@ class GveFamily(Family):
 
         return commands()
 
+    def send_job(self, job: str, target: str, **options: Any) -> None:
+        """``conform send``: the reference sender (sender/command.py)."""
+        from conform.families.gve.sender.command import send_job
+
+        send_job(job, target, **options)
+
     def command_options(self, command: str) -> Sequence[Any]:
         from conform.families.gve.cli import command_options
 

@@ -1,6 +1,6 @@
 """GVE's side of the command line: what ``conform characterize`` probes and writes, what
-``conform spec show|diff|questions`` print for GVE variants, the family's own subcommands
-(``send``, the reference sender; ``profile``, the dialect profiles of ``characterize``) and its
+``conform spec show|diff|questions`` print for GVE variants, the family's own subcommand
+(``profile``, the dialect profiles of ``characterize``) and its
 options on the engine's commands (``--dialect`` on ``run``; the A-register, reference switches
 and ground truth on ``emulate serve``). The engine reaches these through the family registry
 (conform.families, conform.cli.family_options)."""
@@ -176,12 +176,15 @@ def questions_table() -> tuple[str, list[str], list[tuple[Any, ...]]]:
 
 def commands() -> Sequence[click.Command]:
     from conform.families.gve.conformance.profile_command import cli as profile
-    from conform.families.gve.sender.command import cli as send
 
-    return (send, profile)
+    return (profile,)
 
 
 def command_options(command: str) -> Sequence[click.Option]:
+    if command == "send":
+        from conform.families.gve.sender.command import send_options
+
+        return send_options()
     if command == "run":
         return (click.Option(["--dialect", "dialect_file"], type=INPUT_FILE, default=None,
                              help="GVE: expect this characterised profile's dialect instead of "

@@ -140,6 +140,18 @@ class MarlinFamily(Family):
 
         return analyze_capture(path, **options)
 
+    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+        """M115, the capability report (conformance/portprobe.py)."""
+        from conform.families.marlin.conformance.portprobe import probe
+
+        return probe(device, baud=baud, timeout=timeout)
+
+    def send_job(self, job: str, target: str, **options: Any) -> None:
+        """``conform send``: the reference streamer (sender/command.py)."""
+        from conform.families.marlin.sender.command import send_job
+
+        send_job(job, target, **options)
+
     def serve(self, variant: str, **options: Any) -> None:
         from conform.families.marlin.unit.serve import serve
 

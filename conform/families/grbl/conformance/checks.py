@@ -516,7 +516,7 @@ class GrblRunner(Runner):
         return result
 
     def halt(self, after_silence: bool = False) -> str:
-        return _stop(self.target)
+        return stop_unit(self.target)
 
     def stop_at_end(self) -> bool:
         return not self.target.emulated and self.motion_ok
@@ -590,7 +590,7 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
     except HarnessError as exc:
         grade, expected, actual, detail = Grade.ERROR, "", "", f"HarnessError: {exc}"
     if grade is not Grade.PASS and not s.target.emulated and c.motion:
-        detail = (detail + "; " if detail else "") + _stop(s.target)
+        detail = (detail + "; " if detail else "") + stop_unit(s.target)
     return CheckResult(grade=grade, expected=expected, actual=actual, detail=detail,
                        log=list(s.target.log), duration=time.perf_counter() - t0, **base)
 
@@ -608,7 +608,7 @@ def _until_still(target: Any, seconds: float) -> None:
             return
 
 
-def _stop(target: Any, attempts: int = 3) -> str:
+def stop_unit(target: Any, attempts: int = 3) -> str:
     """Feed hold, then a soft reset, until grbl acknowledges with its banner: the machine
     stands and the planner and receive buffer are empty."""
     notes = []

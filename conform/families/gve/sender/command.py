@@ -1,4 +1,6 @@
-"""``conform send JOB --target URL``: stream a vector file or G-code to a unit."""
+"""GVE's reference sender behind ``conform send JOB --target URL`` (the engine's command,
+conform/cli/send_cmd.py): stream a vector file or G-code to a unit; its own options
+(checksums, packets, policy, the emulated link's latency and noise, G-code conversion)."""
 
 from __future__ import annotations
 
@@ -7,18 +9,12 @@ import time
 
 import click
 
-from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import (
-    BAUD,
-    INPUT_FILE,
     NON_NEGATIVE,
     NON_NEGATIVE_INT,
-    OUTPUT_FILE,
     POSITIVE,
     POSITIVE_INT,
     PROBABILITY,
-    TARGET,
-    VARIANT,
 )
 from conform.errors import LinkError, UserError
 from conform.families.gve.sender.core import POLICIES
@@ -91,58 +87,57 @@ def _finish(sender: object) -> None:
                         exit_code=1)
 
 
-@click.command(name="send")
-@click.argument("job", type=INPUT_FILE)
-@click.option("--target", required=True, type=TARGET,
-              help="emu:VARIANT (in-process), a pyserial URL (socket://, rfc2217://...) or a "
-                   "port / pty path.")
-@click.option("--variant", type=VARIANT, default=None, help="The unit's variant (default: emu's, or gve64-v19).")
-@click.option("--baud", type=BAUD, default=115200, show_default=True)
-@click.option("--checksums/--no-checksums", default=False, show_default=True)
-@click.option("--packet", type=POSITIVE_INT, default=1, show_default=True,
-              help="C/B lines per *S…*E packet (1: no packets).")
-@click.option("--policy", type=click.Choice(POLICIES), default="careful", show_default=True,
-              help="What to do after a garbled answer or none (careless ones are for demos).")
-@click.option("--latency", type=NON_NEGATIVE, default=0.0, show_default=True,
-              help="Simulated converter latency per direction, ms.")
-@click.option("--timeout", type=POSITIVE, default=250.0, show_default=True,
-              help="Answer timeout, ms.")
-@click.option("--noise", type=PROBABILITY, default=0.0, help="emu: probability a byte is damaged.")
-@click.option("--seed", type=NON_NEGATIVE_INT, default=1, help="emu: seed of the noise.")
-@click.option("--corrupt-command", default="", help="emu: damage these host writes (0-based).")
-@click.option("--corrupt-answer", default="", help="emu: damage these answer lines (0-based).")
-@click.option("--record", type=OUTPUT_FILE, default=None,
-              help="emu: record the session as an MCAP capture.")
-@click.option("--steps-per-mm", default="100", show_default=True, help="G-code: per axis, X,Y,Z.")
-@click.option("--feed", type=POSITIVE, default=600.0, show_default=True,
-              help="G-code: mm/min before the first F.")
-@click.option("--accel", type=POSITIVE, default=500.0, show_default=True, help="G-code: mm/s².")
-@click.option("--lenient", is_flag=True,
-              help="G-code: skip words outside the subset and what cannot be read.")
-@click.option("--allow-motion", is_flag=True,
-              help="Required to send motion to anything but an emulator.")
-@force_option("the --record file")
-def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, packet: int,
-        policy: str, latency: float, timeout: float, noise: float, seed: int,
-        corrupt_command: str, corrupt_answer: str, record: str | None, steps_per_mm: str,
-        feed: float, accel: float, lenient: bool, allow_motion: bool, force: bool) -> None:
-    """Stream JOB (one command per line, or .nc/.gcode) and report what happened.
+def send_options() -> tuple[click.Option, ...]:
+    """GVE's own options of ``conform send`` (``Family.command_options("send")``)."""
+    return (
+        click.Option(["--checksums/--no-checksums"], default=False, show_default=True,
+                     help="GVE: checksummed lines."),
+        click.Option(["--packet"], type=POSITIVE_INT, default=1, show_default=True,
+                     help="GVE: C/B lines per *S…*E packet (1: no packets)."),
+        click.Option(["--policy"], type=click.Choice(POLICIES), default="careful",
+                     show_default=True,
+                     help="GVE: what to do after a garbled answer or none (careless ones are "
+                          "for demos)."),
+        click.Option(["--latency"], type=NON_NEGATIVE, default=0.0, show_default=True,
+                     help="GVE: simulated converter latency per direction, ms."),
+        click.Option(["--noise"], type=PROBABILITY, default=0.0,
+                     help="GVE, emu: probability a byte is damaged."),
+        click.Option(["--seed"], type=NON_NEGATIVE_INT, default=1,
+                     help="GVE, emu: seed of the noise."),
+        click.Option(["--corrupt-command"], default="",
+                     help="GVE, emu: damage these host writes (0-based)."),
+        click.Option(["--corrupt-answer"], default="",
+                     help="GVE, emu: damage these answer lines (0-based)."),
+        click.Option(["--steps-per-mm"], default="100", show_default=True,
+                     help="GVE, G-code: per axis, X,Y,Z."),
+        click.Option(["--feed"], type=POSITIVE, default=600.0, show_default=True,
+                     help="GVE, G-code: mm/min before the first F."),
+        click.Option(["--accel"], type=POSITIVE, default=500.0, show_default=True,
+                     help="GVE, G-code: mm/s²."),
+        click.Option(["--lenient"], is_flag=True,
+                     help="GVE, G-code: skip words outside the subset and what cannot be read."),
+    )
 
-    \b
-    Examples:
-      conform send captures/jobs/part.nc --target emu:gve64-v19 --checksums --packet 20
-      conform send captures/jobs/raster.txt --target /dev/ttyUSB0 --allow-motion
-    """
+
+DEFAULT_TIMEOUT = 0.25   # seconds to wait for an answer
+
+
+def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_motion: bool,
+             record: str | None, timeout: float | None, quiet: bool = False,
+             checksums: bool = False, packet: int = 1, policy: str = "careful",
+             latency: float = 0.0, noise: float = 0.0, seed: int = 1,
+             corrupt_command: str = "", corrupt_answer: str = "", steps_per_mm: str = "100",
+             feed: float = 600.0, accel: float = 500.0, lenient: bool = False,
+             **_: object) -> None:
+    """Stream JOB (one command per line, or .nc/.gcode) and report what happened
+    (``conform send`` for a GVE unit; the engine checked ``--record`` and ``--timeout``)."""
     from conform.families.gve.sender.job import load_job
     from conform.families.gve.spec import load_spec
 
-    fresh_output(record, force, "--record")
     spec = load_spec()
-    emu = target.startswith("emu:")
-    vid = (target[4:] if emu else None) or variant or "gve64-v19"
-    if variant and emu and target[4:] and variant != target[4:]:
-        raise UserError(f"--variant {variant} contradicts --target {target}")
-    var = spec.variant(vid)
+    timeout_ms = 1000.0 * (DEFAULT_TIMEOUT if timeout is None else timeout)
+    emu = target == "emu" or target.startswith("emu:")
+    var = spec.variant(variant or "gve64-v19")
     dialect = spec.dialect()
     if packet < 1:
         raise UserError(f"--packet {packet}: must be 1 or more")
@@ -150,7 +145,6 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
         raise UserError(f"--baud {baud}: must be positive")
     _check_number("--noise", noise, 0.0, 1.0)
     _check_number("--latency", latency, 0.0, 10_000.0)
-    _check_number("--timeout", timeout, 0.0, 600_000.0, lo_open=True)
     _check_number("--feed", feed, 0.0, lo_open=True)
     _check_number("--accel", accel, 0.0, lo_open=True)
     spm = _floats(steps_per_mm)
@@ -161,7 +155,7 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
                         "(record a real port with `conform proxy`)")
     if not emu:
         _send_port(job, gopts, spec, variant, target, baud, checksums, packet, policy,
-                   latency, timeout, allow_motion)
+                   latency, timeout_ms, allow_motion, quiet)
         return
     items = load_job(job, var, dialect, **gopts)
     from conform.families.gve.sender.links import LinkModel
@@ -171,8 +165,8 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
                      corrupt_commands=_ints(corrupt_command, "--corrupt-command"),
                      corrupt_answers=_ints(corrupt_answer, "--corrupt-answer"))
     res = send_emulated(items, var, dialect, policy=policy, checksums=checksums,
-                        packet=packet, link=link, record=record, timeout=timeout / 1000.0,
-                        progress=Progress)
+                        packet=packet, link=link, record=record, timeout=timeout_ms / 1000.0,
+                        progress=None if quiet else Progress)
     s = res.sender
     click.echo(f"sent {len(items)} job lines to {target}: {s.stats.sent} writes, "
                f"{s.stats.answers} answers, {s.stats.garbled} garbled, "
@@ -194,7 +188,7 @@ def cli(job: str, target: str, variant: str | None, baud: int, checksums: bool, 
 
 def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target: str,
                baud: int, checksums: bool, packet: int, policy: str, latency: float,
-               timeout: float, allow_motion: bool) -> None:
+               timeout: float, allow_motion: bool, quiet: bool) -> None:
     """A real port (or any pyserial URL): ``?`` first (variant, checksum mode), then stream."""
     import serial
 
@@ -225,13 +219,13 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
                                              if found.checksum_was_on else ""), err=True)
         var = spec.variant(vid)  # type: ignore[attr-defined]
         items = load_job(job, var, spec.dialect(), **gopts)  # type: ignore[attr-defined]
-        _stream(items, var, port, target, checksums, packet, policy, latency, timeout)
+        _stream(items, var, port, target, checksums, packet, policy, latency, timeout, quiet)
     finally:
         port.close()
 
 
 def _stream(items: list, var: object, port: object, target: str, checksums: bool, packet: int,
-            policy: str, latency: float, timeout: float) -> None:
+            policy: str, latency: float, timeout: float, quiet: bool) -> None:
     import serial
 
     from conform.families.gve.sender.core import Sender
@@ -242,7 +236,8 @@ def _stream(items: list, var: object, port: object, target: str, checksums: bool
                     timeout=timeout / 1000.0)
     progress = Progress(sender)
     try:
-        run_serial(sender, port, latency=latency / 1000.0, on_progress=progress)
+        run_serial(sender, port, latency=latency / 1000.0,
+                   on_progress=None if quiet else progress)
     except KeyboardInterrupt as exc:   # Ctrl-C, SIGTERM, SIGHUP (conform.stops)
         answers = halt_and_delete(sender, port)
         port.close()
