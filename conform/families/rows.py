@@ -62,3 +62,31 @@ def read_table(root: Path, name: str, needed: str = "") -> tuple[Rows, dict[str,
         return Rows(path), tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{path}: not valid TOML: {exc}") from None
+
+
+class LineTables:
+    """What a family's loaded tables answer the same way in every family: a variant by id (a
+    one-line error naming the family's variants) and the kind of one line from the unit (the
+    first ``messages`` row whose pattern matches). Mixed into the family's tables dataclass,
+    which has ``variants``, ``messages`` (rows with ``kind`` and ``pattern``) and names its
+    family in ``family_name``."""
+
+    family_name = ""
+    variants: dict[str, Any]
+    messages: dict[str, Any]
+
+    def variant(self, vid: str) -> Any:
+        try:
+            return self.variants[vid]
+        except KeyError:
+            from conform.families import unknown_variant
+
+            raise UserError(unknown_variant(vid, self.family_name)) from None
+
+    def classify(self, line: str) -> tuple[str, re.Match[str] | None]:
+        """The message kind of one line from the unit (``unknown`` when no row matches)."""
+        for m in self.messages.values():
+            hit = m.pattern.match(line)
+            if hit:
+                return m.kind, hit
+        return "unknown", None

@@ -14,7 +14,7 @@ from typing import Any
 
 from conform.errors import UserError
 from conform.families import table_folder
-from conform.families.rows import Rows, read_table
+from conform.families.rows import LineTables, Rows, read_table
 
 SPEC_PACKAGE = "conform.families.grbl.spec"
 FILES = ("variants", "codes", "settings", "protocol", "status", "examples")
@@ -138,7 +138,7 @@ class Variant:
 
 
 @dataclass
-class GrblSpec:
+class GrblSpec(LineTables):
     """Every grbl table."""
 
     root: Path
@@ -153,21 +153,10 @@ class GrblSpec:
     status: dict[str, Any]
     examples: list[Example] = field(default_factory=list)
 
+    family_name = "grbl"
+
     def variant(self, vid: str) -> Variant:
-        try:
-            return self.variants[vid]
-        except KeyError:
-            from conform.families import unknown_variant
-
-            raise UserError(unknown_variant(vid, "grbl")) from None
-
-    def classify(self, line: str) -> tuple[str, re.Match[str] | None]:
-        """The message kind of one line from the unit (``unknown`` if none matches)."""
-        for m in self.messages.values():
-            hit = m.pattern.match(line)
-            if hit:
-                return m.kind, hit
-        return "unknown", None
+        return LineTables.variant(self, vid)
 
 
 def _read(root: Path, name: str) -> tuple[Rows, dict[str, Any]]:

@@ -15,7 +15,7 @@ from typing import Any
 
 from conform.errors import UserError
 from conform.families import table_folder
-from conform.families.rows import Rows, read_table
+from conform.families.rows import LineTables, Rows, read_table
 
 FILES = ("variants", "messages", "commands", "caps")
 KINDS = ("move", "dwell", "sync", "home", "report_temp", "report_pos", "firmware",
@@ -93,28 +93,17 @@ class Cap:
 
 
 @dataclass
-class MarlinSpec:
+class MarlinSpec(LineTables):
     root: Path
     variants: dict[str, Variant]
     messages: dict[str, Message]
     commands: dict[str, Command]
     caps: list[Cap]
 
+    family_name = "marlin"
+
     def variant(self, vid: str) -> Variant:
-        try:
-            return self.variants[vid]
-        except KeyError:
-            from conform.families import unknown_variant
-
-            raise UserError(unknown_variant(vid, "marlin")) from None
-
-    def classify(self, line: str) -> tuple[str, re.Match[str] | None]:
-        """The kind of one line from the unit (``unknown`` when no row matches)."""
-        for m in self.messages.values():
-            hit = m.pattern.match(line)
-            if hit:
-                return m.kind, hit
-        return "unknown", None
+        return LineTables.variant(self, vid)
 
     def command(self, code: str, v: Variant) -> Command | None:
         """The command ``code`` (``G1``, ``M105``) when the variant has it."""
