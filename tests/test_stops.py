@@ -232,8 +232,9 @@ def test_characterize_stopped_by_sighup_halts_the_unit(tmp_path):
 
 @pytest.mark.slow
 def test_characterize_stopped_by_ctrl_c_writes_a_partial_profile(tmp_path):
-    """Ctrl-C while A4 is being probed (it takes seconds: H, vectors, D): the unit is halted, the questions answered so far are
-    written marked partial (the rest listed), and `profile diff` names what is missing."""
+    """Ctrl-C while A4 is being probed (it takes seconds: H, vectors, D): the unit is halted,
+    the questions answered so far are written marked partial (the rest listed), and
+    `profile diff` names what is missing."""
     from conform.families.gve.conformance.profile import load_profile
     from conform.families.gve.spec import load_spec
 
