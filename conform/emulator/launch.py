@@ -117,10 +117,12 @@ def serve_unit(family: str, variant: str, build: Callable[[float], ServedUnit], 
                baud: int | None = None, tcp_port: int | None = None, faults: str | None = None,
                seed: int | None = None, control_path: str | None = None,
                link_path: str | None = None, record_path: str | None = None,
-               answer_delay: float = 0.0) -> None:
+               answer_delay: float = 0.0, quiet: bool = False) -> None:
     """``conform emulate serve`` for any family: ``build(t_start)`` makes the unit on the
     monotonic wall clock; this serves it until SIGINT/SIGTERM. The first line of stdout is the
-    device path; a recording's session metadata is the same vocabulary for every family."""
+    device path; a recording's session metadata is the same vocabulary for every family. While
+    it serves, the bytes each way are the progress display (none with ``quiet``)."""
+    from conform.cli.progress import progress
     from conform.emulator.serve import Emulator
 
     check_pacing(baud, answer_delay)
@@ -150,7 +152,10 @@ def serve_unit(family: str, variant: str, build: Callable[[float], ServedUnit], 
     announce(endpoint, f"{variant} on {endpoint.name}"
              + (f" ({served.describe})" if served.describe else "") + f"; control: {control.path}")
     try:
-        run_until_signal(emulator)
+        with progress("conform emulate", quiet=quiet) as bar:
+            bar.task("serving", None, poll=lambda: f"{emulator.bytes_in} bytes in, "
+                                                   f"{emulator.bytes_out} out")
+            run_until_signal(emulator)
     finally:
         control.close()
         if recorder is not None:
