@@ -6,6 +6,7 @@ being reworked with its move into the engine."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -119,3 +120,19 @@ def test_emulate_serve_shows_progress_and_q_silences_it():
     assert "conform emulate: serving — 0 bytes in, 0 out" in _serve()
     quiet = _serve("-q")
     assert "serving —" not in quiet and "conform emulate: stopped (" in quiet
+
+
+def test_the_readme_table_names_the_commands_each_option_is_on():
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    table = readme.split("#### Options that mean the same everywhere", 1)[1].split("\n\n", 2)[1]
+    rows = {}
+    for line in table.splitlines()[2:]:
+        option, on, _means = (c.strip() for c in line.strip("|").split("|"))
+        rows[option] = sorted(re.findall(r"`([a-z][a-z -]*)`", on))
+    assert rows["`-q`, `--quiet`"] == sorted(LONG_RUNNING)
+    assert rows["`--seed N`"] == _with("--seed")
+    assert rows["`--timeout SECONDS`"] == _with("--timeout")
+    assert rows["`--report DIR`"] == _with("--report")
+    assert rows["`-o FILE`"] == [c for c in _with("-o") if c != "report"]
+    assert rows["`--record FILE`"] == _with("--record")
+    assert rows["`--parquet DIR`"] == _with("--parquet")
