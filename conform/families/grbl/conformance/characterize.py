@@ -31,12 +31,20 @@ class Observation:
         return self.observed == self.table
 
 
-def characterize(target: Any, vid: str) -> list[Observation]:
+#: what is probed, in order (a partial profile lists those it did not reach)
+ITEMS = ("version", "build", "options", "planner_blocks", "rx_buffer", "crlf_is_two_lines",
+         "line_max")
+
+
+def characterize(target: Any, vid: str, out: list[Observation] | None = None
+                 ) -> list[Observation]:
+    """Probe every item of :data:`ITEMS`; ``out`` (the caller's) fills as they are found, so
+    that an interrupted characterisation still has them."""
     spec = load_grbl()
     v = spec.variant(vid)
     s = Session(target, spec, v)
     s.fresh()
-    out = []
+    out = [] if out is None else out
     got = s.talk(b"\x18")
     banner = next((x for x in got.lines if x.startswith("Grbl ")), "")
     version = banner.split()[1] if banner else None
@@ -66,7 +74,8 @@ def characterize(target: Any, vid: str) -> list[Observation]:
     return out
 
 
-def write_profile(obs: list[Observation], path: str, *, target: str, variant: str) -> None:
+def write_profile(obs: list[Observation], path: str, *, target: str, variant: str,
+                  interrupted: str | None = None) -> None:
     def val(x: Any) -> str:
         if isinstance(x, bool):
             return "true" if x else "false"
@@ -75,7 +84,12 @@ def write_profile(obs: list[Observation], path: str, *, target: str, variant: st
         return '"' + str(x).replace("\\", "\\\\").replace('"', '\\"') + '"'
 
     lines = ["# what this grbl build does, probed by conform characterize",
-             f"target = {val(target)}", f"variant = {val(variant)}", "", "[observed]"]
+             f"target = {val(target)}", f"variant = {val(variant)}"]
+    if interrupted is not None:   # partial: the items found before the stop
+        done = {o.name for o in obs}
+        lines += ["partial = true", f"interrupted = {val(interrupted)}",
+                  "unanswered = [" + ", ".join(val(n) for n in ITEMS if n not in done) + "]"]
+    lines += ["", "[observed]"]
     lines += [f"{o.name} = {val(o.observed)}" for o in obs if o.observed is not None]
     lines += ["", "[table]"] + [f"{o.name} = {val(o.table)}" for o in obs]
     lines += ["", "[evidence]"] + [f"{o.name} = {val(o.evidence)}" for o in obs]
@@ -99,9 +113,16 @@ def run(target_text: str, output: str, variant: str | None, baud: int,
         target: Any = EmuTarget(lambda: family("grbl").make_unit(vid), f"emu:{vid}", baud=baud)
     else:
         target = open_link(target_text, baud=baud)
+    obs: list[Observation] = []
+
+    def partial(how: str) -> str:
+        write_profile(obs, output, target=target_text, variant=vid,
+                      interrupted=f"{how} after {len(obs)} of {len(ITEMS)} items")
+        return f"partial profile {output}: {len(obs)} of {len(ITEMS)} items found"
+
     try:
-        with halting(None if target.emulated else lambda: _stop(target)):
-            obs = characterize(target, vid)
+        with halting(None if target.emulated else lambda: _stop(target), partial):
+            characterize(target, vid, obs)
     finally:
         target.close()
     for o in obs:
