@@ -91,9 +91,20 @@ def load_profile(path: str | Path) -> Profile:
     return Profile(dict(dialect), dict(data.get("meta", {})), dict(data.get("evidence", {})))
 
 
+def complete_profile(path: str | Path) -> Profile:
+    """A profile to take a dialect from: a partial one is refused, since its unanswered
+    questions would silently take the defaults."""
+    prof = load_profile(path)
+    missing = unanswered(prof)
+    if missing:
+        raise UserError(f"{path}: a partial profile ({prof.meta.get('interrupted', 'interrupted')})"
+                        f" leaves {', '.join(missing)} unanswered; characterize the unit again")
+    return prof
+
+
 def load_profile_dialect(spec: Any, path: str | Path) -> Any:
     """The dialect a profile describes (validated against questions.toml)."""
-    prof = load_profile(path)
+    prof = complete_profile(path)
     try:
         return spec.dialect(prof.dialect)
     except UserError as exc:
