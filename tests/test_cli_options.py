@@ -102,12 +102,11 @@ def test_o_is_the_file_written_except_reports_folder():
         assert isinstance(t, click.Path) and (t.file_okay, t.dir_okay) == want, command
 
 
-def _serve(*extra: str) -> str:
+def _serve(variant: str, *extra: str) -> str:
     """stderr of `conform emulate serve` left serving for a second off a terminal."""
     env = {**os.environ, "PYTHONPATH": str(REPO), "CONFORM_PROGRESS_SECONDS": "0.2"}
-    p = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", "gve64-v19",
-                          *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         env=env)
+    p = subprocess.Popen([sys.executable, "-m", "conform", "emulate", "serve", variant, *extra],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     assert p.stdout.readline().startswith("/dev/")
     time.sleep(1.0)
     p.send_signal(signal.SIGTERM)
@@ -116,9 +115,10 @@ def _serve(*extra: str) -> str:
     return err
 
 
-def test_emulate_serve_shows_progress_and_q_silences_it():
-    assert "conform emulate: serving — 0 bytes in, 0 out" in _serve()
-    quiet = _serve("-q")
+@pytest.mark.parametrize("variant", ["gve64-v19", "marlin-2.1"])   # the engine's serve, Marlin's
+def test_emulate_serve_shows_progress_and_q_silences_it(variant):
+    assert re.search(r"conform emulate: serving — 0 bytes in, \d+ out", _serve(variant))
+    quiet = _serve(variant, "-q")
     assert "serving —" not in quiet and "conform emulate: stopped (" in quiet
 
 
