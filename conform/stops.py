@@ -144,12 +144,19 @@ def exit_status(code: int) -> int:
 
 
 @contextmanager
-def halting(halt: Callable[[], str] | None) -> Iterator[None]:
+def halting(halt: Callable[[], str] | None,
+            then: Callable[[str], str] | None = None) -> Iterator[None]:
     """An interruption inside the block halts the unit (``halt``: the family's stop, retried
     until acknowledged; None for an emulated one) and ends the command with one line saying
-    what was sent — for commands that talk to a unit outside the conformance runner."""
+    what was sent — for commands that talk to a unit outside the conformance runner. ``then``
+    (given how the command was stopped) saves what was done so far, shielded from further
+    signals, and says where."""
     try:
         yield
     except KeyboardInterrupt as exc:
+        how = interrupted_by(exc)
         what = halt() if halt is not None else "nothing to stop (an emulated unit)"
-        raise UserError(f"interrupted ({interrupted_by(exc)}): {what}", exit_code=130) from None
+        if then is not None:
+            with shield():
+                what += f"; {then(how)}"
+        raise UserError(f"interrupted ({how}): {what}", exit_code=130) from None

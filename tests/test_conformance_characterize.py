@@ -86,3 +86,23 @@ def test_lenient_number_syntax_is_characterised(spec):
     target, _ = open_target("emu:gve64-v19", spec, dialect=dialect)
     found, _ = characterize(spec, target, "gve64-v19")
     assert found.changed() == dialect.changed()
+
+
+def test_a_partial_profile_is_refused_as_a_dialect(spec, tmp_path, capsys):
+    """Its unanswered questions would silently take the defaults: `run --dialect` and
+    `emulate serve --profile` refuse it in one line (exit 2); `profile diff` reads it."""
+    from conform.families.gve.conformance.characterize import Finding
+
+    found = {q: Finding(q, "determined", spec.dialect().choices[q], [], [], [])
+             for q in ("A1", "A2")}
+    partial = tmp_path / "partial.toml"
+    write_profile(to_profile(spec, None, found, target="emu:gve64-v19", variant="gve64-v19",
+                             interrupted="Ctrl-C after 2 of 29 questions"), partial)
+    for args in (["run", "--dialect", str(partial), "-q"],
+                 ["emulate", "serve", "gve64-v19", "--profile", str(partial)]):
+        with pytest.raises(SystemExit) as info:
+            main(args)
+        assert info.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "a partial profile (Ctrl-C after 2 of 29 questions) leaves " \
+            "A3, A4" in err[0], err

@@ -8,6 +8,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from conform.conformance.results import Grade
 from conform.conformance.target import EmuTarget
 from conform.families.grbl.conformance.checks import generate, run_checks
@@ -94,6 +96,36 @@ def test_characterize_reads_what_the_build_does(tmp_path):
     p = subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:grbl-1.1f", "-o",
                         str(tmp_path / "q.toml")], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0 and "0 item(s) differ" in p.stdout
+
+
+def test_characterize_interrupted_writes_what_it_found_marked_partial(tmp_path, monkeypatch):
+    """Ctrl-C at the third exchange (the CR LF probe): the items of Ctrl-X and $I are written,
+    marked partial with the two it did not reach; the command ends with 130's error line."""
+    import tomllib
+
+    from conform.errors import UserError
+    from conform.families import family
+    from conform.families.grbl.conformance import characterize as probe
+
+    talk, calls = probe.Session.talk, []
+
+    def interrupted(self, *a, **kw):  # noqa: ANN001, ANN202
+        calls.append(a)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return talk(self, *a, **kw)
+
+    monkeypatch.setattr(probe.Session, "talk", interrupted)
+    out = tmp_path / "g.toml"
+    with pytest.raises(UserError) as info:
+        family("grbl").characterize("emu:grbl-1.1f", str(out), None, baud=115200,
+                                    echo=lambda *_: None)
+    assert info.value.exit_code == 130
+    assert f"partial profile {out}: 5 items found, 2 not reached" in str(info.value)
+    prof = tomllib.loads(out.read_text())
+    assert prof["partial"] is True and prof["interrupted"] == "Ctrl-C after 5 items"
+    assert prof["unanswered"] == ["crlf_is_two_lines", "line_max"]
+    assert prof["observed"]["rx_buffer"] == V.rx_buffer and "line_max" not in prof["table"]
 
 
 def test_the_stop_is_confirmed_by_the_banner():

@@ -63,3 +63,23 @@ def test_the_emergency_parser_is_told_by_m108_ending_m0() -> None:
     # a build whose M0 waits out its time although M108 came: no emergency parser at work
     deaf = observed("marlin-2.1-adv", "user-wait-always")["emergency_parser"]
     assert deaf.observed is False and not deaf.same
+
+
+def test_interrupted_it_writes_what_it_found_marked_partial(tmp_path, monkeypatch) -> None:
+    """Ctrl-C during the keepalive dwell: M115's items, the ok format and MAX_CMD_SIZE are
+    written, marked partial, with the items not reached listed; exit 130's one line."""
+    from conform.errors import UserError
+    from conform.families.marlin.conformance import characterize as probe
+
+    def interrupted(*_a, **_kw):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(probe, "_keepalive", interrupted)
+    out = tmp_path / "m.toml"
+    with pytest.raises(UserError) as info:
+        family("marlin").characterize("emu:marlin-2.1", str(out), None, echo=lambda *_: None)
+    assert info.value.exit_code == 130 and f"partial profile {out}" in str(info.value)
+    prof = tomllib.loads(out.read_text())
+    assert prof["partial"] is True and prof["interrupted"].startswith("Ctrl-C after")
+    assert prof["unanswered"] == ["keepalive", "repeat_is_silent", "emergency_parser"]
+    assert prof["observed"]["max_cmd_size"] == 96 and "keepalive" not in prof["observed"]

@@ -143,11 +143,45 @@ def test_markdown_follows_the_same_order(tmp_path):
     at = md.index
     assert md.startswith("# Conformance summary: INCOMPLETE")
     assert at("**Incomplete run.** /dev/pts/9: link lost") < at("## Not verified") \
-        < at("## Failures (6)") < at("## Manual sections × variants")
+        < at("## Failures (6)") < at("## Commands × variants")
     assert at("### GVE64 §13.5 (") < at("### GVE64 §13.5.3 (") < at("### GVE64 §13.5.13 (")
     assert "- 2 checks need EEPROM writes — enable with `--allow-eeprom`" in md
     assert "0.002000 rx   4,60\\r" in md and "expected: `!0J# → 4`" in md
-    assert "| GVE64 §13.5.2 | 1 PASS 1 SKIPPED | 1 PASS 1 SKIPPED |" in md
+    assert "| C | GVE64 §13.5.2: 1 SKIPPED | GVE64 §13.5.2: 1 SKIPPED |" in md
+
+
+def test_matrix_rows_line_up_one_command_across_variants(tmp_path):
+    """GVE124's manual numbers V §12.5.3 where GVE64's says §13.5.3: the matrix has one row for
+    V holding both variants' grades, each with its own clause (not two half-empty rows)."""
+    out = tmp_path / "r"
+    with pytest.raises(SystemExit) as info:
+        main(["run", "--target", "emu:gve64-v19", "--target", "emu:gve124", "--no-machine",
+              "-q", "--check", "*/V/*", "--check", "*/question/A7", "--report", str(out)])
+    assert info.value.code == 0
+    data = json.loads((out / "results.json").read_text())
+    assert {c["subject"] for c in data["checks"]} == {"V", "A7"}
+    md = (out / "summary.md").read_text()
+    table = md[md.index("## Commands × variants"):].splitlines()
+    assert "| command | gve64-v19 | gve124 |" in table
+    v_rows = [line for line in table if line.startswith("| V |")]
+    assert len(v_rows) == 1
+    cells = [c.strip() for c in v_rows[0].strip("|").split("|")]
+    assert cells[1].startswith("GVE64 §13.5.3: ") and "PASS" in cells[1]
+    assert cells[2].startswith("GVE124 §12.5.3: ") and "PASS" in cells[2]
+    html = (out / "index.html").read_text()
+    matrix = html[html.index('id="sections"'):html.index('id="matrix"')]
+    row = matrix[matrix.index('href="#r-V"'):]
+    row = row[:row.index("</tr>")]
+    assert 'title="GVE64 §13.5.3"' in row and 'title="GVE124 §12.5.3"' in row
+    # the check-by-check table of the row: V/valid of both variants on one line
+    details = html[html.index('<details id="r-V"'):]
+    line = details[details.index(">V/valid<"):]
+    assert line[:line.index("</tr>")].count("g PASS") == 2
+
+
+def test_a_results_file_without_subjects_falls_back_to_the_id():
+    old = CheckResult("gve64-v19/13.5.3/V/valid", Grade.PASS, "GVE64 §13.5.3")
+    assert old.row == "V" and CheckResult.from_json(old.to_json()).row == "V"
 
 
 def test_junit_classname_is_variant_and_section(tmp_path):

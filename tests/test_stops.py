@@ -228,3 +228,42 @@ def test_characterize_stopped_by_sighup_halts_the_unit(tmp_path):
     assert code == 129, err
     assert "interrupted (SIGHUP): sent H" in err and "Traceback" not in err
     assert _host_tail(recording, 40).endswith(b"!0D\r!0O0,FF\r")
+
+
+@pytest.mark.slow
+def test_characterize_stopped_by_ctrl_c_writes_a_partial_profile(tmp_path):
+    """Ctrl-C while A4 is being probed (it takes seconds: H, vectors, D): the unit is halted,
+    the questions answered so far are written marked partial (the rest listed), and
+    `profile diff` names what is missing."""
+    from conform.families.gve.conformance.profile import load_profile
+    from conform.families.gve.spec import load_spec
+
+    recording, out = tmp_path / "emu.mcap", tmp_path / "unit.toml"
+    with _recorded("gve64-v19", recording) as pty:
+        code, err = _stopped(["characterize", pty, "-o", str(out)], "— A4", 0.0, signal.SIGINT)
+    assert code == 130, err
+    assert "interrupted (Ctrl-C): sent H" in err and "Traceback" not in err
+    assert f"partial profile {out}: " in err
+    assert _host_tail(recording, 40).endswith(b"!0D\r!0O0,FF\r")
+    profile = load_profile(out)
+    questions = list(load_spec().questions)
+    assert profile.meta["partial"] is True
+    assert profile.meta["interrupted"].startswith("Ctrl-C after ")
+    answered, missing = list(profile.dialect), profile.meta["unanswered"]
+    assert {"A1", "A2", "A3"} <= set(answered) and "A29" in missing
+    assert sorted(answered + missing) == sorted(questions)
+    defaults = load_spec().dialect().choices   # the emulator follows the tables' defaults
+    assert all(profile.dialect[q] == defaults[q] for q in answered)
+    assert set(profile.evidence) == set(answered)
+    full = tmp_path / "full.toml"
+    subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:gve64-v19", "-q",
+                    "-o", str(full)], check=True, env=_env(), capture_output=True)
+    diff = subprocess.run([sys.executable, "-m", "conform", "profile", "diff", str(out),
+                           str(full)], env=_env(), capture_output=True, text=True)
+    assert diff.returncode == 1, diff.stderr
+    head = diff.stdout.splitlines()[0]
+    assert head.startswith(f"{out}: partial profile (Ctrl-C after ")
+    assert head.endswith(f"{len(missing)} question(s) not answered: {', '.join(missing)}")
+    rows = {line.split()[0]: line for line in diff.stdout.splitlines()[2:]}
+    assert set(rows) == set(missing)
+    assert all("(not answered)" in rows[q] for q in missing)

@@ -13,6 +13,7 @@ from conform.cli.params import (
     VARIANT,
     echo_json,
     json_option,
+    quiet_option,
 )
 from conform.cli.progress import progress as show_progress
 from conform.errors import UserError, writable_folder
@@ -36,7 +37,8 @@ FAIL_ON = ("never", "warning", "error", "hazard")   # the findings' severities, 
 @click.option("--no-whatif", is_flag=True, help="Skip the what-if queue replays.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress display (default: bars on a terminal, a line every few seconds "
-                   "off one).")
+                   "off one); --no-progress is -q.")
+@quiet_option()
 @click.option("--time-range", default=None, metavar="START:END",
               help="Draw the plots over time for this range only, in seconds from the start "
                    "(either end may be left out), to look closely at a stutter.")
@@ -53,7 +55,7 @@ FAIL_ON = ("never", "warning", "error", "hazard")   # the findings' severities, 
              "written")
 def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         variant: str | None, baud: float | None, dialect: str | None, no_whatif: bool,
-        progress: bool | None, time_range: str | None, jobs: int | None,
+        progress: bool | None, quiet: bool, time_range: str | None, jobs: int | None,
         scheduler: str | None, fail_on: str, as_json: bool) -> None:
     """Analyse a capture: findings with manual clauses, latency split, throughput, queue.
 
@@ -78,13 +80,15 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
 
     from conform.diagnosis.bundle import expand_bundles
 
+    quiet = quiet or progress is False
+
     files = expand_bundles(files, echo)  # a support bundle (conform bundle): its captures
     if report_dir:   # before the analysis: a folder that cannot be written is one line now
         writable_folder(report_dir, "--report")
     if parquet_dir:
         writable_folder(parquet_dir, "--parquet")
     if len(files) > 1 or os.path.isdir(files[0]):
-        with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
+        with show_progress("conform analyze", quiet=quiet, transient=True) as bar:
             bar.task(f"analysing {len(files)} inputs" if len(files) > 1 else
                      f"analysing the captures in {files[0]}")
             if fail_on not in ("never", "hazard"):
@@ -110,7 +114,7 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
         size = os.path.getsize(file)
     except OSError:
         size = 0
-    with show_progress("conform analyze", quiet=progress is False, transient=True) as bar:
+    with show_progress("conform analyze", quiet=quiet, transient=True) as bar:
         task = bar.task(os.path.basename(file), size or None, unit="bytes")
 
         def on_bytes(done: int, total: int) -> None:

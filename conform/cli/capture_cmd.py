@@ -7,7 +7,7 @@ from datetime import UTC, datetime
 import click
 
 from conform.capture.recover import capture_info, format_info, recover
-from conform.cli.params import INPUT_PATH, OUTPUT_FILE, echo_json, json_option
+from conform.cli.params import INPUT_PATH, OUTPUT_FILE, echo_json, json_option, quiet_option
 from conform.cli.progress import progress
 
 
@@ -24,14 +24,15 @@ def cli() -> None:
 @cli.command()
 @click.argument("file", type=INPUT_PATH)
 @json_option()
-def info(file: str, as_json: bool) -> None:
+@quiet_option()
+def info(file: str, as_json: bool, quiet: bool) -> None:
     """Duration, bytes each way, messages per channel, clean or truncated.
 
     \b
     Example:
       conform capture info captures/good-rs232.mcap --json
     """
-    with progress("conform capture info", transient=True) as bar:
+    with progress("conform capture info", quiet=quiet, transient=True) as bar:
         bar.task(f"reading {file}")
         result = capture_info(file)
     if as_json:
@@ -54,14 +55,15 @@ def info(file: str, as_json: bool) -> None:
 @click.option("-o", "--output", type=OUTPUT_FILE, default=None,
               help="Where to write (default: FILE without .part, or FILE.recovered.mcap).")
 @click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
-def recover_cmd(file: str, output: str | None, force: bool) -> None:
+@quiet_option()
+def recover_cmd(file: str, output: str | None, force: bool, quiet: bool) -> None:
     """Rewrite the intact part of a killed or damaged recording as a complete MCAP.
 
     \b
     Example:
       conform capture recover session.mcap.part
     """
-    with progress("conform capture recover", transient=True) as bar:
+    with progress("conform capture recover", quiet=quiet, transient=True) as bar:
         bar.task(f"salvaging {file}")
         res = recover(file, output, force=force)
     s = res.status

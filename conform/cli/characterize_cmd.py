@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from conform.cli.params import BAUD, OUTPUT_FILE, POSITIVE_INT, TARGET, VARIANT
+from conform.cli.params import BAUD, OUTPUT_FILE, POSITIVE_INT, TARGET, VARIANT, quiet_option
 from conform.conformance.target import parse_target
 
 
@@ -17,9 +17,12 @@ from conform.conformance.target import parse_target
 @click.option("--allow-motion", is_flag=True, help="Real units: allow probes that move axes.")
 @click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
 @click.option("--allow-eeprom", is_flag=True, help="Real units: allow EEPROM write probes (A18).")
+@quiet_option()
 def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: bool,
-        max_steps: int | None, allow_eeprom: bool) -> None:
-    """Probe the open questions A1–A29 and write what the unit actually does.
+        max_steps: int | None, allow_eeprom: bool, quiet: bool) -> None:
+    """Probe the open questions A1–A29 and write what the unit actually does. Stopped by
+    Ctrl-C, SIGTERM or SIGHUP, it halts the unit and writes the questions answered so far,
+    marked partial (`conform profile diff` names the missing ones); exit 128 + N.
 
     \b
     Examples:
@@ -30,4 +33,4 @@ def cli(target: str, output: str, variant: str | None, baud: int, allow_motion: 
 
     family_for_variant(variant or parse_target(target)[1] or "").characterize(
         target, output, variant, baud=baud, allow_motion=allow_motion, max_steps=max_steps,
-        allow_eeprom=allow_eeprom, echo=click.echo)
+        allow_eeprom=allow_eeprom, quiet=quiet, echo=click.echo)

@@ -15,11 +15,12 @@ import click
 
 from conform.cli.params import (
     INPUT_FILE,
-    NON_NEGATIVE_INT,
     OUTPUT_DIR,
     VARIANT,
     default_variant_text,
     json_option,
+    quiet_option,
+    seed_option,
 )
 
 
@@ -31,18 +32,19 @@ from conform.cli.params import (
 @click.option("--report", "report_dir", default=None, type=OUTPUT_DIR,
               help="Write index.html, summary.md, junit.xml, results.json here "
                    "(default reports/check-sender-<timestamp>/).")
-@click.option("--timeout", type=float, default=None,
+@click.option("--timeout", type=float, default=None, metavar="SECONDS",
               help="Seconds before a program still running is stopped and graded as hung "
                    "(default per scenario, 30).")
 @click.option("--job", "job_file", default=None, type=INPUT_FILE,
               help="A job file in the unit's own language (its family's job format) to use in every "
                    "scenario instead "
                    "of the scenario's own.")
-@click.option("--seed", type=NON_NEGATIVE_INT, default=1, show_default=True, help="Seed of the faults.")
+@seed_option()
+@quiet_option()
 @json_option("results.json's document")
 @click.argument("command", nargs=-1, type=click.UNPROCESSED)
 def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
-        timeout: float | None, job_file: str | None, seed: int, as_json: bool,
+        timeout: float | None, job_file: str | None, seed: int, quiet: bool, as_json: bool,
         command: tuple[str, ...]) -> None:
     """Run COMMAND once per scenario against the emulator and grade it per rule and clause.
 
@@ -80,7 +82,8 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
     directory = report_folder(report_dir)
 
     def say(msg: str) -> None:
-        click.echo(f"check-sender: {msg}", err=True)
+        if not quiet:
+            click.echo(f"check-sender: {msg}", err=True)
 
     results = check(list(command), variant=variant, names=names or None,
                     directory=directory, timeout=timeout, seed=seed, job_lines=job_lines,

@@ -15,7 +15,15 @@ import click
 
 from conform.cli.family_options import family_options, split
 from conform.cli.outputs import force_option, fresh_output
-from conform.cli.params import BAUD, NON_NEGATIVE, NON_NEGATIVE_INT, PORT_NUMBER, VARIANT
+from conform.cli.params import (
+    BAUD,
+    NON_NEGATIVE,
+    OUTPUT_FILE,
+    PORT_NUMBER,
+    VARIANT,
+    quiet_option,
+    seed_option,
+)
 from conform.errors import UserError
 
 
@@ -56,19 +64,19 @@ def cli() -> None:
 @click.option("--faults", default=None, metavar="SPEC",
               help="Noise, drops, latency, garbled answers, disconnects "
                    "(e.g. corrupt=1e-3,drop=1e-4,latency=1-16,garble=0.01,disconnect=0.02).")
-@click.option("--seed", type=NON_NEGATIVE_INT, default=None,
-              help="Seed for the fault injection.")
+@seed_option()
+@quiet_option()
 @click.option("--control", "control_path", default=None, metavar="PATH",
               help="Unix socket for control commands (default: a fresh path, shown on stderr).")
 @click.option("--link", "link_path", default=None, metavar="PATH",
               help="Also create a symlink PATH to the pty (stable across injected disconnects).")
-@click.option("--record", "record_path", default=None, metavar="FILE.mcap",
+@click.option("--record", "record_path", default=None, metavar="FILE.mcap", type=OUTPUT_FILE,
               help="Record the session as an MCAP capture.")
 @click.option("--answer-delay", type=NON_NEGATIVE, default=0.0, show_default=True,
               help="Processing time of the unit before each answer, seconds.")
 @force_option("the --record file")
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str | None,
-              seed: int | None, control_path: str | None, link_path: str | None,
+              seed: int, quiet: bool, control_path: str | None, link_path: str | None,
               record_path: str | None, answer_delay: float, force: bool,
               **family_values: Any) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
@@ -84,7 +92,8 @@ def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str 
     fam = family_for_variant(variant)
     fam.serve(variant, baud=baud, tcp_port=tcp_port, faults=faults, seed=seed,
               link_path=link_path, record_path=record_path, answer_delay=answer_delay,
-              control_path=control_path, **split("emulate serve", fam.name, family_values))
+              control_path=control_path, quiet=quiet,
+              **split("emulate serve", fam.name, family_values))
 
 
 @cli.command("control", context_settings={"ignore_unknown_options": True})

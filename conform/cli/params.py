@@ -173,6 +173,26 @@ def echo_json(doc: Any) -> None:
     click.echo(json.dumps(doc, indent=1, default=str, ensure_ascii=False))
 
 
+def quiet_option() -> Any:
+    """``-q/--quiet``: the same on every long-running command (README, "Options that mean the
+    same everywhere")."""
+    return click.option("-q", "--quiet", is_flag=True,
+                        help="No progress display (by default: bars on a terminal, a line "
+                             "every few seconds off one).")
+
+
+#: what ``--seed`` is when not given, on every command that has one
+DEFAULT_SEED = 1
+
+
+def seed_option() -> Any:
+    """``--seed N``: one default and one meaning wherever it appears."""
+    return click.option("--seed", type=NON_NEGATIVE_INT, default=DEFAULT_SEED,
+                        show_default=True,
+                        help="Seed of everything random this command does (state-machine "
+                             "sequences, injected faults): the same seed repeats the run.")
+
+
 #: exit statuses every command shares (README "Exit status")
 EXIT_OK, EXIT_FINDING, EXIT_USAGE = 0, 1, 2
 

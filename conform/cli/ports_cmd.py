@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass
 
 import click
 
-from conform.cli.params import BAUD, POSITIVE, echo_json, json_option
+from conform.cli.params import BAUD, POSITIVE, echo_json, json_option, quiet_option
 
 
 @dataclass
@@ -43,10 +43,12 @@ def probe(port: Port, baud: int, timeout: float) -> Port:
               help="Ask each port each family's harmless question and say which unit answered "
                    "(sends nothing that moves or holds a unit).")
 @click.option("--baud", type=BAUD, default=115200, show_default=True, help="For --probe.")
-@click.option("--timeout", type=POSITIVE, default=1.0, show_default=True,
+@click.option("--timeout", type=POSITIVE, default=1.0, show_default=True, metavar="SECONDS",
               help="Seconds to wait for each answer (--probe).")
 @json_option()
-def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_json: bool) -> None:
+@quiet_option()
+def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_json: bool,
+        quiet: bool) -> None:
     """List serial ports with description and hardware id; with --probe, which unit answers.
 
     With PATHs (ports, ptys, pyserial URLs), only those: ptys are not in the system's listing.
@@ -63,7 +65,7 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
     if do_probe:
         from conform.cli.progress import progress
 
-        with progress("conform ports", transient=True) as bar:
+        with progress("conform ports", quiet=quiet, transient=True) as bar:
             task = bar.task("probing", len(ports))
             for p in ports:
                 task.update(step=p.device)

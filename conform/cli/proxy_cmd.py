@@ -10,7 +10,7 @@ import click
 
 from conform.capture.live import ProxyCapture, run_until_signal
 from conform.cli.outputs import force_option, free_link, fresh_output
-from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
+from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT, quiet_option
 from conform.cli.progress import progress, recording
 from conform.errors import LinkError
 from conform.stops import STOP_SIGNALS
@@ -31,7 +31,7 @@ from conform.stops import STOP_SIGNALS
               help="If the unit's port vanishes, wait for it to come back and go on.")
 @click.option("--link", default=None, type=OUTPUT_FILE,
               help="Also make this symlink to the sender's pty (a stable name).")
-@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@quiet_option()
 @force_option("the -o file")
 @click.option("--live", is_flag=True,
               help="A terminal view on stderr that updates while it records: bytes in flight "

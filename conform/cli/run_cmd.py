@@ -12,7 +12,6 @@ import click
 from conform.cli.family_options import family_options, split
 from conform.cli.params import (
     BAUD,
-    NON_NEGATIVE_INT,
     OUTPUT_DIR,
     POSITIVE_INT,
     TARGET,
@@ -21,6 +20,8 @@ from conform.cli.params import (
     default_variant_text,
     echo_json,
     json_option,
+    quiet_option,
+    seed_option,
 )
 from conform.cli.progress import progress
 from conform.conformance.plan import list_checks, run_targets
@@ -51,7 +52,7 @@ from conform.stops import exit_status, shield
               help="Also run the deviant units and report the kill rate.")
 @click.option("--replay", default=None, metavar="ID[@SEED]",
               help="Re-run one check (a state-machine check with the seed that found it).")
-@click.option("--seed", type=NON_NEGATIVE_INT, default=0, show_default=True, help="State-machine seed.")
+@seed_option()
 @click.option("--allow-motion", is_flag=True, help="Real units: allow checks that move axes, "
               "switch outputs or start the spindle (needs --max-steps).")
 @click.option("--max-steps", type=POSITIVE_INT, default=None, help="Bound on every axis move (pulses).")
@@ -60,7 +61,7 @@ from conform.stops import exit_status, shield
 @click.option("--inputs-control", default=None, metavar="PATH",
               help="Drive the inputs of an emulator behind the link through its control socket "
                    "(`conform emulate serve` prints it), for the checks that need inputs.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@quiet_option()
 @json_option("the results in results.json's format, plus the report folder")
 def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,

@@ -8,7 +8,7 @@ import click
 
 from conform.capture.live import SniffCapture, run_until_signal
 from conform.cli.outputs import force_option, fresh_output
-from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT
+from conform.cli.params import BAUD, OUTPUT_FILE, VARIANT, quiet_option
 from conform.cli.progress import progress, recording
 from conform.errors import LinkError, UserError
 
@@ -26,7 +26,7 @@ from conform.errors import LinkError, UserError
 @click.option("--no-decode", is_flag=True, help="Record raw bytes only.")
 @click.option("--reconnect", is_flag=True,
               help="If an adapter vanishes, wait for it to come back and go on.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress display.")
+@quiet_option()
 @force_option("the -o file")
 @click.option("--live", is_flag=True,
               help="A terminal view on stderr that updates while it records (as proxy --live).")

@@ -33,10 +33,15 @@ def _toml(x: Any) -> str:
 
 
 def write_profile(obs: Sequence[Observation], path: str, *, target: str, variant: str,
-                  title: str) -> None:
-    """The profile file; an item not observed has no ``[observed]`` entry."""
-    lines = [f"# {title}", f"target = {_toml(target)}", f"variant = {_toml(variant)}", "",
-             "[observed]"]
+                  title: str, interrupted: str | None = None,
+                  unanswered: Sequence[str] = ()) -> None:
+    """The profile file; an item not observed has no ``[observed]`` entry. An interrupted
+    characterisation is marked ``partial`` with how it stopped and the items not reached."""
+    lines = [f"# {title}", f"target = {_toml(target)}", f"variant = {_toml(variant)}"]
+    if interrupted is not None:
+        lines += ["partial = true", f"interrupted = {_toml(interrupted)}",
+                  "unanswered = [" + ", ".join(_toml(n) for n in unanswered) + "]"]
+    lines += ["", "[observed]"]
     lines += [f"{_key(o.name)} = {_toml(o.observed)}" for o in obs if o.observed is not None]
     lines += ["", "[table]"] + [f"{_key(o.name)} = {_toml(o.table)}" for o in obs
                                 if o.table is not None]
@@ -61,23 +66,39 @@ def report(obs: Sequence[Observation], output: str, echo: Callable[[str], Any] =
          + (": " + ", ".join(differ) if differ else ""))
 
 
+Probe = Callable[[Any, str, list[Observation]], Any]
+"""probe(target, variant, out): appends each Observation to ``out`` as it is found."""
+
+
 def characterize_target(fam: Any, target_text: str, output: str, variant: str | None, *,
-                        baud: int, probe: Callable[[Any, str], list[Observation]],
-                        stop: Callable[[Any], Any], title: str,
+                        baud: int, probe: Probe, stop: Callable[[Any], str],
+                        items: Sequence[str], title: str,
                         echo: Callable[[str], Any] = print) -> None:
     """``conform characterize`` for a family whose probes yield observations: open the target
-    (``emu:VARIANT[:MUTANT]`` or a port), probe with the unit halted by ``stop`` however the
-    run ends, then write the profile and print it."""
+    (``emu:VARIANT[:MUTANT]`` or a port) and probe, the unit halted by ``stop`` however the run
+    ends; then write the profile and print it. Stopped by a signal, it writes what was found
+    so far as a partial profile (``items``: what is probed, in order; a name ending in ``*``
+    stands for every item it begins) and exits 128 + N."""
     from conform.stops import halting
 
     target, implied = fam.open_target(target_text, baud=baud, permissions=None)
     vid = variant or implied or fam.default_variant
+    obs: list[Observation] = []
+
+    def partial(how: str) -> str:
+        done = {o.name for o in obs}
+        left = [n for n in items if n not in done and not (
+            n.endswith("*") and any(d.startswith(n[:-1]) for d in done))]
+        write_profile(obs, output, target=target_text, variant=vid, title=title,
+                      interrupted=f"{how} after {len(obs)} items", unanswered=left)
+        return f"partial profile {output}: {len(obs)} items found, {len(left)} not reached"
+
     try:
         known = [v.id for v in fam.variants()]
         if vid not in known:
             raise UserError(f"{vid!r} is not a {fam.name} variant (known: {', '.join(known)})")
-        with halting(None if target.emulated else lambda: stop(target)):
-            obs = probe(target, vid)
+        with halting(None if target.emulated else lambda: stop(target), partial):
+            probe(target, vid, obs)
     finally:
         target.close()
     write_profile(obs, output, target=target_text, variant=vid, title=title)

@@ -70,6 +70,15 @@ class CheckResult:
     duration: float = 0.0
     variant: str = ""
     target: str = ""
+    # what the check is about (a command, a setting, an open question), named alike in every
+    # variant of a family, so the variants × subjects matrix lines up a command whatever clause
+    # each variant's manual gives it; the family's check object says it (its ``subject``)
+    subject: str = ""
+
+    @property
+    def row(self) -> str:
+        """The subject, or for results written before subjects the first part of the key."""
+        return self.subject or self.key.split("/", 1)[0]
 
     @property
     def key(self) -> str:

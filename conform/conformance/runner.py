@@ -7,7 +7,8 @@ results say what was sent; on a link the estimate is announced
 before the run and the ETA while it runs. What a check is and how it is graded, which state the
 unit is kept in and how it is halted belong to the family: a subclass of :class:`Runner`
 (``Family.runner``) provides ``run_check``, ``halt`` and optionally ``estimate``,
-``machine_budget`` and ``finish``.
+``machine_budget`` and ``finish``. A check object's ``subject`` (what it is about, named alike
+in every variant: a command, a setting) becomes its result's, the row of the report's matrix.
 """
 
 from __future__ import annotations
@@ -124,6 +125,8 @@ class Runner(ABC):
                 next_eta += self.options.eta_every
             for check in checks:
                 result = self.run_check(check)
+                if not result.subject:
+                    result.subject = str(getattr(check, "subject", "") or "")
                 run.checks.append(result)
                 if self.estimate is not None:
                     now = time.perf_counter()

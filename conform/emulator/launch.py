@@ -62,14 +62,20 @@ def announce(endpoint: Any, what: str) -> None:
     report(what)
 
 
-def run_until_signal(emulator: Any) -> None:
-    """Serve until SIGINT, SIGTERM or SIGHUP, then put the previous handlers back."""
+def run_until_signal(emulator: Any, quiet: bool = False) -> None:
+    """Serve until SIGINT, SIGTERM or SIGHUP, then put the previous handlers back; meanwhile
+    the bytes each way are the progress display (none when ``quiet``)."""
+    from conform.cli.progress import progress
+
     def on_signal(signum: int, _frame: Any) -> None:
         emulator.stop()
 
     old = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
-        emulator.run()
+        with progress("conform emulate", quiet=quiet) as bar:
+            bar.task("serving", None, poll=lambda: f"{emulator.bytes_in} bytes in, "
+                                                   f"{emulator.bytes_out} out")
+            emulator.run()
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
@@ -117,10 +123,11 @@ def serve_unit(family: str, variant: str, build: Callable[[float], ServedUnit], 
                baud: int | None = None, tcp_port: int | None = None, faults: str | None = None,
                seed: int | None = None, control_path: str | None = None,
                link_path: str | None = None, record_path: str | None = None,
-               answer_delay: float = 0.0) -> None:
+               answer_delay: float = 0.0, quiet: bool = False) -> None:
     """``conform emulate serve`` for any family: ``build(t_start)`` makes the unit on the
     monotonic wall clock; this serves it until SIGINT/SIGTERM. The first line of stdout is the
-    device path; a recording's session metadata is the same vocabulary for every family."""
+    device path; a recording's session metadata is the same vocabulary for every family. While
+    it serves, the bytes each way are the progress display (none with ``quiet``)."""
     from conform.emulator.serve import Emulator
 
     check_pacing(baud, answer_delay)
@@ -150,7 +157,7 @@ def serve_unit(family: str, variant: str, build: Callable[[float], ServedUnit], 
     announce(endpoint, f"{variant} on {endpoint.name}"
              + (f" ({served.describe})" if served.describe else "") + f"; control: {control.path}")
     try:
-        run_until_signal(emulator)
+        run_until_signal(emulator, quiet)
     finally:
         control.close()
         if recorder is not None:

@@ -276,11 +276,10 @@ class Family:
         """What the deviant unit ``name`` does wrong, in a few words."""
         return name
 
-    def characterize_probes(self) -> tuple[Callable[[Any, str], list[Any]],
-                                           Callable[[Any], Any]] | None:
-        """For the default ``characterize``: (probe(target, variant) → observations
-        (``conform.conformance.observed.Observation``), stop(target) that halts the unit);
-        None when the family has no probes."""
+    def characterize_probes(self) -> Any:
+        """For the default ``characterize``: (probe(target, variant, out) appending
+        ``conform.conformance.observed.Observation``s to ``out``, stop(target) halting the unit,
+        the item names probed in order); None when the family has no probes."""
         return None
 
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
@@ -292,10 +291,11 @@ class Family:
             raise self.lacks("`characterize`")
         from conform.conformance.observed import characterize_target
 
-        probe, stop = hooks
+        probe, stop, items = hooks
         characterize_target(self, target, output, variant, baud=baud, probe=probe, stop=stop,
-                            echo=echo, title=f"what this {self.name} build does, probed by "
-                                             "conform characterize")
+                            items=items, echo=echo,
+                            title=f"what this {self.name} build does, probed by conform "
+                                  "characterize")
 
     probe_rank: int = 100
     """``ports --probe`` asks the families in this order: a family whose question could

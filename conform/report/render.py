@@ -78,14 +78,14 @@ def render_html(results: RunResults) -> str:
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              trim_blocks=True, lstrip_blocks=True)
 
-    def rows_of(section: view.Section) -> list[tuple[str, str, list[CheckResult | None]]]:
-        return [(key, next(c.level for c in row if c), row)
-                for key, row in _rows(results, section.checks)]
+    def rows_of(row: view.Row) -> list[tuple[str, str, list[CheckResult | None]]]:
+        return [(key, next(c.level for c in cells if c), cells)
+                for key, cells in _rows(results, row.checks)]
 
     env.globals.update(anchor=anchor, log_lines=view.log_lines, differing=view.differing,
                        replay=lambda c: view.replay_command(c, results.command),
                        rows_of=rows_of)
-    columns, section_rows = view.section_matrix(results)
+    columns, subject_rows = view.subject_matrix(results)
     problems = view.problems(results)
     deviations = view.deviations(results)
     return env.get_template("report.html.j2").render(
@@ -94,7 +94,7 @@ def render_html(results: RunResults) -> str:
         not_applicable=sum(1 for c in results.checks if c.grade is Grade.NOT_APPLICABLE),
         problems=problems, n_problems=sum(len(s.checks) for s in problems),
         deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
-        columns=columns, section_rows=section_rows, n_checks=len(results.checks),
+        columns=columns, subject_rows=subject_rows, n_checks=len(results.checks),
         causes=view.causes(results),
         grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
     )
@@ -177,11 +177,14 @@ def render_markdown(results: RunResults) -> str:
             for c in s.checks:
                 out += _md_check(c, log_limit=0 if not c.log else 24, command=results.command)
             out.append("")
-    columns, rows = view.section_matrix(results)
-    out += ["", "## Manual sections × variants", "",
-            "| section | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
-    for section, cells in rows:
-        out.append(f"| {section.clause} | " + " | ".join(cell.text() for cell in cells) + " |")
+    columns, rows = view.subject_matrix(results)
+    out += ["", "## Commands × variants", "",
+            "Each cell: the variant's own clause and the grades of its checks.", "",
+            "| command | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
+    for row in rows:
+        out.append(f"| {_md_cell(row.subject)} | "
+                   + " | ".join(_md_cell(f"{c.clause}: {c.text()}" if c.clause else c.text())
+                                for c in row.cells) + " |")
     if results.mutants:
         killed = sum(1 for m in results.mutants if m.get("killed"))
         out += ["", f"## Mutants: {killed}/{len(results.mutants)} killed", "",
@@ -191,6 +194,11 @@ def render_markdown(results: RunResults) -> str:
                        f"{', '.join(m.get('caught_by', [])[:3]) or '—'} | "
                        f"{'yes' if m.get('killed') else 'NO'} |")
     return "\n".join(out) + "\n"
+
+
+def _md_cell(text: str) -> str:
+    """A table cell's text with Markdown's table and inline characters escaped."""
+    return re.sub(r"([|<>*_`\\])", r"\\\1", text)
 
 
 def render_junit(results: RunResults) -> str:

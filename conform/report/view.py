@@ -2,7 +2,8 @@
 
 The HTML, Markdown and terminal renderings all take their content from here: the headline (and
 why a run is incomplete), what was not verified and how to enable it, the failures grouped by
-manual section with a replay command each, and the sections × variants matrix.
+manual section with a replay command each, and the subjects × variants matrix (one row per
+command, whatever clause each variant's manual gives it).
 """
 
 from __future__ import annotations
@@ -230,10 +231,12 @@ def headline(results: RunResults) -> Headline:
 
 @dataclass
 class Cell:
-    """One section on one target: grade counts and the worst grade (its colour)."""
+    """One subject on one target: grade counts, the worst grade (its colour) and the clause the
+    target's variant gives it."""
 
     counts: Counter[str]
     worst: str | None
+    clause: str = ""
 
     def text(self) -> str:
         if not self.counts:
@@ -253,18 +256,37 @@ def column_name(run) -> str:  # noqa: ANN001 - a TargetRun
     return run.variant if run.target == f"emu:{run.variant}" else f"{run.target} ({run.variant})"
 
 
-def section_matrix(results: RunResults) -> tuple[list[str], list[tuple[Section, list[Cell]]]]:
-    """Columns (one per target run) and one row per manual section."""
-    columns = [column_name(r) for r in results.runs]
-    rows = []
+@dataclass
+class Row:
+    """One subject (a command, a setting: ``CheckResult.row``): its checks on every target and
+    one cell per target."""
+
+    subject: str
+    checks: list[CheckResult] = field(default_factory=list)
+    cells: list[Cell] = field(default_factory=list)
+
+    @property
+    def anchor(self) -> str:
+        """``r-N_003caxis_003e``: unique per subject, whatever characters it holds."""
+        return "r-" + "".join(ch if ch.isascii() and ch.isalnum() else f"_{ord(ch):04x}"
+                              for ch in self.subject)
+
+
+def subject_matrix(results: RunResults) -> tuple[list[str], list[Row]]:
+    """Columns (one per target run) and one row per subject, so that one command lines up
+    across variants whose manuals number it differently; rows in the order of the first
+    manual's sections. Each cell holds the grades and that variant's own clause."""
+    rows: dict[str, Row] = {}
     for section in by_section(results.checks):
-        cells = []
+        for c in section.checks:
+            rows.setdefault(c.row, Row(c.row)).checks.append(c)
+    for row in rows.values():
         for run in results.runs:
-            counts = Counter(c.grade.value for c in section.checks
-                             if c.target == run.target and c.variant == run.variant)
-            cells.append(Cell(counts, _worst(counts)))
-        rows.append((section, cells))
-    return columns, rows
+            mine = [c for c in row.checks if c.target == run.target and c.variant == run.variant]
+            counts = Counter(c.grade.value for c in mine)
+            clauses = dict.fromkeys(section_of(c.clause) for c in mine)
+            row.cells.append(Cell(counts, _worst(counts), ", ".join(clauses)))
+    return [column_name(r) for r in results.runs], list(rows.values())
 
 
 def _run_index(results: RunResults) -> dict[tuple[str, str], int]:

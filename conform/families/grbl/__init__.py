@@ -113,10 +113,10 @@ class GrblFamily(Family):
         return GRBL
 
     def characterize_probes(self) -> Any:
-        from conform.families.grbl.conformance.characterize import characterize
+        from conform.families.grbl.conformance.characterize import ITEMS, characterize
         from conform.families.grbl.conformance.checks import stop_unit
 
-        return characterize, stop_unit
+        return characterize, stop_unit, ITEMS
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:

@@ -28,8 +28,10 @@ from conform.stops import halting
 
 def characterize(target: str, output: str, variant: str | None, *, baud: int = 115200,
                  allow_motion: bool = False, max_steps: int | None = None,
-                 allow_eeprom: bool = False, echo: Callable[..., None] = click.echo) -> None:
-    """Probe the open questions A1–A29 on ``target`` and write the profile to ``output``."""
+                 allow_eeprom: bool = False, quiet: bool = False,
+                 echo: Callable[..., None] = click.echo) -> None:
+    """Probe the open questions A1–A29 on ``target`` and write the profile to ``output``; an
+    interrupted characterisation writes the questions answered so far, marked partial."""
     from conform.families.gve.conformance.characterize import to_profile
 
     spec = load_spec()
@@ -51,15 +53,27 @@ def characterize(target: str, output: str, variant: str | None, *, baud: int = 1
                  + (f" ({', '.join(f.matches)})" if f.status == "ambiguous" else "")
                  + (f" — {f.note}" if f.status == "not-probed" else ""))
 
-        with progress("conform characterize") as bar:
+        findings: dict[str, Any] = {}
+
+        def partial(how: str) -> str:
+            """The questions answered before the stop, marked partial (the rest listed)."""
+            n = len(findings)
+            write_profile(to_profile(spec, None, findings, target=target, variant=vid,
+                                     interrupted=f"{how} after {n} of "
+                                                 f"{len(spec.questions)} questions"), output)
+            return f"partial profile {output}: {n} of {len(spec.questions)} questions answered"
+
+        with progress("conform characterize", quiet=quiet) as bar:
             task = bar.task(f"{target} ({vid})", len(spec.questions))
 
             def step(f):  # noqa: ANN001, ANN202
-                task.update(advance=1, step=f.question)
                 show(f)
 
-            with halting(None if tgt.emulated else tgt.safe_stop):
-                dialect, findings = probe(spec, tgt, vid, progress=step)
+            with halting(None if tgt.emulated else tgt.safe_stop, partial):
+                dialect, findings = probe(
+                    spec, tgt, vid, progress=step, findings=findings,
+                    probing=lambda q: task.update(completed=len(findings), step=q))
+                task.update(completed=len(spec.questions), step="")
         if not tgt.emulated and allow_motion:
             echo(tgt.safe_stop(), err=True)
     finally:

@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from conform.errors import UserError
-from conform.families.gve.conformance.profile import load_profile
+from conform.families.gve.conformance.profile import complete_profile
 from conform.families.gve.spec import load_spec
 
 
@@ -61,7 +61,7 @@ def serve(variant: str, *, dialect_pairs: tuple[str, ...] = (), profile: str | N
 
 
 def _dialect_choices(pairs: tuple[str, ...], profile: str | None) -> dict[str, str]:
-    choices: dict[str, str] = dict(load_profile(profile).dialect) if profile else {}
+    choices: dict[str, str] = dict(complete_profile(profile).dialect) if profile else {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key or not value:

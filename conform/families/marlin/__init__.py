@@ -109,10 +109,10 @@ class MarlinFamily(Family):
         return MARLIN
 
     def characterize_probes(self) -> Any:
-        from conform.families.marlin.conformance.characterize import characterize
+        from conform.families.marlin.conformance.characterize import ITEMS, characterize
         from conform.families.marlin.conformance.checks import halt
 
-        return characterize, halt
+        return characterize, halt, ITEMS
 
     def show_spec(self, variant: str, command: str | None, *, console: Any,
                   as_json: bool = False) -> None:

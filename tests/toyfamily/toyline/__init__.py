@@ -85,6 +85,10 @@ class ToyCheck:
     clause: str = "variants.toml"
     level: str = MUST
 
+    @property
+    def subject(self) -> str:
+        return self.send.split()[0].decode()
+
 
 class ToyRunner(Runner):
     def run_check(self, check: ToyCheck) -> CheckResult:

@@ -15,13 +15,20 @@ from conform.conformance.observed import Observation
 from conform.families.grbl.conformance.checks import Session
 from conform.families.grbl.spec.load import load_grbl
 
+#: what is probed, in order (a partial profile lists those it did not reach)
+ITEMS = ("version", "build", "options", "planner_blocks", "rx_buffer", "crlf_is_two_lines",
+         "line_max")
 
-def characterize(target: Any, vid: str) -> list[Observation]:
+
+def characterize(target: Any, vid: str, out: list[Observation] | None = None
+                 ) -> list[Observation]:
+    """Probe every item of :data:`ITEMS`; ``out`` (the caller's) fills as they are found, so
+    that an interrupted characterisation still has them."""
     spec = load_grbl()
     v = spec.variant(vid)
     s = Session(target, spec, v)
     s.fresh()
-    out = []
+    out = [] if out is None else out
     got = s.talk(b"\x18")
     banner = next((x for x in got.lines if x.startswith("Grbl ")), "")
     version = banner.split()[1] if banner else None

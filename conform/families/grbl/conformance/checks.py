@@ -168,6 +168,16 @@ class GrblCheck:
     motion: bool = False
     eeprom: bool = False
 
+    @property
+    def subject(self) -> str:
+        """What is checked, as grbl names it: ``$11``, ``error:3``, ``ALARM:2``, else the kind
+        (``example``, ``realtime``, ``state``)."""
+        parts = self.id.split("/")[2:]
+        names = {"setting": "${}", "error": "error:{}", "alarm": "ALARM:{}"}
+        if len(parts) > 1 and parts[0] in names:
+            return names[parts[0]].format(parts[1])
+        return parts[0] if parts else self.id
+
 
 def _setup(s: Session, setup: Sequence[bytes]) -> None:
     for item in setup:

@@ -147,11 +147,18 @@ class Finding:
 
 def characterize(spec: Any, target: Target, variant_id: str, *,
                  progress: Callable[[Finding], None] | None = None,
-                 passes: int = 2) -> tuple[Any, dict[str, Finding]]:
-    """Probe every open question; (the dialect found, the finding per question)."""
+                 passes: int = 2, findings: dict[str, Finding] | None = None,
+                 probing: Callable[[str], None] | None = None
+                 ) -> tuple[Any, dict[str, Finding]]:
+    """Probe every open question; (the dialect found, the finding per question).
+
+    ``findings`` (given by the caller) fills as questions are answered, so that an interrupted
+    characterisation still has what was found; ``probing`` is told each question of the first
+    pass before its probe runs (the passes after it only re-read the same answers)."""
     checksums_before = target.checksum_on
     try:
-        return _characterize(spec, target, variant_id, progress, passes)
+        return _characterize(spec, target, variant_id, progress, passes,
+                             {} if findings is None else findings, probing)
     finally:
         leave_checksums(target, checksums_before)
 
@@ -169,14 +176,16 @@ def leave_checksums(target: Target, on: bool, tries: int = 3) -> None:
 
 
 def _characterize(spec: Any, target: Target, variant_id: str,
-                  progress: Callable[[Finding], None] | None, passes: int
+                  progress: Callable[[Finding], None] | None, passes: int,
+                  findings: dict[str, Finding], probing: Callable[[str], None] | None
                   ) -> tuple[Any, dict[str, Finding]]:
     variant = spec.variant(variant_id)
     belief = dict(spec.dialect().choices)
-    findings: dict[str, Finding] = {}
     observed: dict[str, list[Any]] = {}
     for n in range(passes):
         for q in spec.questions:
+            if probing is not None and n == 0:
+                probing(q)
             script = probe(q, variant)
             if script is None:
                 findings[q] = Finding(q, "not-probed", belief[q], [], [], [],
@@ -219,12 +228,23 @@ def _characterize(spec: Any, target: Target, variant_id: str,
 
 
 def to_profile(spec: Any, dialect: Any, findings: dict[str, Finding], *, target: str,
-               variant: str) -> Profile:
+               variant: str, interrupted: str | None = None) -> Profile:
+    """The profile of a characterisation; an ``interrupted`` one holds the questions answered
+    before the stop, marked ``partial`` with the unanswered questions listed."""
     counts: dict[str, int] = {}
     for f in findings.values():
         counts[f.status] = counts.get(f.status, 0) + 1
-    meta = {"target": target, "variant": variant, "created": now_iso(),
-            "summary": ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))}
+    meta: dict[str, Any] = {"target": target, "variant": variant, "created": now_iso(),
+                            "summary": ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))}
+    if interrupted is not None:
+        meta |= {"partial": True, "interrupted": interrupted,
+                 "unanswered": [q for q in spec.questions if q not in findings]}
+        return Profile({q: f.choice for q, f in findings.items()}, meta,
+                       _evidence(findings))
+    return Profile(dict(dialect.choices), meta, _evidence(findings))
+
+
+def _evidence(findings: dict[str, Finding]) -> dict[str, dict[str, Any]]:
     evidence = {}
     for q, f in findings.items():
         ev: dict[str, Any] = {"status": f.status, "matches": f.matches}
@@ -234,4 +254,4 @@ def to_profile(spec: Any, dialect: Any, findings: dict[str, Finding], *, target:
             ev["probe"] = f.probe
             ev["answers"] = f.answers
         evidence[q] = ev
-    return Profile(dict(dialect.choices), meta, evidence)
+    return evidence

@@ -78,6 +78,13 @@ class Check:
         parts = self.id.split("/")
         return "/".join(parts[2:]) if len(parts) > 2 else self.id
 
+    @property
+    def subject(self) -> str:
+        """The command (``V``), open question (``A7``) or behaviour (``queue-full``) checked:
+        the same in every variant, where the clause is not (GVE64 §13.5.3, GVE124 §12.5.3)."""
+        parts = self.key.split("/")
+        return parts[1] if parts[0] == "question" and len(parts) > 1 else parts[0]
+
 
 def clause_number(clause: str) -> str:
     """``"GVE64 §13.5.2"`` → ``"13.5.2"``."""

@@ -12,6 +12,10 @@ Format (shared with ``conform emulate --profile``)::
     matches = ["every-line"]
     probe = ["!0@", "!0V1000", ...]
     answers = ["0,0", "0", ...]
+
+An interrupted ``conform characterize`` writes ``partial = true``, ``interrupted`` (how and
+after how many questions) and ``unanswered = ["A13", ...]`` in ``[meta]``, and only the
+answered questions in ``[dialect]``.
 """
 
 from __future__ import annotations
@@ -87,20 +91,44 @@ def load_profile(path: str | Path) -> Profile:
     return Profile(dict(dialect), dict(data.get("meta", {})), dict(data.get("evidence", {})))
 
 
+def complete_profile(path: str | Path) -> Profile:
+    """A profile to take a dialect from: a partial one is refused, since its unanswered
+    questions would silently take the defaults."""
+    prof = load_profile(path)
+    missing = unanswered(prof)
+    if missing:
+        raise UserError(f"{path}: a partial profile ({prof.meta.get('interrupted', 'interrupted')})"
+                        f" leaves {', '.join(missing)} unanswered; characterize the unit again")
+    return prof
+
+
 def load_profile_dialect(spec: Any, path: str | Path) -> Any:
     """The dialect a profile describes (validated against questions.toml)."""
-    prof = load_profile(path)
+    prof = complete_profile(path)
     try:
         return spec.dialect(prof.dialect)
     except UserError as exc:
         raise UserError(f"{path}: {exc}") from None
 
 
+def unanswered(p: Profile) -> list[str]:
+    """The questions a partial profile (an interrupted ``characterize``) did not answer."""
+    if not p.meta.get("partial"):
+        return []
+    listed = p.meta.get("unanswered", [])
+    return [str(q) for q in listed] if isinstance(listed, list) else []
+
+
+NOT_ANSWERED = "(not answered)"
+
+
 def diff_profiles(a: Profile, b: Profile, defaults: dict[str, str] | None = None
                   ) -> list[tuple[str, str | None, str | None]]:
     """(question, choice in a, choice in b) for every question on which they differ; a question
-    a profile leaves out counts as its default (from ``defaults``) when one is given."""
+    a profile leaves out counts as its default (from ``defaults``) when one is given, except
+    where a partial profile says it was never answered (:data:`NOT_ANSWERED`)."""
     base = defaults or {}
-    da, db = base | a.dialect, base | b.dialect
+    da = base | a.dialect | dict.fromkeys(unanswered(a), NOT_ANSWERED)
+    db = base | b.dialect | dict.fromkeys(unanswered(b), NOT_ANSWERED)
     keys = sorted(set(da) | set(db), key=lambda k: _qkey((k, None)))
     return [(k, da.get(k), db.get(k)) for k in keys if da.get(k) != db.get(k)]

@@ -7,7 +7,7 @@ import sys
 import click
 
 from conform.cli.params import INPUT_FILE
-from conform.families.gve.conformance.profile import diff_profiles, load_profile
+from conform.families.gve.conformance.profile import diff_profiles, load_profile, unanswered
 from conform.families.gve.spec import load_spec
 
 
@@ -25,13 +25,19 @@ def cli() -> None:
 @click.argument("a", type=INPUT_FILE)
 @click.argument("b", type=INPUT_FILE)
 def diff(a: str, b: str) -> None:
-    """Open questions on which two profiles differ; exit 1 when they do.
+    """Open questions on which two profiles differ; exit 1 when they do. A partial profile
+    (an interrupted characterize) names the questions it did not answer; they differ.
 
     \b
     Example:
       conform profile diff unit-a.toml unit-b.toml
     """
     pa, pb = load_profile(a), load_profile(b)
+    for path, p in ((a, pa), (b, pb)):
+        missing = unanswered(p)
+        if missing:
+            click.echo(f"{path}: partial profile ({p.meta.get('interrupted', 'interrupted')}); "
+                       f"{len(missing)} question(s) not answered: {', '.join(missing)}")
     rows = diff_profiles(pa, pb, dict(load_spec().dialect().choices))
     if not rows:
         click.echo("same dialect")

@@ -139,12 +139,23 @@ def _emergency_parser(s: Session, v: Variant) -> Observation:
                        f"M0 S3 ended {took:.1f} s after it was sent (M108 sent at 0.5 s)")
 
 
-def characterize(target: Any, vid: str) -> list[Observation]:
+ITEMS = ("firmware", "protocol_version", "cap.*", "advanced_ok", "max_cmd_size", "keepalive",
+         "repeat_is_silent", "emergency_parser")
+"""What is probed, in order (``cap.*``: every Cap: line; ADVANCED_OK adds planner_blocks and
+bufsize)."""
+
+
+def characterize(target: Any, vid: str, out: list[Observation] | None = None
+                 ) -> list[Observation]:
+    """Probe every item of :data:`ITEMS`; ``out`` (the caller's) fills as they are found, so
+    an interrupted characterisation still has them."""
     spec = load_marlin()
     v = spec.variant(vid)
     s = Session(target, spec, v)
     s.fresh()
-    out = _m115(s, v, spec) + _ok_format(s, v)
+    out = [] if out is None else out
+    out.extend(_m115(s, v, spec))
+    out.extend(_ok_format(s, v))
     out.append(_max_cmd_size(s, v))
     out.append(_keepalive(s, v))
     out.append(_repeat(s))

@@ -47,6 +47,12 @@ class MarlinCheck:
     heat: bool = False
     emulator_only: bool = False
 
+    @property
+    def subject(self) -> str:
+        """What is checked: ``line``, ``checksum``, ``report``, ``halt`` …"""
+        parts = self.id.split("/")
+        return parts[2] if len(parts) > 2 else self.id
+
 
 def _ok_kind(s: Session, line: str) -> bool:
     return s.spec.classify(line)[0].startswith("ok")

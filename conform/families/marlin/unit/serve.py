@@ -42,7 +42,7 @@ def build(variant: str, *, t0: float, baud: int | None, faults: str | None, seed
 def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
           faults: str | None = None, seed: int | None = None, link_path: str | None = None,
           record_path: str | None = None, answer_delay: float = 0.0,
-          control_path: str | None = None, **_ignored: Any) -> None:
+          control_path: str | None = None, quiet: bool = False, **_ignored: Any) -> None:
     from conform.emulator.launch import (
         announce,
         check_pacing,
@@ -81,7 +81,7 @@ def serve(variant: str, *, baud: int | None = None, tcp_port: int | None = None,
              f"buffer {v.rx_buffer} bytes, planner {v.planner_blocks} blocks); control: "
              f"{control.path}")
     try:
-        run_until_signal(emulator)
+        run_until_signal(emulator, quiet)
     finally:
         control.close()
         if recorder is not None:
