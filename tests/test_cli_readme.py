@@ -22,6 +22,7 @@ README = (REPO / "README.md").read_text(encoding="utf-8")
 # commands make (a run, characterize, a recording), relative to a test's folder
 TOUR = "/tmp/conform-tour/"
 MADE_BY_THE_README = ("reports/latest/results.json", "tour/unit.toml", "tour/unit-v10.toml",
+                      "tour/printer.toml", "tour/printer-0.toml",
                       "session.mcap", "session.mcap.part", "tour/support.zip")
 
 

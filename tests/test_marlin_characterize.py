@@ -83,3 +83,30 @@ def test_interrupted_it_writes_what_it_found_marked_partial(tmp_path, monkeypatc
     assert prof["partial"] is True and prof["interrupted"].startswith("Ctrl-C after")
     assert prof["unanswered"] == ["keepalive", "repeat_is_silent", "emergency_parser"]
     assert prof["observed"]["max_cmd_size"] == 96 and "keepalive" not in prof["observed"]
+
+
+def test_profile_diff_names_what_differs_between_two_builds(tmp_path) -> None:
+    paths = []
+    for variant in ("marlin-2.1", "marlin-2.1-adv"):
+        paths.append(tmp_path / f"{variant}.toml")
+        r = subprocess.run([sys.executable, "-m", "conform", "characterize", f"emu:{variant}",
+                            "-o", str(paths[-1]), "-q"], capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 0, r.stderr
+    same = subprocess.run([sys.executable, "-m", "conform", "profile", "diff", str(paths[0]),
+                           str(paths[0])], capture_output=True, text=True, timeout=60)
+    assert same.returncode == 0 and same.stdout.strip() == "same observations"
+    d = subprocess.run([sys.executable, "-m", "conform", "profile", "diff", *map(str, paths)],
+                       capture_output=True, text=True, timeout=60)
+    assert d.returncode == 1
+    rows = {line.split()[0]: line.split()[1:] for line in d.stdout.splitlines()[1:]}
+    # what the -adv variant's tables add (ADVANCED_OK, EMERGENCY_PARSER), and only that
+    assert rows == {"cap.EMERGENCY_PARSER": ["0", "1"], "advanced_ok": ["false", "true"],
+                    "emergency_parser": ["false", "true"], "planner_blocks": ["(absent)", "15"],
+                    "bufsize": ["(absent)", "4"]}
+    grbl = tmp_path / "g.toml"
+    subprocess.run([sys.executable, "-m", "conform", "characterize", "emu:grbl-1.1f", "-o",
+                    str(grbl), "-q"], capture_output=True, timeout=120, check=True)
+    mixed = subprocess.run([sys.executable, "-m", "conform", "profile", "diff", str(grbl),
+                            str(paths[0])], capture_output=True, text=True, timeout=60)
+    assert mixed.returncode == 2 and "profiles of one family only" in mixed.stderr

@@ -26,6 +26,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "send",
     "report",
     "characterize",
+    "profile",
     "proxy",
     "sniff",
     "capture",

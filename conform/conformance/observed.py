@@ -103,3 +103,31 @@ def characterize_target(fam: Any, target_text: str, output: str, variant: str | 
         target.close()
     write_profile(obs, output, target=target_text, variant=vid, title=title)
     report(obs, output, echo)
+
+
+def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
+                  ) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+    """Two observation profiles item by item: (notes on partial ones, rows (item, a, b) that
+    differ, the line when none does)."""
+    notes = []
+    for path, doc in ((a, doc_a), (b, doc_b)):
+        left = doc.get("unanswered") if doc.get("partial") is True else None
+        if isinstance(left, list):
+            notes.append(f"{path}: partial profile ({doc.get('interrupted', 'interrupted')}); "
+                         f"{len(left)} item(s) not reached: {', '.join(map(str, left))}")
+    oa, ob = doc_a.get("observed", {}), doc_b.get("observed", {})
+    names = list(dict.fromkeys([*oa, *ob, *_left(doc_a), *_left(doc_b)]))
+
+    def shown(doc: dict[str, Any], obs: dict[str, Any], name: str) -> Any:
+        if name in obs:
+            return obs[name]
+        return "(not answered)" if name in _left(doc) else "(absent)"
+
+    rows = [(n, shown(doc_a, oa, n), shown(doc_b, ob, n)) for n in names
+            if shown(doc_a, oa, n) != shown(doc_b, ob, n) or n in _left(doc_a) or n in _left(doc_b)]
+    return notes, rows, "same observations"
+
+
+def _left(doc: dict[str, Any]) -> list[str]:
+    left = doc.get("unanswered") if doc.get("partial") is True else None
+    return [str(x) for x in left] if isinstance(left, list) else []

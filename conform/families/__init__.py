@@ -297,6 +297,12 @@ class Family:
                             title=f"what this {self.name} build does, probed by conform "
                                   "characterize")
 
+    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+        """``conform profile diff`` of two profiles of a shape the engine does not read (the
+        engine compares ``[observed]`` profiles itself): (notes, rows (item, a, b) that differ,
+        the line when none does)."""
+        raise self.lacks("profiles of this shape")
+
     probe_rank: int = 100
     """``ports --probe`` asks the families in this order: a family whose question could
     disturb another family's unit (a byte another protocol acts on at once) asks late."""

@@ -172,6 +172,11 @@ class GveFamily(Family):
 
         return commands()
 
+    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+        from conform.families.gve.conformance.profile_command import diff
+
+        return diff(a, b)
+
     def send_job(self, job: str, target: str, **options: Any) -> None:
         """``conform send``: the reference sender (sender/command.py)."""
         from conform.families.gve.sender.command import send_job

@@ -189,9 +189,7 @@ def questions_table() -> tuple[str, list[str], list[tuple[Any, ...]]]:
              for q in spec.questions.values()])
 
 def commands() -> Sequence[click.Command]:
-    from conform.families.gve.conformance.profile_command import cli as profile
-
-    return (profile,)
+    return ()
 
 
 def command_options(command: str) -> Sequence[click.Option]:
