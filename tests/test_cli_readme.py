@@ -23,7 +23,7 @@ README = (REPO / "README.md").read_text(encoding="utf-8")
 TOUR = "/tmp/conform-tour/"
 MADE_BY_THE_README = ("reports/latest/results.json", "tour/unit.toml", "tour/unit-v10.toml",
                       "tour/printer.toml", "tour/printer-0.toml",
-                      "session.mcap", "session.mcap.part", "tour/support.zip")
+                      "tour/session.mcap", "tour/grbl.mcap", "session.mcap.part", "tour/support.zip")
 
 
 def _blocks() -> list[str]:
@@ -104,15 +104,12 @@ def test_help_has_an_example(path, cmd):
 WRITES = re.compile(r"(?:^|\s)(?:-o|--output|--report|--parquet|--record|--junitxml)[= ](\S+)")
 # not run by the tour test: servers, long runs, real ports, and what needs a recorded session
 NOT_RUN = re.compile(r"&|--matrix|--mutants|/dev/tty|--probe|check-sender|emulate|\bsend\b|"
-                     r"proxy|sniff|session\.mcap|support\.zip|--help|_CONFORM_COMPLETE")
+                     r"proxy|sniff|session\.mcap|grbl\.mcap|support\.zip|--help|_CONFORM_COMPLETE")
 
 
 def _tour() -> list[str]:
-    """The tour's command lines, but section 2 (capture → analyse), which is being reworked
-    with `send` and still writes into the working folder."""
+    """The tour's command lines."""
     tour = README.split("## A short tour", 1)[1].split("\n## Benchmarks", 1)[0]
-    head, rest = tour.split("### 2. Capture → analyse", 1)
-    tour = head + "###" + rest.split("\n###", 1)[1]
     lines = []
     for block in re.findall(r"```sh\n(.*?)```", tour, flags=re.S):
         lines += [x.split(" #", 1)[0].strip() for x in block.splitlines()]
