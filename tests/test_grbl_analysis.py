@@ -295,3 +295,20 @@ def test_every_plot_is_on_the_session_time_axis(monkeypatch):
         want = a.reports[0][0] if name == "machine" else 2.0
         assert first == pytest.approx(want, abs=0.05), name
     assert a.t0 == 0.0 and a.metrics["duration_s"] > 5.0
+
+
+@pytest.mark.parametrize(("next_after", "verdict"), [
+    (0.002, "the sender stopped after it"),   # on its way before the error could be read
+    (0.5, "the sender went on"),
+])
+def test_a_line_sent_as_the_error_arrived_is_not_going_on(next_after, verdict):
+    """A counting sender may write its next line in the same instant error:N arrives (the
+    recorder sees the error first); only a line sent after the host could have read the error
+    (REACTION_S) says the sender went on."""
+    host = [(0.0, b"G1X1F100\n"), (0.1, b"G1X2\n"), (0.2, b"G5X1\n")]
+    unit = [(0.05, b"ok\r\n"), (0.15, b"ok\r\n"), (0.25, b"error:20\r\n")]
+    host.append((0.25 + next_after, b"G1X3\n"))
+    unit.append((0.3 + next_after, b"ok\r\n"))
+    a = analyze_streams(host, unit)
+    err = next(f for f in a.findings if f.kind == "error-response")
+    assert err.message.endswith(verdict), err.message

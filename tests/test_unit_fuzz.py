@@ -200,6 +200,26 @@ def test_campaign_finds_a_malformed_answer():
     assert any("F" in e for e in fig.examples)
 
 
+class _Stuck(Unit):
+    """Spins on the CPU for 0.2 s whenever it is asked for its position (a unit that hangs)."""
+
+    def exchange(self, data, t):
+        if b"P" in data:
+            import time
+
+            end = time.thread_time() + 0.2
+            while time.thread_time() < end:
+                pass
+        return super().exchange(data, t)
+
+
+def test_campaign_counts_a_unit_that_hangs():
+    """The frame's time is the unit's own CPU time: a unit stuck in a loop is counted."""
+    fig = Campaign(SPEC, seed=5, unit_class=_Stuck, mixes=0, hang_s=0.1).run(3000,
+                                                                              per_config=1500)
+    assert fig.hangs > 0 and any("took 0.2" in e for e in fig.examples)
+
+
 def test_campaign_short():
     fig = Campaign(SPEC, seed=11, mixes=2).run(20_000, per_config=300)
     assert fig.frames == 20_000 and fig.judged > 10_000

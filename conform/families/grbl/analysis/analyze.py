@@ -125,6 +125,11 @@ class GrblAnalysis:
                 "starvations": starved}
 
 
+REACTION_S = 0.1
+"""Seconds a host needs to read an answer and act on it: a line it sends sooner after
+``error:N`` arrived was decided before the error was read, not sent in spite of it."""
+
+
 def _pct_ms(ordered: list[float], q: float) -> float | None:
     """The q-quantile of sorted seconds, in ms (nearest rank), or None without values."""
     if not ordered:
@@ -245,7 +250,9 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     for e in exchanges:
         if e.answer and e.answer.startswith("error:"):
             code = int(e.answer[6:])
-            later = last_sent > (e.t_answer or e.t_sent)    # lines go out in time order
+            # lines go out in time order; one sent within REACTION_S of the error's arrival was
+            # already on its way (the sender had not read the error yet)
+            later = last_sent > (e.t_answer or e.t_sent) + REACTION_S
             goes_on = "the sender went on" if later else "the sender stopped after it"
             out.add("error-response", rel(e.t_answer or e.t_sent), "error",
                     f"line {e.line} {e.text!r}: error:{code} "
