@@ -1,5 +1,6 @@
 """What a `conform check-sender` run costs: every scenario for the family's careful test sender
-(GVE: tests/senders/careful.py; grbl: tests/senders/grbl_counting.py good), wall time per
+(GVE: tests/senders/careful.py; grbl: tests/senders/grbl_counting.py good; Marlin:
+tests/senders/marlin_careful.py), wall time per
 scenario and in all, and the process CPU time, against a target of 60 s for the full matrix (a
 check a user runs often must stay short).
 
@@ -26,7 +27,8 @@ from conform.sendercheck.grade import check
 TARGET_S = 60.0
 SENDERS = Path(__file__).resolve().parents[1] / "tests" / "senders"
 # the test sender that passes every MUST rule, per family: (script, arguments after {job})
-CAREFUL = {"gve": ("careful.py", ()), "grbl": ("grbl_counting.py", ("good",))}
+CAREFUL = {"gve": ("careful.py", ()), "grbl": ("grbl_counting.py", ("good",)),
+           "marlin": ("marlin_careful.py", ())}
 
 
 def cpu() -> float:
