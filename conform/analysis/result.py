@@ -8,7 +8,7 @@ its other tables."""
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -103,6 +103,27 @@ class ResultBase:
                 "exchanges_per_s": exchanges_per_s, "hazards": self.metrics["hazards"],
                 "findings": self.kinds(), "rtt_p50_ms": p50, "rtt_p95_ms": p95,
                 "rtt_p99_ms": p99, "rtt_max_ms": top, **own}
+
+
+    def add_notes(self, notes: Sequence[str], status: Any) -> None:
+        """``notes`` from reading the capture, then whether the file was whole (``status``:
+        conform.analysis.rawread's ``complete`` and ``problem``)."""
+        self.notes += notes
+        if not status.complete:
+            self.complete = False
+            self.notes.append(f"capture incomplete: {status.problem}")
+
+
+def capture_variant(metadata: Mapping[str, Any], asked: str | None, known: Collection[str],
+                    default: str, title: str) -> tuple[str, list[str]]:
+    """The variant to analyse a capture as: the one ``asked`` for, else the one its session
+    metadata names, else ``default``; a name ``known`` lacks falls back to ``default`` with a
+    note (``title``: the family, as the note names it)."""
+    vid = asked or str(metadata.get("conform.session", {}).get("variant", "") or "")
+    if vid in known:
+        return vid, []
+    note = f"variant {vid!r} is not a {title} variant; analysed as {default}"
+    return default, [note] if vid else []
 
 
 def per_s(n: float, seconds: float) -> float:

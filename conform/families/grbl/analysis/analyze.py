@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from conform.analysis.result import Finding, ResultBase, findings_table, per_s, save_tables
+from conform.analysis.result import (
+    Finding,
+    ResultBase,
+    capture_variant,
+    findings_table,
+    per_s,
+    save_tables,
+)
 from conform.families.grbl.protocol.codec import split_host, split_unit
 from conform.families.grbl.spec.load import GrblSpec, load_grbl
 
@@ -393,14 +400,8 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
 def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: str = ""
                 ) -> GrblAnalysis:
     """Analyse the raw directions of a capture already read (conform.analysis.rawread)."""
-    session = raw.metadata.get("conform.session", {})
     spec = load_grbl()
-    vid = variant or str(session.get("variant", "") or "")
-    notes = []
-    if vid not in spec.variants:
-        if vid:
-            notes.append(f"variant {vid!r} is not a grbl variant; analysed as {DEFAULT_VARIANT}")
-        vid = DEFAULT_VARIANT
+    vid, notes = capture_variant(raw.metadata, variant, spec.variants, DEFAULT_VARIANT, "grbl")
 
     def chunks(d: Any) -> list[tuple[float, float, bytes]]:
         data = d.data.tobytes()
@@ -410,10 +411,7 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
     a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, spec=spec, path=path,
                         detected=detected)
-    a.notes += notes
-    if not raw.status.complete:
-        a.complete = False
-        a.notes.append(f"capture incomplete: {raw.status.problem}")
+    a.add_notes(notes, raw.status)
     return a
 
 

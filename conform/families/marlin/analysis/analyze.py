@@ -27,7 +27,7 @@ from itertools import chain
 from pathlib import Path
 from typing import Any
 
-from conform.analysis.result import ResultBase, per_s
+from conform.analysis.result import ResultBase, capture_variant, per_s
 from conform.families.marlin.analysis.core import MAX_KEPT, MAX_LISTED, Analyser, merged
 from conform.families.marlin.analysis.records import (
     CLAUSE_Q,
@@ -164,14 +164,9 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
     rs = RawStream(path)
     parts = rs.parts()
     head = next(parts, None)   # the session metadata comes before the first raw chunk
-    session = rs.capture().metadata.get("conform.session", {})
     spec = load_marlin()
-    vid = variant or str(session.get("variant", "") or "")
-    notes = []
-    if vid not in spec.variants:
-        if vid:
-            notes.append(f"variant {vid!r} is not a Marlin variant; analysed as {DEFAULT_VARIANT}")
-        vid = DEFAULT_VARIANT
+    vid, notes = capture_variant(rs.capture().metadata, variant, spec.variants, DEFAULT_VARIANT,
+                                 "Marlin")
     v = spec.variant(vid)
     waiting: dict[str, deque[Any]] = {"host": deque(), "unit": deque()}
     if head is not None:
@@ -197,11 +192,7 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
                         planner_blocks=v.planner_blocks, keep_lines=keep_lines, parquet=parquet)
     for _ in parts:            # the rest of the file (its status), if a direction ended first
         pass
-    a.notes += notes
-    status = rs.capture().status
-    if not status.complete:
-        a.complete = False
-        a.notes.append(f"capture incomplete: {status.problem}")
+    a.add_notes(notes, rs.capture().status)
     return a
 
 
