@@ -11,7 +11,7 @@ import json
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 SERIOUS = ("hazard", "error")
 """The severities ``conform analyze`` lists one by one under the findings line."""
@@ -36,19 +36,23 @@ class Finding:
         return d
 
 
+@dataclass
 class ResultBase:
-    """A family's analysis result with the fields below; the family's dataclass adds its own
-    and brings ``summary_lines``, ``write_report`` and ``write_tables`` built on the helpers
-    here. ``metrics`` holds at least ``duration_s``, ``hazards`` and ``finding_counts``."""
+    """A family's analysis result: the capture's ``path``, the ``family``, the ``variant``
+    analysed and how the family was ``detected``; the family's dataclass adds its records,
+    ``findings``, ``metrics`` (at least ``duration_s``, ``hazards`` and ``finding_counts``),
+    ``notes`` and ``complete``, and brings ``summary_lines``, ``write_report`` and
+    ``write_tables`` built on the helpers here."""
 
     path: str
     family: str
     variant: str
     detected: str
-    findings: list[Finding]
-    metrics: dict[str, Any]
-    notes: list[str]
-    complete: bool
+    if TYPE_CHECKING:   # the family's fields, after its own records
+        findings: list[Finding]
+        metrics: dict[str, Any]
+        notes: list[str]
+        complete: bool
 
     def kinds(self) -> dict[str, int]:
         """How many findings of each kind (all of them, listed or not)."""

@@ -51,10 +51,6 @@ class Exchange:
 
 @dataclass
 class GrblAnalysis(ResultBase):
-    path: str
-    family: str
-    variant: str
-    detected: str
     exchanges: list[Exchange]
     findings: list[Finding]
     metrics: dict[str, Any]

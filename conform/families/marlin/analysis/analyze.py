@@ -45,14 +45,10 @@ DEFAULT_VARIANT = "marlin-2.1"
 
 @dataclass
 class MarlinAnalysis(ResultBase):
-    path: str
-    variant: str
-    detected: str
     lines: list[HostLine]
     findings: list[Finding]
     metrics: dict[str, Any]
     notes: list[str] = field(default_factory=list)
-    family: str = "marlin"
     complete: bool = True
     motion: int = 0                     # motion lines taken (G0-G3)
     lines_kept: bool = False            # ``lines`` holds every host line
@@ -142,7 +138,7 @@ def analyze_streams(host: Iterable[Chunk], unit: Iterable[Chunk], *,
     finally:
         if table is not None:
             table.close()
-    a = MarlinAnalysis(path, variant, detected, kept, findings, metrics)
+    a = MarlinAnalysis(path, "marlin", variant, detected, kept, findings, metrics)
     a.motion = core.motion
     a.lines_kept = keep_lines
     if core.dropped:
