@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import KW_ONLY, asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,20 +39,22 @@ class Finding:
 @dataclass
 class ResultBase:
     """A family's analysis result: the capture's ``path``, the ``family``, the ``variant``
-    analysed and how the family was ``detected``; the family's dataclass adds its records,
-    ``findings``, ``metrics`` (at least ``duration_s``, ``hazards`` and ``finding_counts``),
-    ``notes`` and ``complete``, and brings ``summary_lines``, ``write_report`` and
-    ``write_tables`` built on the helpers here."""
+    analysed, how the family was ``detected``, the ``notes`` on the analysis and whether the
+    capture file was whole (``complete``; both keyword-only, after the family's fields). The
+    family's dataclass adds its records, ``findings`` and ``metrics`` (at least
+    ``duration_s``, ``hazards`` and ``finding_counts``), and brings ``summary_lines``,
+    ``write_report`` and ``write_tables`` built on the helpers here."""
 
     path: str
     family: str
     variant: str
     detected: str
+    _: KW_ONLY
+    notes: list[str] = field(default_factory=list)
+    complete: bool = True
     if TYPE_CHECKING:   # the family's fields, after its own records
         findings: list[Finding]
         metrics: dict[str, Any]
-        notes: list[str]
-        complete: bool
 
     def kinds(self) -> dict[str, int]:
         """How many findings of each kind (all of them, listed or not)."""

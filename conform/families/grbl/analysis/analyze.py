@@ -54,10 +54,8 @@ class GrblAnalysis(ResultBase):
     exchanges: list[Exchange]
     findings: list[Finding]
     metrics: dict[str, Any]
-    notes: list[str] = field(default_factory=list)
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
     reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
-    complete: bool = True  # the capture file was whole (not truncated or damaged)
     t0: float = 0.0  # the session's start (its first byte either way): findings' and plots' 0
 
     def findings_document(self) -> dict[str, Any]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
 from typing import Any
@@ -48,8 +48,6 @@ class MarlinAnalysis(ResultBase):
     lines: list[HostLine]
     findings: list[Finding]
     metrics: dict[str, Any]
-    notes: list[str] = field(default_factory=list)
-    complete: bool = True
     motion: int = 0                     # motion lines taken (G0-G3)
     lines_kept: bool = False            # ``lines`` holds every host line
     tables: dict[str, Path] | None = None   # the tables written as the capture streamed
