@@ -13,29 +13,26 @@ they could exceed the buffer, a byte may be lost on the hardware: a hazard.
 
 from __future__ import annotations
 
-import json
 import re
 import statistics
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from conform.analysis.result import (
+    Finding,
+    ResultBase,
+    capture_variant,
+    findings_table,
+    per_s,
+    save_tables,
+)
 from conform.families.grbl.protocol.codec import split_host, split_unit
 from conform.families.grbl.spec.load import GrblSpec, load_grbl
 
 MAX_LISTED = 50
 DEFAULT_VARIANT = "grbl-1.1f"
 Chunk = tuple[float, bytes]
-
-
-@dataclass
-class Finding:
-    kind: str
-    t: float
-    severity: str         # info | warning | error | hazard
-    message: str
-    clause: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(slots=True)
@@ -53,38 +50,20 @@ class Exchange:
 
 
 @dataclass
-class GrblAnalysis:
-    path: str
-    family: str
-    variant: str
-    detected: str
+class GrblAnalysis(ResultBase):
     exchanges: list[Exchange]
     findings: list[Finding]
     metrics: dict[str, Any]
-    notes: list[str] = field(default_factory=list)
     realtime: list[tuple[float, int]] = field(default_factory=list)  # (t, byte), absolute t
     reports: list[tuple[float, str]] = field(default_factory=list)  # status reports (t, text)
-    complete: bool = True  # the capture file was whole (not truncated or damaged)
     t0: float = 0.0  # the session's start (its first byte either way): findings' and plots' 0
-
-    def kinds(self) -> dict[str, int]:
-        return dict(self.metrics.get("finding_counts", {}))
-
-    def hazards(self) -> list[Finding]:
-        return [f for f in self.findings if f.severity == "hazard"]
 
     def findings_document(self) -> dict[str, Any]:
         """``conform analyze --json``: the document GVE's analysis prints (capture, variant,
         findings with kind and severity, metrics, notes; conform.analysis.report)."""
         return {"capture": self.path, "variant": self.variant,
-                "findings": [{k: v for k, v in asdict(f).items() if k != "extra"} | f.extra
-                             for f in self.findings],
+                "findings": [f.to_dict() for f in self.findings],
                 "metrics": self.metrics, "notes": self.notes}
-
-    def to_json(self) -> dict[str, Any]:
-        return {"format": "conform-grbl-analysis/1", "path": self.path, "family": self.family,
-                "variant": self.variant, "detected": self.detected, "metrics": self.metrics,
-                "findings": [asdict(f) for f in self.findings], "notes": self.notes}
 
     # what the engine asks of any family's analysis (conform.families.AnalysisResult)
 
@@ -95,11 +74,7 @@ class GrblAnalysis:
                f"error) in {m['duration_s']:.3f} s; streaming {m['streaming_method']}, at most "
                f"{m['max_bytes_in_flight']} bytes in flight (receive buffer {m['rx_buffer']}); "
                f"{m['status_polls']} status polls ({m['poll_rate_hz']:.1f}/s)"]
-        counts = m.get("finding_counts", {})
-        out.append("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) or "none"))
-        out += [f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}" for f in self.findings
-                if f.severity in ("hazard", "error")]
-        return out + [f"note: {note}" for note in self.notes]
+        return out + self.findings_lines()
 
     def write_report(self, directory: str) -> dict[str, Path]:
         return write_report(self, directory)
@@ -112,17 +87,11 @@ class GrblAnalysis:
         exchanges, motion lines for vectors; the latency is line to ok/error."""
         m = self.metrics
         rtt = sorted(e.t_answer - e.t_sent for e in self.exchanges if e.t_answer is not None)
-        starved = m.get("finding_counts", {}).get("planner-starved", 0)
         motion = sum(1 for e in self.exchanges if e.answer == "ok" and is_motion(e.text))
-        d = m["duration_s"]
-        return {"family": self.family, "state": "clean" if self.complete else "damaged",
-                "duration_s": d, "exchanges": m["lines"],
-                "vectors_accepted": motion, "exchanges_per_s": m["lines_per_s"],
-                "vectors_per_s": motion / d if d > 0 else 0.0, "hazards": m["hazards"],
-                "findings": dict(m.get("finding_counts", {})),
-                "rtt_p50_ms": _pct_ms(rtt, 0.50), "rtt_p95_ms": _pct_ms(rtt, 0.95),
-                "rtt_p99_ms": _pct_ms(rtt, 0.99), "rtt_max_ms": _pct_ms(rtt, 1.0),
-                "starvations": starved}
+        return self.fleet_row_of(
+            m["lines"], m["lines_per_s"], [_pct_ms(rtt, q) for q in (0.50, 0.95, 0.99, 1.0)],
+            vectors_accepted=motion, vectors_per_s=per_s(motion, m["duration_s"]),
+            starvations=m.get("finding_counts", {}).get("planner-starved", 0))
 
 
 REACTION_S = 0.1
@@ -345,7 +314,7 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
         "ok": sum(1 for e in exchanges if e.answer == "ok"),
         "errors": sum(1 for e in exchanges if e.answer and e.answer.startswith("error:")),
         "alarms": out.counts.get("alarm", 0), "duration_s": duration,
-        "lines_per_s": len(exchanges) / duration if duration > 0 else 0.0,
+        "lines_per_s": per_s(len(exchanges), duration),
         "streaming_method": method, "paced_share": round(share, 3),
         "max_lines_in_flight": max_lines, "max_job_lines_in_flight": max_job_lines,
         "job_lines_back_to_back": back_to_back,
@@ -432,14 +401,8 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
 def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: str = ""
                 ) -> GrblAnalysis:
     """Analyse the raw directions of a capture already read (conform.analysis.rawread)."""
-    session = raw.metadata.get("conform.session", {})
     spec = load_grbl()
-    vid = variant or str(session.get("variant", "") or "")
-    notes = []
-    if vid not in spec.variants:
-        if vid:
-            notes.append(f"variant {vid!r} is not a grbl variant; analysed as {DEFAULT_VARIANT}")
-        vid = DEFAULT_VARIANT
+    vid, notes = capture_variant(raw.metadata, variant, spec.variants, DEFAULT_VARIANT, "grbl")
 
     def chunks(d: Any) -> list[tuple[float, float, bytes]]:
         data = d.data.tobytes()
@@ -449,45 +412,25 @@ def analyze_raw(raw: Any, path: str, *, variant: str | None = None, detected: st
 
     a = analyze_streams(chunks(raw.host), chunks(raw.unit), variant=vid, spec=spec, path=path,
                         detected=detected)
-    a.notes += notes
-    if not raw.status.complete:
-        a.complete = False
-        a.notes.append(f"capture incomplete: {raw.status.problem}")
+    a.add_notes(notes, raw.status)
     return a
 
 
 def write_report(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     """index.html (:mod:`.htmlreport`), findings.json and summary.md in ``directory``."""
     from conform.families.grbl.analysis.htmlreport import render_html
-    from conform.report.render import write_files
 
-    def summary() -> str:
-        lines = [f"# grbl capture analysis: {a.path}", "", f"family: grbl ({a.detected})", ""]
-        lines += [f"- {k}: {v}" for k, v in a.metrics.items() if k != "finding_counts"]
-        lines += ["", "## Findings", ""]
-        lines += [f"- {f.t:.4f} s {f.severity} {f.kind}: {f.message} [{f.clause}]"
-                  for f in a.findings] or ["none"]
-        return "\n".join(lines) + "\n"
-
-    d = write_files(directory, {
-        "findings.json": lambda: json.dumps(a.to_json(), indent=1, default=str),
-        "summary.md": summary,
-        "index.html": lambda: render_html(a),
-    })
-    return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
+    head = [f"# grbl capture analysis: {a.path}", "", f"family: grbl ({a.detected})"]
+    return a.report_files(directory, lambda: a.summary_markdown(head), lambda: render_html(a))
 
 
 def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:
     """exchanges.parquet (one row per line sent) and findings.parquet in ``directory``."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    from conform.errors import UserError
-
-    d = Path(directory)
     ex = a.exchanges
     t0 = min((e.t_sent for e in ex), default=0.0)
-    tables = {
+    return save_tables(directory, {
         "exchanges": pa.table({
             "line": [e.line for e in ex], "text": [e.text for e in ex],
             "bytes": [e.size for e in ex], "t_sent": [e.t_sent - t0 for e in ex],
@@ -495,15 +438,5 @@ def write_parquet(a: GrblAnalysis, directory: str) -> dict[str, Path]:
             "t_answer": [None if e.t_answer is None else e.t_answer - t0 for e in ex],
             "lines_in_flight": [e.lines_in_flight for e in ex],
             "bytes_in_flight": [e.bytes_in_flight for e in ex]}),
-        "findings": pa.table({
-            "t": [f.t for f in a.findings], "kind": [f.kind for f in a.findings],
-            "severity": [f.severity for f in a.findings],
-            "message": [f.message for f in a.findings], "clause": [f.clause for f in a.findings]}),
-    }
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        for name, table in tables.items():
-            pq.write_table(table, d / f"{name}.parquet")
-    except OSError as exc:
-        raise UserError(f"{d}: cannot write the tables: {exc.strerror or exc}") from None
-    return {name: d / f"{name}.parquet" for name in tables}
+        "findings": findings_table(a.findings),
+    })

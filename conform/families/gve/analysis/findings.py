@@ -11,12 +11,13 @@ Python, and each kind lists at most ``MAX_LISTED`` rows (the metrics keep the fu
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from conform.analysis.result import Finding as BaseFinding
 from conform.families.gve.analysis.columns import AXES, isin, packet_numbers, vectors
 from conform.families.gve.analysis.frames import ANSWER, CS_BAD, CS_MISSING, ECHO, GARBLED, PARTIAL
 
@@ -49,21 +50,13 @@ CLAUSES = {
 
 
 @dataclass
-class Finding:
-    kind: str
-    t: float
-    severity: str
-    message: str
-    clause: str = ""
+class Finding(BaseFinding):
+    """The engine's finding with the frames it rests on, its row of the frames table and
+    how many it stands for (an "… and N more" finding)."""
+
     frames: list[str] = field(default_factory=list)
     row: int | None = None
     count: int = 1
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d.update(d.pop("extra"))
-        return d
 
 
 class Findings:
@@ -92,7 +85,7 @@ class Findings:
         if not listed:
             return
         self.items.append(Finding(kind, float(t), severity, message, CLAUSES.get(kind, ""),
-                                  frames or [], row, count, extra))
+                                  extra, frames=frames or [], row=row, count=count))
 
     def many(self, kind: str, rows: np.ndarray, severity: str, make: Any,
              limit: int = MAX_LISTED, side: str | None = None) -> None:
@@ -122,7 +115,7 @@ class Findings:
             t = after.t if after is not None else 0.0
             self.items.insert(self.items.index(after) + 1 if after is not None else 0,
                               Finding(kind, t, severity, f"… and {n} more like these",
-                                      CLAUSES.get(kind, ""), [], None, n))
+                                      CLAUSES.get(kind, ""), count=n))
         self.finished = True
 
     def sorted(self) -> list[Finding]:

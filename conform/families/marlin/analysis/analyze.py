@@ -22,11 +22,12 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
 from typing import Any
 
+from conform.analysis.result import ResultBase, capture_variant, per_s
 from conform.families.marlin.analysis.core import MAX_KEPT, MAX_LISTED, Analyser, merged
 from conform.families.marlin.analysis.records import (
     CLAUSE_Q,
@@ -43,27 +44,13 @@ DEFAULT_VARIANT = "marlin-2.1"
 
 
 @dataclass
-class MarlinAnalysis:
-    path: str
-    variant: str
-    detected: str
+class MarlinAnalysis(ResultBase):
     lines: list[HostLine]
     findings: list[Finding]
     metrics: dict[str, Any]
-    notes: list[str] = field(default_factory=list)
-    family: str = "marlin"
-    complete: bool = True
     motion: int = 0                     # motion lines taken (G0-G3)
     lines_kept: bool = False            # ``lines`` holds every host line
     tables: dict[str, Path] | None = None   # the tables written as the capture streamed
-
-    def kinds(self) -> dict[str, int]:
-        return dict(self.metrics.get("finding_counts", {}))
-
-    def to_json(self) -> dict[str, Any]:
-        return {"format": "conform-marlin-analysis/1", "path": self.path, "family": self.family,
-                "variant": self.variant, "detected": self.detected, "metrics": self.metrics,
-                "findings": [asdict(f) for f in self.findings], "notes": self.notes}
 
     def summary_lines(self) -> list[str]:
         m = self.metrics
@@ -76,11 +63,7 @@ class MarlinAnalysis:
                f"periods; ran twice: {m['twice_confirmed']} confirmed, {m['twice_possible']} "
                f"possible; never ran: {m['never_confirmed']} confirmed, {m['never_possible']} "
                "possible"]
-        counts = m.get("finding_counts", {})
-        out.append("findings: " + (", ".join(f"{k} {n}" for k, n in counts.items()) or "none"))
-        out += [f"  {f.t:10.4f}s {f.severity:7} {f.kind}: {f.message}" for f in self.findings
-                if f.severity in ("hazard", "error")][:MAX_LISTED]
-        return out + [f"note: {note}" for note in self.notes]
+        return out + self.findings_lines(MAX_LISTED)
 
     def write_report(self, directory: str) -> dict[str, Path]:
         from conform.families.marlin.analysis.report import write_report
@@ -101,16 +84,11 @@ class MarlinAnalysis:
 
     def fleet_row(self) -> dict[str, Any]:
         m = self.metrics
-        motion = self.motion
-        d = m["duration_s"]
-        return {"family": self.family, "state": "clean" if self.complete else "damaged",
-                "duration_s": d, "exchanges": m["host_lines"], "vectors_accepted": motion,
-                "exchanges_per_s": m["lines_per_s"], "vectors_per_s": motion / d if d > 0 else 0.0,
-                "hazards": m["hazards"], "findings": dict(m.get("finding_counts", {})),
-                "rtt_p50_ms": m["ok_p50_ms"], "rtt_p95_ms": m["ok_p95_ms"],
-                "rtt_p99_ms": m["ok_p99_ms"], "rtt_max_ms": m["ok_max_ms"],
-                "starvations": m["planner_empty"]}
-
+        return self.fleet_row_of(
+            m["host_lines"], m["lines_per_s"],
+            [m["ok_p50_ms"], m["ok_p95_ms"], m["ok_p99_ms"], m["ok_max_ms"]],
+            vectors_accepted=self.motion, vectors_per_s=per_s(self.motion, m["duration_s"]),
+            starvations=m["planner_empty"])
 
 def timed_lines(chunks: Iterable[Chunk]) -> list[Chunk]:
     return list(iter_lines(chunks))
@@ -158,7 +136,7 @@ def analyze_streams(host: Iterable[Chunk], unit: Iterable[Chunk], *,
     finally:
         if table is not None:
             table.close()
-    a = MarlinAnalysis(path, variant, detected, kept, findings, metrics)
+    a = MarlinAnalysis(path, "marlin", variant, detected, kept, findings, metrics)
     a.motion = core.motion
     a.lines_kept = keep_lines
     if core.dropped:
@@ -180,14 +158,9 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
     rs = RawStream(path)
     parts = rs.parts()
     head = next(parts, None)   # the session metadata comes before the first raw chunk
-    session = rs.capture().metadata.get("conform.session", {})
     spec = load_marlin()
-    vid = variant or str(session.get("variant", "") or "")
-    notes = []
-    if vid not in spec.variants:
-        if vid:
-            notes.append(f"variant {vid!r} is not a Marlin variant; analysed as {DEFAULT_VARIANT}")
-        vid = DEFAULT_VARIANT
+    vid, notes = capture_variant(rs.capture().metadata, variant, spec.variants, DEFAULT_VARIANT,
+                                 "Marlin")
     v = spec.variant(vid)
     waiting: dict[str, deque[Any]] = {"host": deque(), "unit": deque()}
     if head is not None:
@@ -213,11 +186,7 @@ def analyze_capture(path: str, *, variant: str | None = None, detected: str = ""
                         planner_blocks=v.planner_blocks, keep_lines=keep_lines, parquet=parquet)
     for _ in parts:            # the rest of the file (its status), if a direction ended first
         pass
-    a.notes += notes
-    status = rs.capture().status
-    if not status.complete:
-        a.complete = False
-        a.notes.append(f"capture incomplete: {status.problem}")
+    a.add_notes(notes, rs.capture().status)
     return a
 
 

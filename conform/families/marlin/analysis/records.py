@@ -1,27 +1,20 @@
 """What the Marlin analysis reads and reports: host lines as queue.cpp sees them, findings,
-and the line splitter over timed chunks."""
+and the line splitter over timed chunks. The finding record is the engine's
+(conform.analysis.result), which the other line-based families share."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import reduce
 from operator import xor
-from typing import Any
+
+from conform.analysis.result import Finding
 
 CLAUSE_Q = "queue.cpp get_serial_commands / gcode_line_error"
 Chunk = tuple[float, bytes]
-
-
-@dataclass
-class Finding:
-    kind: str
-    t: float
-    severity: str         # info | warning | error | hazard
-    message: str
-    clause: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+__all__ = ["CLAUSE_Q", "Chunk", "Finding", "HostLine", "iter_lines", "parse_host"]
 
 
 @dataclass(slots=True)

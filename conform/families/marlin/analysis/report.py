@@ -4,7 +4,6 @@ report), lines.parquet and findings.parquet (the tables)."""
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 from typing import Any
 
@@ -12,13 +11,10 @@ from conform.errors import UserError
 
 
 def _summary(a: Any) -> str:
-    lines = [f"# Marlin capture analysis: {a.path}", "", f"family: marlin, variant {a.variant} "
-             f"({a.detected})", ""]
-    lines += [f"- {k}: {v}" for k, v in a.metrics.items() if k != "finding_counts"]
-    lines += ["", "## Findings", ""]
-    lines += [f"- {f.t:.4f} s {f.severity} {f.kind}: {f.message} [{f.clause}]"
-              for f in a.findings] or ["none"]
-    return "\n".join(lines + [""] + [f"note: {n}" for n in a.notes]) + "\n"
+    return a.summary_markdown(
+        [f"# Marlin capture analysis: {a.path}", "",
+         f"family: marlin, variant {a.variant} ({a.detected})"],
+        ["", *(f"note: {n}" for n in a.notes)])
 
 
 def _html(a: Any) -> str:
@@ -38,17 +34,8 @@ def _html(a: Any) -> str:
             f"</th></tr>{found}</table></body></html>\n")
 
 
-def write_json(a: Any) -> str:
-    """findings.json: the analysis as its JSON document."""
-    return json.dumps(a.to_json(), indent=1, default=str)
-
-
 def write_report(a: Any, directory: str) -> dict[str, Path]:
-    from conform.report.render import write_files
-
-    d = write_files(directory, {"findings.json": lambda: write_json(a), "summary.md":
-                                lambda: _summary(a), "index.html": lambda: _html(a)})
-    return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
+    return a.report_files(directory, lambda: _summary(a), lambda: _html(a))
 
 
 LINE_SCHEMA = (("t_sent", "float64"), ("n", "int64"), ("text", "string"), ("bytes", "int64"),
@@ -107,22 +94,10 @@ class LineTable:
         self.writer.close()
 
     def finish_findings(self, findings: list[Any]) -> dict[str, Path]:
-        _write_findings(self.dir, findings)
+        from conform.analysis.result import findings_table, save_tables
+
+        save_tables(self.dir, {"findings": findings_table(findings)})
         return {"lines": self.dir / "lines.parquet", "findings": self.dir / "findings.parquet"}
-
-
-def _write_findings(d: Path, findings: list[Any]) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    table = pa.table({"t": [f.t for f in findings], "kind": [f.kind for f in findings],
-                      "severity": [f.severity for f in findings],
-                      "message": [f.message for f in findings],
-                      "clause": [f.clause for f in findings]})
-    try:
-        pq.write_table(table, d / "findings.parquet")
-    except OSError as exc:
-        raise UserError(f"{d}: cannot write the tables: {exc.strerror or exc}") from None
 
 
 def write_parquet(a: Any, directory: str) -> dict[str, Path]:
