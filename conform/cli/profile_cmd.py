@@ -26,12 +26,16 @@ def cli() -> None:
     """
 
 
+MAX_PROFILE_BYTES = 4 << 20
+"""A profile is a few kilobytes; a larger file is refused before it is read."""
+
+
 def _read(path: str) -> dict[str, Any]:
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError):
-        return {}       # the family's reader says what is wrong with it
+    """The profile's TOML; a file too large, unreadable or not TOML is one line (exit 2)."""
+    from conform.errors import load_user_file
+
+    doc = load_user_file(path, tomllib.loads, max_bytes=MAX_PROFILE_BYTES, what="profile")
+    return doc if isinstance(doc, dict) else {}
 
 
 def _variant(doc: dict[str, Any]) -> str:
