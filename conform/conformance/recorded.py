@@ -10,7 +10,9 @@ a port's wall clock as dates).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 EPOCH = 1_750_000_000.0   # an emulated session's virtual clock starts at this date (2025-06-15)
@@ -81,3 +83,32 @@ class RecordedTarget:
         data = self._held + self.target.drain()
         self._held = b""
         return data
+
+
+@contextmanager
+def sending_to(fam: Any, target: str, variant: str, *, job: str, job_lines: int, baud: int,
+               record: str | None, allow_motion: bool, metadata: Mapping[str, object]
+               ) -> Iterator[RecordedTarget]:
+    """What a family's ``send_job`` does around its streamer: refuse a non-emulated target
+    without ``--allow-motion`` (nothing sent), open ``target`` (``emu:`` as ``variant``'s
+    emulator), record it when asked, and finish the capture however the stream ends."""
+    from conform.conformance.target import parse_target
+    from conform.errors import UserError
+
+    emulated = parse_target(target)[0] == "emu"
+    if not emulated and not allow_motion:
+        raise UserError(f"sending {job} to {target} moves the machine: add --allow-motion "
+                        "(nothing was sent)")
+    tgt, _ = fam.open_target(f"emu:{variant}" if emulated else target, baud=baud,
+                             permissions=None)
+    try:
+        taped = RecordedTarget.open(tgt, record, {
+            "variant": variant, "baud": baud, "target": target, "job": Path(job).name,
+            **metadata})
+    except BaseException:
+        tgt.close()
+        raise
+    try:
+        yield taped
+    finally:
+        taped.close({"job_lines": job_lines})

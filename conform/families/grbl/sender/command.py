@@ -10,12 +10,11 @@ stop, ``checks.stop_unit``); an ALARM has stopped the unit already; a lost link 
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import click
 
-from conform.conformance.recorded import RecordedTarget
+from conform.conformance.recorded import RecordedTarget, sending_to
 from conform.conformance.target import HarnessError
 from conform.errors import LinkError, UserError
 from conform.families.grbl.sender.stream import METHODS, ReadyError, Stats, Streamer
@@ -35,7 +34,6 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
              record: str | None, timeout: float | None, quiet: bool = False,
              method: str = "counting", **_: Any) -> None:
     """Stream ``job`` to the grbl unit on ``target`` (see the module docstring)."""
-    from conform.conformance.target import parse_target
     from conform.families import family
     from conform.families.grbl.sender.job import load_job
     from conform.families.grbl.spec.load import load_grbl
@@ -44,24 +42,12 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
     fam = family("grbl")
     v = spec.variant(variant or fam.default_variant)
     lines = load_job(job, line_max=v.line_max, realtime=set(spec.realtime))
-    emulated = parse_target(target)[0] == "emu"
-    if not emulated and not allow_motion:
-        raise UserError(f"sending {job} to {target} moves the machine: add --allow-motion "
-                        "(nothing was sent)")
-    tgt, _ = fam.open_target(target if not emulated else f"emu:{v.id}", baud=baud,
-                             permissions=None)
-    try:
-        taped = RecordedTarget.open(tgt, record, {
-            "capture_method": "conform send (grbl reference streamer)", "variant": v.id,
-            "baud": baud, "sender_method": method, "target": target, "job": Path(job).name})
-    except BaseException:
-        tgt.close()
-        raise
-    try:
+    with sending_to(fam, target, v.id, job=job, job_lines=len(lines), baud=baud, record=record,
+                    allow_motion=allow_motion, metadata={
+                        "capture_method": "conform send (grbl reference streamer)",
+                        "sender_method": method}) as taped:
         stats = _stream(taped, lines, spec, v, method=method, job=job, quiet=quiet,
                         timeout=DEFAULT_TIMEOUT if timeout is None else timeout, target=target)
-    finally:
-        taped.close({"job_lines": len(lines)})
     _summary(stats, lines, target, v.id, method, v.rx_buffer, record)
 
 

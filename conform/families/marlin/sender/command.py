@@ -6,12 +6,11 @@ off: ``checks.halt``)."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import click
 
-from conform.conformance.recorded import RecordedTarget
+from conform.conformance.recorded import sending_to
 from conform.errors import LinkError, UserError
 
 DEFAULT_TIMEOUT = 10.0   # seconds with nothing from the unit (busy: processing counts) before the link is lost
@@ -20,7 +19,7 @@ DEFAULT_TIMEOUT = 10.0   # seconds with nothing from the unit (busy: processing 
 def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_motion: bool,
              record: str | None, timeout: float | None, quiet: bool = False, **_: Any) -> None:
     from conform.cli.progress import progress
-    from conform.conformance.target import HarnessError, parse_target
+    from conform.conformance.target import HarnessError
     from conform.families import family
     from conform.families.marlin.conformance.checks import halt
     from conform.families.marlin.sender.stream import Streamer, load_job
@@ -29,19 +28,9 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
     fam = family("marlin")
     v = fam.load_tables().variant(variant or fam.default_variant)
     lines = load_job(job, max_cmd_size=v.max_cmd_size)
-    emulated = parse_target(target)[0] == "emu"
-    if not emulated and not allow_motion:
-        raise UserError(f"sending {job} to {target} moves the machine: add --allow-motion "
-                        "(nothing was sent)")
-    tgt, _ = fam.open_target(f"emu:{v.id}" if emulated else target, baud=baud, permissions=None)
-    try:
-        taped = RecordedTarget.open(tgt, record, {
-            "capture_method": "conform send (Marlin reference streamer)", "variant": v.id,
-            "baud": baud, "target": target, "job": Path(job).name})
-    except BaseException:
-        tgt.close()
-        raise
-    try:
+    with sending_to(fam, target, v.id, job=job, job_lines=len(lines), baud=baud, record=record,
+                    allow_motion=allow_motion, metadata={
+                        "capture_method": "conform send (Marlin reference streamer)"}) as taped:
         with progress("conform send", quiet=quiet) as bar:
             task = bar.task("job lines", len(lines))
             streamer = Streamer(taped, lines, job=job,
@@ -53,8 +42,6 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
             except HarnessError as exc:
                 raise LinkError(f"{target}: link lost after {streamer.stats.ok} of {len(lines)} "
                                 f"job lines ({exc})", exit_code=1) from None
-    finally:
-        taped.close({"job_lines": len(lines)})
     click.echo(f"sent {st.sent} of {len(lines)} job lines to {target} ({v.id}): {st.ok} ok, "
                f"{st.resends} resent, in {st.seconds:.2f} s")
     if st.position:
