@@ -4,7 +4,7 @@ The engine (spec tooling, emulator adapter, conformance results and reports, cap
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
-one package (``conform.families.<name>``, its tables in ``<name>/spec/tables/``) registered in
+one package (``conform.families.<name>``, its tables in the top-level ``specs/<name>/``) registered in
 the ``conform.families`` entry point group. The engine reaches a family only through this
 registry (tests/test_family_boundary.py). See docs/architecture.md and
 docs/writing-a-family.md.
@@ -416,13 +416,18 @@ SPECS_ENV = "CONFORM_SPECS"
 def table_folder(name: str, package: str) -> Path:
     """The folder of family ``name``'s tables: ``$CONFORM_SPECS/<name>/`` when that exists (a
     modified copy to try), else the tables shipped inside ``package`` (its ``tables/`` data
-    folder, found through importlib.resources so a wheel install finds them too)."""
+    folder, found through importlib.resources: a wheel carries the top-level ``specs/<name>/``
+    there, setup.py), else, in a source checkout or an editable install, ``specs/<name>/`` beside
+    the package's top-level folder."""
     env = os.environ.get(SPECS_ENV)
     if env:
         override = Path(env) / name
         if override.is_dir():
             return override
-    return Path(str(files(package).joinpath("tables")))
+    shipped = Path(str(files(package).joinpath("tables")))
+    if shipped.is_dir():
+        return shipped
+    return Path(str(files(package.partition(".")[0]))).parent / "specs" / name
 
 
 ENTRY_POINT_GROUP = "conform.families"

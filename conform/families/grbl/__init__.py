@@ -1,7 +1,7 @@
-"""grbl 1.1f as a protocol family: tables in grbl/spec/tables/, a sans-I/O reference unit, the
+"""grbl 1.1f as a protocol family: tables in specs/grbl/, a sans-I/O reference unit, the
 conformance checks generated from the tables, traffic detection and capture analysis.
 
-Subpackages, as GVE's: ``spec`` (load and validate spec/tables), ``protocol`` (split a byte
+Subpackages, as GVE's: ``spec`` (load and validate specs/grbl), ``protocol`` (split a byte
 stream into lines and realtime bytes, classify what grbl sends; the g-code parser and its modal
 state), ``unit`` (the reference unit: model, planner, ``$`` commands, the text it sends, input
 pins, faults, control requests), ``conformance`` (checks, characterisation), ``analysis``

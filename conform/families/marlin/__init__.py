@@ -1,4 +1,4 @@
-"""Marlin 2.1 as a protocol family: tables in marlin/spec/tables/, a sans-I/O reference unit,
+"""Marlin 2.1 as a protocol family: tables in specs/marlin/, a sans-I/O reference unit,
 conformance checks graded per clause, traffic detection and capture analysis, check-sender.
 
 Rooms: ``spec`` (tables and their loader), ``protocol`` (checksums, framing, reading lines,

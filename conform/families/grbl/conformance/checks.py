@@ -1,11 +1,11 @@
-"""grbl conformance checks, generated from grbl/spec/tables and graded per clause.
+"""grbl conformance checks, generated from specs/grbl and graded per clause.
 
 The checks produce the engine's own result objects (:class:`CheckResult` in a
 :class:`TargetRun`), so ``conform run`` writes the same reports (results.json, index.html,
 summary.md, junit.xml) for grbl as for GVE. A check id reads
 ``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
 
-Groups: ``example`` (the documented exchanges, grbl/spec/tables/examples.toml), ``error`` (every
+Groups: ``example`` (the documented exchanges, specs/grbl/examples.toml), ``error`` (every
 code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x at each
 documented edge: lo, lo-1, hi, hi+1, a fraction, a stray letter, no number;
 :func:`setting_edges`), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),

@@ -2,7 +2,7 @@
 
 A check id reads ``<variant>/<source file>/<group>/<name>``, e.g.
 ``marlin-2.1/queue.cpp/checksum/comment-before-star``; its clause is the function of Marlin's
-source (spec/tables) whose behaviour it holds the unit to. Groups: ``line`` (numbers, M110,
+source (specs/marlin) whose behaviour it holds the unit to. Groups: ``line`` (numbers, M110,
 repeats), ``checksum``, ``reply`` (ok, unknown command), ``report`` (M105, M114, M115, M155),
 ``keepalive``, ``buffer`` (MAX_CMD_SIZE, the receive buffer emptied on an error, ADVANCED_OK),
 ``halt`` (M112 and the emergency parser), ``reset``, ``motion``.
