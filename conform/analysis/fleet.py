@@ -101,10 +101,10 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any],
         return row
     _fill(row, a, machine_of(p, a.raw.metadata), a.raw.metadata.get("conform.session", {}))
     if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
-        for name, path in a.tables.items():
-            d = Path(parquet_dir) / name / f"machine={_safe(row['machine'])}"
+        for name, written in a.tables.items():
+            d = sink.dir / name / f"machine={_safe(row['machine'])}"
             d.mkdir(parents=True, exist_ok=True)
-            path.replace(d / path.name)
+            written.replace(d / written.name)
     _session_report(row, a, report_dir, default_family().name)
     return row
 
@@ -368,7 +368,7 @@ def fleet_datasets(parquet_dir: str | Path) -> list[str]:
     """The datasets a fleet run wrote into ``parquet_dir`` (each table's folder, a family's
     under its name), as paths to say: ``t/exchanges``, never ``t//exchanges``."""
     root = Path(parquet_dir)
-    out = []
+    out: list[str] = []
     for d in sorted(q for q in root.glob("*") if q.is_dir() and not q.name.startswith(".")):
         subs = [q for q in sorted(d.iterdir()) if q.is_dir() and not q.name.startswith(("machine=", "."))]
         out.extend(str(q) for q in subs) if subs else out.append(str(d))

@@ -145,7 +145,7 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
         for note in r.notes:
             if note.startswith("hint: "):
                 echo(f"  {note}")
-        told = set()
+        told: set[int] = set()
         for cause in (g for g in grouped if g.checks[0].target == r.target):
             echo(f"  FAIL ×{len(cause.checks)} {cause.sentence()}")
             told.update(id(c) for c in cause.checks)

@@ -20,7 +20,7 @@ def _console() -> Console:
 _JSON = json_option("the table's rows")
 
 
-def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json: bool,
+def _emit(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]], as_json: bool,
           key: str, **extra: Any) -> None:
     """Print rows as a rich table, or as ``{key: [{column: value}], ...extra}`` JSON."""
     if as_json:

@@ -314,7 +314,7 @@ class LinkTarget(Target):
     def set_input(self, port: int, bit: int, active: bool) -> None:
         """Inputs of an emulator behind the link, through its control socket (``inputs``)."""
         if self.inputs is None:
-            super().set_input(port, bit, active)
+            return super().set_input(port, bit, active)
         from conform.emulator.control import send_control
 
         word = "press" if active else "release"

@@ -42,7 +42,7 @@ class LocalControl:
     ever touched by the thread that owns it."""
 
     def __init__(self) -> None:
-        self.requests: queue.SimpleQueue = queue.SimpleQueue()
+        self.requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]] = queue.SimpleQueue()
 
     def ask(self, line: str, timeout: float = 5.0) -> str:
         reply: queue.SimpleQueue[str] = queue.SimpleQueue()

@@ -15,6 +15,7 @@ from typing import Any
 import click
 
 from conform.errors import UserError
+from conform.link.endpoint import Endpoint
 from conform.stops import STOP_SIGNALS
 
 
@@ -81,7 +82,8 @@ def run_until_signal(emulator: Any, quiet: bool = False) -> None:
             signal.signal(s, handler)
 
 
-def open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any]:
+def open_endpoint(tcp_port: int | None, link_path: str | None
+                  ) -> tuple[Endpoint, Callable[[], Endpoint]]:
     if tcp_port is not None:
         from conform.link.tcp import TcpServerEndpoint
 
@@ -93,11 +95,11 @@ def open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any
     from conform.link.pty import PtyEndpoint
 
     try:
-        endpoint = PtyEndpoint(link=link_path)
+        pty = PtyEndpoint(link=link_path)
     except OSError as exc:
         raise UserError(f"cannot create a pty{' at ' + link_path if link_path else ''}: "
                         f"{exc.strerror or exc}") from None
-    return endpoint, lambda: PtyEndpoint(link=link_path)
+    return pty, lambda: PtyEndpoint(link=link_path)
 
 
 @dataclass

@@ -49,6 +49,12 @@ class SansIOUnit(Protocol):
         """When the unit next has something to do (None: only when bytes arrive)."""
 
 
+class ControlRequests(Protocol):
+    """Where an emulator's loop takes its control requests: (line, queue for the reply)."""
+
+    requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]]
+
+
 class ControlServer:
     """A unix socket that accepts one-line control requests (see conform.emulator.control).
 
@@ -180,7 +186,7 @@ class Emulator:
         baud: int | None = None,
         injector: FaultInjector | None = None,
         recorder: Any = None,
-        control: ControlServer | None = None,
+        control: ControlRequests | None = None,
         reopen: Callable[[], Any] | None = None,
         report: Callable[[str], None] | None = None,
         clock: Callable[[], float] = time.monotonic,

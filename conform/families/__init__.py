@@ -204,8 +204,8 @@ class Family:
         if mutant is not None and mutant not in self.mutants():
             known = ", ".join(self.mutants()) or "none"
             raise UserError(f"target {text!r}: {self.name} has no mutant {mutant!r} (known: {known})")
-        options = {"mutant": mutant} if mutant else {}
-        return EmuTarget(lambda: self.make_unit(vid, **options), text if what else f"emu:{vid}",
+        return EmuTarget(lambda: self.make_unit(vid, mutant=mutant) if mutant else self.make_unit(vid),
+                         text if what else f"emu:{vid}",
                          baud=baud), vid
 
     def identify(self, target: Any) -> tuple[str, str]:

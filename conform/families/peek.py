@@ -5,6 +5,7 @@ they read a capture whole)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 from conform.families import Detection, divert
@@ -22,7 +23,7 @@ def peek_capture(path: str, limit: int = PEEK_BYTES, *, bytes_too: bool = False
 
     topic_dir = {t: d for d, t in DIRECTION_TOPIC.items()}
     data = {"host": bytearray(), "unit": bytearray()}
-    status = ScanStatus(path)
+    status = ScanStatus(Path(path))
     seen = 0
     for channel, rec in iter_messages(status):
         if status.metadata.get("conform.session", {}).get("variant") and not bytes_too:
@@ -77,7 +78,7 @@ def detect_or_empty(path: str, variant: str | None) -> tuple[Detection | None, b
 def _intact(path: str) -> bool:
     from conform.capture.scan import ScanStatus, iter_messages
 
-    status = ScanStatus(path)
+    status = ScanStatus(Path(path))
     for _ in iter_messages(status):
         pass
     return status.clean

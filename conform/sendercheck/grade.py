@@ -51,7 +51,7 @@ def comparison_json(c: Any) -> dict[str, Any] | None:
     """A family's comparison of the job with the truth, for results.json."""
     if c is None:
         return None
-    facts = dataclasses.asdict(c) if dataclasses.is_dataclass(c) else {}
+    facts = dataclasses.asdict(c) if dataclasses.is_dataclass(c) and not isinstance(c, type) else {}
     return {"summary": c.summary(), **facts}
 
 
