@@ -7,9 +7,13 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.conformance.target import Target
+    from conform.families import Family
 
 
 @dataclass
@@ -66,12 +70,15 @@ def report(obs: Sequence[Observation], output: str, echo: Callable[[str], Any] =
          + (": " + ", ".join(differ) if differ else ""))
 
 
-Probe = Callable[[Any, str, list[Observation]], Any]
+Probe = Callable[["Target", str, list[Observation]], object]
 """probe(target, variant, out): appends each Observation to ``out`` as it is found."""
 
+ProbeHooks = tuple[Probe, Callable[["Target"], str], Sequence[str]]
+"""``Family.characterize_probes``: (probe, stop(target) halting the unit, the items probed)."""
 
-def characterize_target(fam: Any, target_text: str, output: str, variant: str | None, *,
-                        baud: int, probe: Probe, stop: Callable[[Any], str],
+
+def characterize_target(fam: Family, target_text: str, output: str, variant: str | None, *,
+                        baud: int, probe: Probe, stop: Callable[[Target], str],
                         items: Sequence[str], title: str,
                         echo: Callable[[str], Any] = print) -> None:
     """``conform characterize`` for a family whose probes yield observations: open the target

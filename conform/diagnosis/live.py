@@ -14,7 +14,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, Protocol
 
 REFRESH_S = 0.25
 TAP_MAX = 200_000           # reads kept for the view; beyond, the oldest are let go
@@ -37,6 +37,16 @@ class LiveState:
     t_line: float | None = None          # when the last line was sent
     t_answer: float | None = None        # when the last answer came
     events: deque[str] = field(default_factory=lambda: deque(maxlen=8))
+
+
+class LiveMonitor(Protocol):
+    """A family's live monitor (``Family.live_monitor``): fed every read as it comes, it keeps
+    ``state`` current."""
+
+    state: LiveState
+
+    def feed(self, direction: str, data: bytes, t: float) -> None:
+        """Bytes read from ``direction`` (``host`` or ``unit``) at ``t``."""
 
 
 def so_far(s: LiveState, now: float) -> str:
@@ -63,7 +73,7 @@ class LiveView:
         self.variant = variant
         self.title = title
         self.tap: deque[tuple[str, bytes, float]] = deque(maxlen=TAP_MAX)
-        self.monitor: Any = None
+        self.monitor: LiveMonitor | Literal[False] | None = None  # False: the family has none
         self.family = ""
         self._seen = {"host": bytearray(), "unit": bytearray()}
         self._held: list[tuple[str, bytes, float]] = []
