@@ -16,9 +16,8 @@ from conform.families import Detection, Family, VariantInfo
 
 
 class MarlinFamily(Family):
-    """Marlin's hooks. It answers both the engine's older hook set (``run_targets``) and the
-    Family base class's (``plan_checks``, ``runner(options=, permissions=)``,
-    ``diff_variants``), so it plugs into either."""
+    """Marlin's hooks (the Family base class's: ``plan_checks``, ``runner``, ``mutants``,
+    ``diff_variants``, ...)."""
 
     name = "marlin"
     title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
@@ -57,8 +56,7 @@ class MarlinFamily(Family):
                **family_values: Any) -> Any:
         from conform.families.marlin.conformance.checks import MarlinRunner
 
-        motion = bool(permissions.allow_motion) if permissions is not None else \
-            bool(family_values.pop("allow_motion", False))
+        motion = permissions is not None and permissions.allow_motion
         return MarlinRunner(target, variant, allow_motion=motion, options=options)
 
     def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
@@ -87,16 +85,6 @@ class MarlinFamily(Family):
         va, vb = spec.variant(a), spec.variant(b)
         rows = diff(va, vb)
         return (f"{a} → {b}: {len(rows)} differences", ["what", a, b, "source"], rows)
-
-    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
-        from conform.families.marlin.conformance.checks import run_checks
-
-        return run_checks(target, variant, **options)
-
-    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
-        from conform.families.marlin.conformance.checks import run_targets
-
-        return run_targets(targets, variant, **options)
 
     def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
         return None   # recorded raw; lines are paired when the capture is analysed
