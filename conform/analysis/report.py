@@ -37,7 +37,7 @@ def _clean(x: Any, finite: bool = True) -> Any:
     return x
 
 
-def findings_document(a: Any) -> dict[str, Any]:
+def findings_document(a: Any) -> dict[str, object]:
     return _clean({
         "capture": a.path,
         "variant": a.variant.id,
@@ -64,7 +64,7 @@ def fmt_ms(v: Any) -> str:
     return "–" if v is None or v != v else f"{v * 1000:.3f}"
 
 
-def base_context(a: Any) -> dict[str, Any]:
+def base_context(a: Any) -> dict[str, object]:
     """What every analysis report's templates get: the analysis ``a``, its metrics ``m``
     (plain, non-finite kept), ``findings``, their number per severity and per kind, the
     notes and ``ms`` (seconds as milliseconds)."""
@@ -87,8 +87,8 @@ def report_folder(out_dir: str | Path) -> Path:
     return d
 
 
-def render_report(out_dir: str | Path, templates: Path, context: dict[str, Any],
-                  document: dict[str, Any]) -> dict[str, Path]:
+def render_report(out_dir: str | Path, templates: Path, context: dict[str, object],
+                  document: dict[str, object]) -> dict[str, Path]:
     """A family's report: ``index.html`` and ``summary.md`` from its ``templates`` folder
     (``report.html.j2``, ``summary.md.j2``) with ``context`` (``base_context`` and its own
     keys), and ``document`` as ``findings.json``."""

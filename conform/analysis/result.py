@@ -13,6 +13,8 @@ from dataclasses import KW_ONLY, asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from conform.jsondoc import JsonObject
+
 SERIOUS = ("hazard", "error")
 """The severities ``conform analyze`` lists one by one under the findings line."""
 
@@ -27,9 +29,9 @@ class Finding:
     severity: str         # info | warning | error | hazard
     message: str
     clause: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, object] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """Its fields, ``extra``'s keys in place of ``extra`` (the ``--json`` shape)."""
         d = asdict(self)
         d.update(d.pop("extra"))
@@ -54,7 +56,7 @@ class ResultBase:
     complete: bool = True
     if TYPE_CHECKING:   # the family's fields, after its own records
         findings: list[Finding]
-        metrics: dict[str, Any]
+        metrics: JsonObject
 
     def kinds(self) -> dict[str, int]:
         """How many findings of each kind (all of them, listed or not)."""
@@ -63,7 +65,7 @@ class ResultBase:
     def hazards(self) -> list[Finding]:
         return [f for f in self.findings if f.severity == "hazard"]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         """``findings.json``: the analysis as a document, named by its family."""
         return {"format": f"conform-{self.family}-analysis/1", "path": self.path,
                 "family": self.family, "variant": self.variant, "detected": self.detected,
@@ -100,7 +102,7 @@ class ResultBase:
         return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
     def fleet_row_of(self, exchanges: int, exchanges_per_s: float,
-                     rtt_ms: Sequence[float | None], **own: Any) -> dict[str, Any]:
+                     rtt_ms: Sequence[float | None], **own: Any) -> dict[str, object]:
         """A fleet row (``fleet_row``): the engine's columns from the metrics, ``exchanges``
         and their rate, the p50/p95/p99/max round trip in ms, then the family's ``own``."""
         p50, p95, p99, top = rtt_ms

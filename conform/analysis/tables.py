@@ -147,7 +147,7 @@ class ParquetStream:
     capture whose earliest byte comes later in the file, rewritten a row group at a time."""
 
     def __init__(self, out_dir: str | Path, only: tuple[str, ...] | None = None,
-                 files: dict[str, Path] | None = None, const: dict[str, Any] | None = None,
+                 files: dict[str, Path] | None = None, const: dict[str, object] | None = None,
                  part: Path | None = None) -> None:
         """``only``: the tables to write (all by default); ``files``: a path per table
         instead of ``DIR/NAME.parquet``; ``part``: every table as ``DIR/NAME/part`` instead
@@ -193,7 +193,7 @@ class ParquetStream:
 
     def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int,
               frames_frame: Callable[..., pd.DataFrame],
-              host_columns: dict[str, Any] | None = None) -> None:
+              host_columns: dict[str, object] | None = None) -> None:
         """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``);
         ``frames_frame(lines, t0, base=, arrow_text=)`` is the family's frames table, and
         ``host_columns`` the columns it adds to the host lines' one."""

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from conform.cli.params import VARIANT, echo_json, json_option
+from conform.jsondoc import JsonObject
 
 
 def _console() -> Console:
@@ -56,7 +57,7 @@ def list_cmd(as_json: bool) -> None:
     """
     from conform.families import families
 
-    doc: dict[str, Any] = {"variants": [], "families": {}}
+    doc: JsonObject = {"variants": [], "families": {}}
     for fam in families():
         title, columns, rows = fam.variant_table(pretty=not as_json)
         if not as_json:

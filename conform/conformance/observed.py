@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from conform.errors import UserError
+from conform.jsondoc import JsonObject
 
 if TYPE_CHECKING:
     from conform.conformance.target import Target
@@ -112,7 +113,7 @@ def characterize_target(fam: Family, target_text: str, output: str, variant: str
     report(obs, output, echo)
 
 
-def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
+def diff_observed(a: str, doc_a: JsonObject, b: str, doc_b: JsonObject
                   ) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
     """Two observation profiles item by item: (notes on partial ones, rows (item, a, b) that
     differ, the line when none does)."""
@@ -125,7 +126,7 @@ def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
     oa, ob = doc_a.get("observed", {}), doc_b.get("observed", {})
     names = list(dict.fromkeys([*oa, *ob, *_left(doc_a), *_left(doc_b)]))
 
-    def shown(doc: dict[str, Any], obs: dict[str, Any], name: str) -> Any:
+    def shown(doc: JsonObject, obs: JsonObject, name: str) -> Any:
         if name in obs:
             return obs[name]
         return "(not answered)" if name in _left(doc) else "(absent)"
@@ -135,6 +136,6 @@ def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
     return notes, rows, "same observations"
 
 
-def _left(doc: dict[str, Any]) -> list[str]:
+def _left(doc: JsonObject) -> list[str]:
     left = doc.get("unanswered") if doc.get("partial") is True else None
     return [str(x) for x in left] if isinstance(left, list) else []

@@ -73,7 +73,7 @@ def list_checks(fam: Any, targets: Sequence[str], variant: str | None, *,
                 profile: str = "quick", patterns: Sequence[str] = (), matrix: bool = False,
                 replay: str | None = None, allow_motion: bool = False,
                 max_steps: int | None = None, allow_eeprom: bool = False,
-                no_machine: bool = False, **family_values: Any) -> list[dict[str, Any]]:
+                no_machine: bool = False, **family_values: Any) -> list[dict[str, object]]:
     """``conform run --list``: the checks each target would get, without running them."""
     plan = _Plan(fam, targets, variant, matrix=matrix, replay=replay, seed=0,
                  allow_motion=allow_motion, max_steps=max_steps, allow_eeprom=allow_eeprom)
@@ -95,7 +95,7 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
                 allow_eeprom: bool = False, no_machine: bool = False,
                 inputs_control: str | None = None,
                 announce: Callable[[str], None] | None = None, **family_values: Any
-                ) -> tuple[list[TargetRun], list[dict[str, Any]]]:
+                ) -> tuple[list[TargetRun], list[dict[str, object]]]:
     """Run ``fam``'s checks on each target; (runs, mutant report). ``display`` shows progress:
     ``display.task(name, total)`` gives a task with ``update(advance=, step=)`` and
     ``completed`` (conform.cli.progress)."""
@@ -141,7 +141,7 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
                 break
         finally:
             target.close()
-    mutant_report: list[dict[str, Any]] = []
+    mutant_report: list[dict[str, object]] = []
     if mutants and aborted is None:
         variants = [r.variant for r in runs] or [fam.default_variant]
         task = display.task("mutants", fam.mutant_count(variants))

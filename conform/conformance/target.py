@@ -123,7 +123,7 @@ class Target(ABC):
     def close(self) -> None:  # noqa: B027 - nothing to release by default
         pass
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> dict[str, object]:
         """Internal state for reports (emulator only)."""
         return {}
 

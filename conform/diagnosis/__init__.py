@@ -44,7 +44,7 @@ class Diagnosis:
         c = self.causes[0]
         return f"Most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         f = self.facts
         return {
             "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,

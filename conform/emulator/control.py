@@ -69,7 +69,7 @@ class FaultControl:
     def __init__(self, faults: Any) -> None:
         self.faults = faults
 
-    def state(self, unit: Any) -> dict[str, Any]:
+    def state(self, unit: Any) -> dict[str, object]:
         return {}
 
     def verb(self, unit: Any, cmd: str, args: list[str], t: float) -> str | None:

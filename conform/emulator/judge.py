@@ -194,7 +194,7 @@ class Verdict:
     def agrees(self) -> bool:
         return not self.differences
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"source": self.source, "variant": self.variant, "agrees": self.agrees,
                 "host_lines": self.host_lines, "recorded_lines": self.recorded_lines,
                 "reference_lines": self.reference_lines, "same": self.same,

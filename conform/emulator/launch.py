@@ -113,10 +113,10 @@ class ServedUnit:
     injector: Any = None                     # None: the engine's, from --faults
     control_handler: Any = None              # the family's control requests (None: refused)
     wrap_reopen: Callable[[Callable[[], Any]], Callable[[], Any]] | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, object] = field(default_factory=dict)
     decode: bool = True                      # decode frames while recording (a live decoder)
     backdate: bool = True                    # recorder dates a chunk's first byte a wire time early
-    end_counts: Callable[[], dict[str, Any]] | None = None   # extra counts at the capture's end
+    end_counts: Callable[[], dict[str, object]] | None = None   # extra counts at the capture's end
     finish: Callable[[Callable[[str], None]], None] | None = None   # after stopping
     stopped_note: Callable[[], str] | None = None   # added to the "stopped (...)" line
 

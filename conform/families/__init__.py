@@ -573,7 +573,7 @@ def unknown_variant(variant_id: str, family_name: str) -> str:
     return f"unknown variant {variant_id!r} (known: {known})"
 
 
-def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = None
+def detect_family(host: bytes, unit: bytes, metadata: dict[str, object] | None = None
                   ) -> Detection:
     """The family whose traffic this is: the capture's declared variant first, then the bytes.
 
@@ -599,7 +599,7 @@ def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = No
 UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the default family's analyser
 
 
-def divert(host: bytes, unit: bytes, metadata: dict[str, Any], variant: str | None
+def divert(host: bytes, unit: bytes, metadata: dict[str, object], variant: str | None
            ) -> Detection | None:
     """Which family other than the default one should analyse this traffic (None: the default
     family's analyser, which also reads damaged or unrecognised captures).

@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 from conform.families import Detection, divert
+from conform.jsondoc import JsonObject
 
 PEEK_BYTES = 65536
 
 
 def peek_capture(path: str, limit: int = PEEK_BYTES, *, bytes_too: bool = False
-                 ) -> tuple[bytes, bytes, dict[str, Any]]:
+                 ) -> tuple[bytes, bytes, JsonObject]:
     """The first ``limit`` bytes of each direction and the session metadata of a capture
     (only the metadata when it names a variant, unless ``bytes_too``)."""
     from conform.capture.batch import payload_bytes
@@ -49,7 +49,7 @@ def detect_capture(path: str, variant: str | None) -> Detection | None:
     return peek_family(path, variant)[0]
 
 
-def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[str, Any]]:
+def peek_family(path: str, variant: str | None) -> tuple[Detection | None, JsonObject]:
     """:func:`detect_capture` and the session metadata it saw (empty when it had none)."""
     if variant:
         return divert(b"", b"", {}, variant), {}

@@ -63,7 +63,7 @@ class Verdict:
     evidence: list[str] = field(default_factory=list)
     expected: str = ""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         d = dict(self.__dict__)
         d["grade"] = self.grade.value
         return d
@@ -122,7 +122,7 @@ class Family:
     # write truth.json) and ``comparison`` (the job against what the unit took: ``summary()``)
     settle: Callable[[Any, Any, Any], None]
     analyze: Callable[[Any, str], Any]  # (capture path, variant id) -> the capture's analysis
-    truth_findings: Callable[[Any], list[dict[str, Any]]]  # session -> ground-truth findings
+    truth_findings: Callable[[Any], list[dict[str, object]]]  # session -> ground-truth findings
     units: Callable[[list[str]], list[Any]] = list  # job lines -> the units actions count
     # job lines -> how many are moves its unit executes (a --job with none is another
     # family's: a usage error); None: every unit counts
@@ -136,7 +136,7 @@ class Family:
     # (reopen, unit, injector, ground truth) -> what the emulator calls to reopen the port
     reopen: Callable[[Callable[[], Any], Any, Any, Any], Callable[[], Any]] | None = None
     facts: Callable[[Any], Any] = lambda s: s  # session -> what the rules read
-    end_counts: Callable[[Any], dict[str, Any]] = lambda _unit: {}  # capture's closing counts
+    end_counts: Callable[[Any], dict[str, object]] = lambda _unit: {}  # capture's closing counts
     decode: bool = True  # decode frames while recording (the family's live decoder)
     # the recording dates an answer's first byte a wire time before the emulator wrote it (as
     # on a line); False: when it was written (what the family's analyser and rules expect)

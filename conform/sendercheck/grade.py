@@ -47,7 +47,7 @@ def _shapes(fam: Any) -> Family:
     return shapes
 
 
-def comparison_json(c: Any) -> dict[str, Any] | None:
+def comparison_json(c: Any) -> dict[str, object] | None:
     """A family's comparison of the job with the truth, for results.json."""
     if c is None:
         return None
@@ -61,9 +61,9 @@ class ScenarioResult:
     title: str
     verdicts: list[Verdict]
     session: Session
-    findings: list[dict[str, Any]] = field(default_factory=list)
+    findings: list[dict[str, object]] = field(default_factory=list)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         s = self.session
         return {
             "scenario": self.name, "title": self.title, "exit_code": s.exit_code,
@@ -91,7 +91,7 @@ class CheckResults:
         return [v for s in self.scenarios for v in s.verdicts]
 
     @property
-    def findings(self) -> list[dict[str, Any]]:
+    def findings(self) -> list[dict[str, object]]:
         return [f for s in self.scenarios for f in s.findings]
 
     @property
@@ -125,7 +125,7 @@ class CheckResults:
                          self.started, self.duration, self.checks(),
                          aborted=self.interrupted or None)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"command": shlex.join(self.command), "variant": self.variant,
                 "family": self.family, "duration_s": round(self.duration, 3),
                 "exit_code": self.exit_code, "counts": self.counts(),
@@ -136,7 +136,7 @@ class CheckResults:
                 "checks": [c.to_json() for c in self.checks()]}
 
 
-def session_findings(s: Session) -> list[dict[str, Any]]:
+def session_findings(s: Session) -> list[dict[str, object]]:
     """Every finding of a scenario: the analyser's (the wire) and the ground truth's."""
     out = []
     for f in s.findings:

@@ -54,7 +54,7 @@ class Session:
     duration: float = 0.0
     timeout: float = 0.0
     truth: Any = field(default_factory=dict)  # the ground truth as written to truth.json
-    events: list[dict[str, Any]] = field(default_factory=list)  # the scenario's requests
+    events: list[dict[str, object]] = field(default_factory=list)  # the scenario's requests
     analysis: Any = None
     analysis_error: str = ""
     comparison: Any = None  # the family's job-against-truth comparison (``summary()``)
