@@ -14,11 +14,17 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    import jinja2
+
+    from conform.analysis.result import Reported
+    from conform.families import AnalysisResult
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -47,7 +53,7 @@ def findings_document(a: Any) -> dict[str, object]:
     })
 
 
-def _env(*folders: Path) -> Any:
+def _env(*folders: Path) -> jinja2.Environment:
     """Templates from ``folders`` (a family's) first, then the engine's and the shared
     pieces."""
     import jinja2
@@ -60,11 +66,11 @@ def _env(*folders: Path) -> Any:
                               trim_blocks=True, lstrip_blocks=True)
 
 
-def fmt_ms(v: Any) -> str:
+def fmt_ms(v: float | None) -> str:
     return "–" if v is None or v != v else f"{v * 1000:.3f}"
 
 
-def base_context(a: Any) -> dict[str, object]:
+def base_context(a: Reported) -> dict[str, object]:
     """What every analysis report's templates get: the analysis ``a``, its metrics ``m``
     (plain, non-finite kept), ``findings``, their number per severity and per kind, the
     notes and ``ms`` (seconds as milliseconds)."""
@@ -102,9 +108,9 @@ def render_report(out_dir: str | Path, templates: Path, context: dict[str, objec
     return paths
 
 
-def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
+def write_report(a: AnalysisResult, out_dir: str | Path) -> dict[str, Path]:
     """The report of any family's analysis (its ``write_report``)."""
-    return a.write_report(out_dir)
+    return a.write_report(str(out_dir))
 
 
 def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None

@@ -11,7 +11,7 @@ import json
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import KW_ONLY, asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from conform.jsondoc import JsonObject
 
@@ -36,6 +36,20 @@ class Finding:
         d = asdict(self)
         d.update(d.pop("extra"))
         return d
+
+
+class Reported(Protocol):
+    """What the engine's report pieces read of any family's analysis: its findings, metrics
+    (``finding_counts``...) and notes (a plot that failed adds one)."""
+
+    @property
+    def findings(self) -> Sequence[Finding]: ...
+
+    @property
+    def metrics(self) -> JsonObject: ...
+
+    @property
+    def notes(self) -> list[str]: ...
 
 
 @dataclass

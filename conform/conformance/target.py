@@ -137,7 +137,7 @@ class Target(ABC):
         """Can the harness switch this unit's inputs (``set_input``)?"""
         return self.emulated
 
-    def prepare(self, script: Any) -> None:
+    def prepare(self, script: object) -> None:
         """Reach the state ``script`` starts from (its reset step): by default a reset."""
         self.reset()
 

@@ -23,9 +23,12 @@ import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.emulator.serve import SansIOUnit
 
 GAP = 0.2
 """Seconds between events whose transcript line gives no time."""
@@ -135,7 +138,7 @@ def read_transcript(path: str | Path) -> Transcript:
     return parse_text(text, p.name)
 
 
-def play(unit: Any, transcript: Transcript, settle: float = SETTLE) -> list[tuple[float, bytes]]:
+def play(unit: SansIOUnit, transcript: Transcript, settle: float = SETTLE) -> list[tuple[float, bytes]]:
     """Every host event written into ``unit`` at its time; what the unit wrote, with times.
 
     What the unit says before the first host event (its banner) is dropped when the recording
@@ -152,7 +155,7 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE) -> list[tupl
     return out
 
 
-def _until(unit: Any, t: float, out: list[tuple[float, bytes]]) -> None:
+def _until(unit: SansIOUnit, t: float, out: list[tuple[float, bytes]]) -> None:
     for _ in range(100_000):
         nxt = unit.next_deadline()
         if nxt is None or nxt > t or not math.isfinite(nxt):
@@ -251,7 +254,7 @@ def compare(transcript: Transcript, reference_out: Iterable[tuple[float, bytes]]
                    len(reference), same, diffs)
 
 
-def judge(transcript: Transcript, unit: Any, mask: Callable[[str], str], variant: str,
+def judge(transcript: Transcript, unit: SansIOUnit, mask: Callable[[str], str], variant: str,
           settle: float = SETTLE) -> Verdict:
     return compare(transcript, play(unit, transcript, settle), mask, variant)
 
