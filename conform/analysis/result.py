@@ -15,6 +15,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from conform.jsondoc import JsonObject
 
+if TYPE_CHECKING:
+    from conform.analysis.rawread import ReadStatus
+
 SERIOUS = ("hazard", "error")
 """The severities ``conform analyze`` lists one by one under the findings line."""
 
@@ -116,7 +119,7 @@ class ResultBase:
         return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
     def fleet_row_of(self, exchanges: int, exchanges_per_s: float,
-                     rtt_ms: Sequence[float | None], **own: Any) -> dict[str, object]:
+                     rtt_ms: Sequence[float | None], **own: object) -> dict[str, object]:
         """A fleet row (``fleet_row``): the engine's columns from the metrics, ``exchanges``
         and their rate, the p50/p95/p99/max round trip in ms, then the family's ``own``."""
         p50, p95, p99, top = rtt_ms
@@ -127,7 +130,7 @@ class ResultBase:
                 "rtt_p99_ms": p99, "rtt_max_ms": top, **own}
 
 
-    def add_notes(self, notes: Sequence[str], status: Any) -> None:
+    def add_notes(self, notes: Sequence[str], status: ReadStatus) -> None:
         """``notes`` from reading the capture, then whether the file was whole (``status``:
         conform.analysis.rawread's ``complete`` and ``problem``)."""
         self.notes += notes
@@ -136,7 +139,7 @@ class ResultBase:
             self.notes.append(f"capture incomplete: {status.problem}")
 
 
-def capture_variant(metadata: Mapping[str, Any], asked: str | None, known: Collection[str],
+def capture_variant(metadata: JsonObject, asked: str | None, known: Collection[str],
                     default: str, title: str) -> tuple[str, list[str]]:
     """The variant to analyse a capture as: the one ``asked`` for, else the one its session
     metadata names, else ``default``; a name ``known`` lacks falls back to ``default`` with a

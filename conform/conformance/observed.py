@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from conform.errors import UserError
 from conform.jsondoc import JsonObject
@@ -20,8 +20,8 @@ if TYPE_CHECKING:
 @dataclass
 class Observation:
     name: str
-    table: Any
-    observed: Any
+    table: object      # what the tables say
+    observed: object   # what the unit did
     evidence: str
 
     @property
@@ -29,7 +29,7 @@ class Observation:
         return self.observed == self.table
 
 
-def _toml(x: Any) -> str:
+def _toml(x: object) -> str:
     if isinstance(x, bool):
         return "true" if x else "false"
     if isinstance(x, int):
@@ -61,7 +61,7 @@ def _key(name: str) -> str:
     return name if name.replace("_", "").isalnum() else _toml(name)
 
 
-def report(obs: Sequence[Observation], output: str, echo: Callable[[str], Any] = print) -> None:
+def report(obs: Sequence[Observation], output: str, echo: Callable[[str], object] = print) -> None:
     """One line per item (``=`` as the tables say, ``!`` not), then the count that differ."""
     for o in obs:
         mark = "=" if o.same else "!"
@@ -81,7 +81,7 @@ ProbeHooks = tuple[Probe, Callable[["Target"], str], Sequence[str]]
 def characterize_target(fam: Family, target_text: str, output: str, variant: str | None, *,
                         baud: int, probe: Probe, stop: Callable[[Target], str],
                         items: Sequence[str], title: str,
-                        echo: Callable[[str], Any] = print) -> None:
+                        echo: Callable[[str], object] = print) -> None:
     """``conform characterize`` for a family whose probes yield observations: open the target
     (``emu:VARIANT[:MUTANT]`` or a port) and probe, the unit halted by ``stop`` however the run
     ends; then write the profile and print it. Stopped by a signal, it writes what was found
@@ -114,7 +114,7 @@ def characterize_target(fam: Family, target_text: str, output: str, variant: str
 
 
 def diff_observed(a: str, doc_a: JsonObject, b: str, doc_b: JsonObject
-                  ) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+                  ) -> tuple[list[str], list[tuple[str, object, object]], str]:
     """Two observation profiles item by item: (notes on partial ones, rows (item, a, b) that
     differ, the line when none does)."""
     notes = []
@@ -126,7 +126,7 @@ def diff_observed(a: str, doc_a: JsonObject, b: str, doc_b: JsonObject
     oa, ob = doc_a.get("observed", {}), doc_b.get("observed", {})
     names = list(dict.fromkeys([*oa, *ob, *_left(doc_a), *_left(doc_b)]))
 
-    def shown(doc: JsonObject, obs: JsonObject, name: str) -> Any:
+    def shown(doc: JsonObject, obs: JsonObject, name: str) -> object:
         if name in obs:
             return obs[name]
         return "(not answered)" if name in _left(doc) else "(absent)"

@@ -15,10 +15,13 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from conform.conformance.results import LogEntry
 from conform.errors import LinkError, UserError
+
+if TYPE_CHECKING:
+    from conform.link.endpoint import Endpoint
 
 DEFAULT_TIMEOUT = 0.5
 
@@ -299,7 +302,7 @@ class LinkTarget(Target):
 
     emulated = False
 
-    def __init__(self, endpoint: Any, name: str, guard: Guard | None, baud: int) -> None:
+    def __init__(self, endpoint: Endpoint, name: str, guard: Guard | None, baud: int) -> None:
         super().__init__(guard)
         self.endpoint = endpoint
         self.name = name

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from conform.diagnosis.causes import Cause, find_stalls, rank
 from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
@@ -99,7 +99,7 @@ def _link_events(raw: RawCapture, t0: float) -> list[Event]:
     return out
 
 
-def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
+def diagnose(path: str, *, variant: str | None = None, analysis: AnalysisResult | None = None,
              family: str | None = None) -> Diagnosis:
     """Diagnose one capture file (``analysis``: its family's analysis, when already made;
     ``family``: its family's name, when already known)."""

@@ -14,7 +14,12 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+if TYPE_CHECKING:
+    from rich.console import Console, RenderableType
+
+    from conform.capture.recorder import Recorder
 
 REFRESH_S = 0.25
 TAP_MAX = 200_000           # reads kept for the view; beyond, the oldest are let go
@@ -67,7 +72,7 @@ def so_far(s: LiveState, now: float) -> str:
 
 
 class LiveView:
-    def __init__(self, recorder: Any, variant: str | None, *, console: Any = None,
+    def __init__(self, recorder: Recorder, variant: str | None, *, console: Console | None = None,
                  title: str = "") -> None:
         self.recorder = recorder
         self.variant = variant
@@ -97,7 +102,7 @@ class LiveView:
             chunk(direction, data, t, t_first)
             append((direction, data, t))
 
-        rec.chunk = tapped
+        rec.chunk = tapped  # type: ignore[method-assign]  # the view taps every chunk
 
     def _choose(self, direction: str, data: bytes, t: float) -> None:
         from conform.families import detect_family, family, family_for_variant
@@ -134,7 +139,7 @@ class LiveView:
             elif self.monitor is None:
                 self._choose(*item)
 
-    def renderable(self) -> Any:
+    def renderable(self) -> RenderableType:
         from rich.table import Table
 
         now = time.time()

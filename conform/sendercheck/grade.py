@@ -19,16 +19,19 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.conformance.results import CheckResult, TargetRun
 from conform.errors import UserError
 from conform.families import default_family as registered_default
 from conform.families import family_for_variant
-from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
+from conform.sendercheck.family import ERROR, FAIL, MUST, Comparison, Family, Verdict
 from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
 from conform.stops import interrupted_by
+
+if TYPE_CHECKING:
+    from conform.families import Family as RegisteredFamily
 
 
 def default_family() -> Family:
@@ -41,18 +44,18 @@ def family_for(variant_id: str) -> Family:
     return _shapes(family_for_variant(variant_id))
 
 
-def _shapes(fam: Any) -> Family:
+def _shapes(fam: RegisteredFamily) -> Family[Any, Any, Any]:
     shapes = getattr(fam, "check_sender", None)
     if shapes is None:
         raise fam.lacks("check-sender scenarios")
     return shapes
 
 
-def comparison_json(c: Any) -> dict[str, object] | None:
+def comparison_json(c: Comparison | None) -> dict[str, object] | None:
     """A family's comparison of the job with the truth, for results.json."""
     if c is None:
         return None
-    facts = dataclasses.asdict(c) if dataclasses.is_dataclass(c) and not isinstance(c, type) else {}
+    facts: dict[str, object] = dataclasses.asdict(c) if dataclasses.is_dataclass(c) and not isinstance(c, type) else {}
     return {"summary": c.summary(), **facts}
 
 
