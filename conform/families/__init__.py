@@ -18,7 +18,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
@@ -41,6 +41,7 @@ if TYPE_CHECKING:  # the shapes of the hooks below; imported where they are used
     from conform.diagnosis.facts import Facts, ParsedLine, ResumePoint
     from conform.diagnosis.live import LiveMonitor
     from conform.emulator.serve import SansIOUnit
+    from conform.jsondoc import JsonObject
     from conform.sendercheck.family import Family as SenderShapes
 
 
@@ -143,9 +144,12 @@ class Family:
     """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
     whose tables a folder holds."""
 
-    check_sender: SenderShapes | None = None
-    """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), run
-    by the engine's supervisor (conform.sendercheck); None: this family judges no senders."""
+    @property
+    def check_sender(self) -> SenderShapes[Any, Any, Any] | None:
+        """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``),
+        run by the engine's supervisor (conform.sendercheck); None: this family judges no
+        senders. A family may override it with a property or a class attribute."""
+        return None
 
     # -- tables ---------------------------------------------------------------------------
     def load_tables(self, root: str | None = None) -> object:
@@ -188,7 +192,7 @@ class Family:
         return f"ok: {self.name}: {len(self.variants())} variants"
 
     # -- the reference unit ------------------------------------------------------------------
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: object) -> SansIOUnit:
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> SansIOUnit:
         """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
         ``now`` (conform.emulator.serve.SansIOUnit). ``options``: the family's own (a mutant's
         name, a dialect, a profile)."""
@@ -204,13 +208,13 @@ class Family:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""
         return ()
 
-    def serve(self, variant: str, **options: object) -> None:
+    def serve(self, variant: str, **options: Any) -> None:
         """Serve the reference unit on a pty or TCP until stopped (``conform emulate``)."""
         raise self.lacks("an emulator")
 
     # -- conformance: what ``conform run``'s loop (conform.conformance.plan) asks -------------
     def open_target(self, text: str, *, baud: int, permissions: Permissions | None,
-                    inputs_control: str | None = None, **family_values: object
+                    inputs_control: str | None = None, **family_values: Any
                     ) -> tuple[Target, str | None]:
         """Open ``emu:VARIANT[:MUTANT]`` or a port; (the target, the variant its name implies).
         By default an emulator is this family's unit on the engine's virtual clock
@@ -233,7 +237,7 @@ class Family:
         return self.default_variant, f"assumed {self.default_variant} ({self.name} units are not asked)"
 
     def plan_checks(self, variant: str, *, permissions: Permissions, profile: str = "quick",
-                    patterns: Sequence[str] = (), machine: bool = True, **family_values: object
+                    patterns: Sequence[str] = (), machine: bool = True, **family_values: Any
                     ) -> Sequence[Check]:
         """The checks of ``variant`` for a run (each with ``id``, ``level``, ``clause``,
         ``title``), filtered by the globs ``patterns``; ``machine``: with the random
@@ -241,7 +245,7 @@ class Family:
         raise self.lacks("conformance checks")
 
     def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
-               permissions: Permissions | None = None, **family_values: object) -> Runner[Any]:
+               permissions: Permissions | None = None, **family_values: Any) -> Runner[Any]:
         """A ``conform.conformance.runner.Runner`` that grades this family's checks on
         ``target``: the engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for
         grading a check, keeping the unit in a check's starting state, halting the unit
@@ -304,7 +308,7 @@ class Family:
         return None
 
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
-                     echo: Callable[[str], object] = print, **options: object) -> None:
+                     echo: Callable[[str], object] = print, **options: Any) -> None:
         """``conform characterize``: probe what the unit does where builds or the source leave
         a choice and write the profile. The default runs ``characterize_probes``."""
         hooks = self.characterize_probes()
@@ -337,7 +341,7 @@ class Family:
     # -- the reference sender: ``conform send`` ----------------------------------------------
     def send_job(self, job: str, target: str, *, variant: str | None, baud: int,
                  allow_motion: bool, record: str | None, timeout: float | None, quiet: bool,
-                 **family_values: object) -> None:
+                 **family_values: Any) -> None:
         """``conform send JOB --target T``: stream the job file to the unit with this family's
         reference sender and print what happened (``UserError`` with exit 1 for a failed or
         incomplete send). ``variant``: named by the user or found by the probe (None: the
@@ -350,7 +354,7 @@ class Family:
         raise self.lacks("reference sender (`conform send`)")
 
     # -- capture and analysis ------------------------------------------------------------------
-    def detect(self, host: bytes, unit: bytes, metadata: Mapping[str, object]) -> Detection:
+    def detect(self, host: bytes, unit: bytes, metadata: JsonObject) -> Detection:
         """Does this traffic look like this family's?"""
         return Detection(self.name, 0.0, f"{self.name} does not detect traffic")
 
@@ -366,7 +370,7 @@ class Family:
         ``conform.capture.merge.HostLines``), or None: every line owes one answer."""
         return None
 
-    def analyze(self, path: str, **options: object) -> AnalysisResult:
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
         """Analyse a capture of this family's traffic: what ``conform analyze`` prints and
         writes, and its row in a fleet summary (conform.families.capture_hook,
         conform.analysis.fleet)."""
