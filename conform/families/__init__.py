@@ -167,7 +167,7 @@ class Family:
         return self.variants()[0].id
 
     def variant_table(self, pretty: bool = False
-                      ) -> tuple[str, list[str], Sequence[Sequence[object]]]:
+                      ) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         """``conform spec list``'s table of this family: (title, columns, rows)."""
         return (f"{self.name} variants", ["variant", "title", "firmware", "axes", "buffers", "notes"],
                 [[v.id, v.title, v.firmware, v.axes, v.buffer, v.notes] for v in self.variants()])
@@ -177,11 +177,11 @@ class Family:
         """``conform spec show``: a variant's commands (or one) from its tables."""
         raise self.lacks("`spec show`")
 
-    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], Sequence[Sequence[object]]]:
+    def diff_variants(self, a: str, b: str) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         """``conform spec diff A B``: (title, columns, rows) of what differs from A to B."""
         raise self.lacks("`spec diff`")
 
-    def open_questions(self) -> tuple[str, list[str], Sequence[Sequence[object]]] | None:
+    def open_questions(self) -> tuple[str, Sequence[str], Sequence[Sequence[object]]] | None:
         """``conform spec questions``: (title, columns, rows) of the choices its sources leave
         open and the default assumed, or None when it has none."""
         return None
@@ -266,7 +266,7 @@ class Family:
         return len(variants) * len(self.mutants())
 
     def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                    progress: Callable[[str], object] | None = None) -> list[dict[str, object]]:
+                    progress: Callable[[str], None] | None = None) -> list[dict[str, object]]:
         """Run the checks against every deviant unit: which checks caught each (FAIL)."""
         import time
 
