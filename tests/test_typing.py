@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 ANY_BOUND = 150
 
@@ -18,6 +20,7 @@ def _engine_files() -> list[Path]:
             if not re.match(r"families/[a-z0-9_]+/", p.relative_to(REPO / "conform").as_posix())]
 
 
+@pytest.mark.slow   # 15 s of CPU cold (no .mypy_cache), over a minute on a loaded 2-core machine
 def test_mypy_is_clean_over_the_engine():
     done = subprocess.run([sys.executable, "-m", "mypy"], cwd=REPO, capture_output=True,
                           text=True, timeout=600)
