@@ -149,6 +149,17 @@ class NoQueueFullFlag(Unit):
         return code, tuple("%02X" % (int(str(f), 16) & ~self._bit_full) for f in fields)
 
 
+class PositionOffAtRest(Unit):
+    """X reads 300 steps off at rest (a position read at rest is exact, GVE64 §13.5.10)."""
+
+    @property
+    def position(self) -> tuple[int, ...]:
+        pos = list(super().position)
+        pos[0] += 300
+        return tuple(pos)
+
+
+
 @dataclass(frozen=True)
 class Mutant:
     name: str
@@ -182,6 +193,8 @@ MUTANTS: dict[str, Mutant] = {m.name: m for m in (
            "answers end with CR LF"),
     Mutant("no-queue-full-flag", NoQueueFullFlag, (), ("C/queue-zero",),
            "F never shows the queue-full bit"),
+    Mutant("position-off-at-rest", PositionOffAtRest, (), ("position", "P/valid"),
+           "X reads 300 steps off at rest"),
 )}
 
 
@@ -195,3 +208,4 @@ def mutant_targets(variant_ids: Sequence[str]) -> list[tuple[Mutant, str]]:
         if vs:
             out.append((m, vs[0]))
     return out
+
