@@ -210,7 +210,12 @@ def test_bytes_put_in_before_the_answer_keep_their_relative_timing() -> None:
     judge(parse_text(text, "x"), unit, lambda x: x, "slow")
     times = [round(t, 3) for t, _ in unit.got]
     assert times[:3] == [0.0, 0.5, 0.7]           # before any answer: as recorded
-    assert times[3] == 0.99                       # M1's answer (at 0.7 here) + 0.29 s
+    # after M1's answer (at 0.7 here) + 0.29 s, but not sooner after M1 than recorded
+    assert times[3] == 2.3
+    slow = _Slow(3.0)
+    judge(parse_text(text, "x"), slow, lambda x: x, "slow")
+    # G4's answer comes at 3.0 here (M1's, refused while busy, at 0.7): 0.29 s after it
+    assert [round(t, 3) for t, _ in slow.got] == [0.0, 0.5, 0.7, 3.29]
 
 
 def test_a_family_line_ending_is_given_to_text_transcripts() -> None:

@@ -288,8 +288,10 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
     A write that followed an answer in the recording (:func:`pacing`) is played once the
     reference has no more of its lines unanswered than the recorded sender had (its answer
     then, plus the recorded delay after it), waiting at most the bound ``WAIT_FACTOR`` /
-    ``WAIT_EXTRA``; a write that came before any answer keeps its recorded delay after the
-    previous write. A reference that answers a line the firmware did not, or not at all,
+    ``WAIT_EXTRA``, and never sooner after the previous write than in the recording (a
+    reference that answers faster than the recorded link does not move the host's writes
+    earlier against what the unit is doing); a write that came before any answer keeps its
+    recorded delay after the previous write. A reference that answers a line the firmware did not, or not at all,
     shifts the count once (a timeout resets it), so one difference stays one difference.
 
     What the unit says before the first host event (its banner) is dropped when the recording
@@ -309,7 +311,7 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
             bound = t_prev + gap * WAIT_FACTOR + WAIT_EXTRA
             if player.until(bound, lambda need=need: player.owed <= need):
                 slack = max(0, min(slack, player.owed - pace.owed))
-                t = max(t_prev, player.answer_t + pace.since, player.unit.now)
+                t = max(t_prev + gap, player.answer_t + pace.since, player.unit.now)
             else:
                 slack = player.owed - pace.owed
                 t = bound
