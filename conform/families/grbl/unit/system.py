@@ -50,7 +50,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             u._say(t, *rp.settings_lines(u.spec, u.settings))
             return 0
         if head == "G":
-            u._say(t, f"[GC:{u.modal.gc_line()}]")
+            u._say(t, f"[GC:{u.modal.gc_line(bool(u.settings[13]))}]")
             return 0
         if head == "C":
             if u.state == "Check":
@@ -89,6 +89,8 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
         u._answer(t, 0)
         u._hard_stop(t)
         u.state = "Sleep"
+        u.modal.spindle, u.modal.coolant = 5, frozenset()   # protocol.c sleep: both off,
+        u._spindle_sync()                                     # Ov: forced (spindle_set_state)
         u._say(t, rp.MSG["sleep"])
         return None
     if head == "I":
@@ -155,7 +157,7 @@ def _setting(u: GrblUnit, rest: str) -> int:
 def store_setting(u: GrblUnit, number: int, value: float) -> int:
     """settings.c settings_store_global_setting: negative 4; an axis setting (100 and up) is
     100 + 10 * kind + axis, anything else there 3; $0 below 3 is 6 (on the truncated uint8
-    value); $20 without homing 10; an unknown number 3."""
+    value); $20 without homing 10; an unknown number 3; $22=0 turns $20 off too."""
     if value < 0:
         return 4
     setting = u.spec.settings.get(number)
@@ -173,6 +175,9 @@ def store_setting(u: GrblUnit, number: int, value: float) -> int:
         if as_uint8 and any(not u.settings[k] for k in setting.needs):
             return 10                       # $20 without homing (settings.c case 20)
     u.settings[number] = setting.coerce(value)
+    if not u.settings[number]:
+        for other in setting.clears:        # settings.c case 22: homing off, soft limits off
+            u.settings[other] = 0
     _apply(u)
     return 0
 
