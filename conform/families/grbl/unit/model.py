@@ -38,7 +38,8 @@ class GrblUnit:
 
     def __init__(self, variant: Variant, spec: GrblSpec | None = None, *, t0: float = 0.0,
                  line_time: float = 0.0005, report_delay: float = 0.002,
-                 settings: dict[int, float] | None = None, truth: bool = False) -> None:
+                 settings: dict[int, float] | None = None, truth: bool = False,
+                 switches: bool = True) -> None:
         self.v = variant
         self.spec = spec or load_grbl()
         self.line_time = line_time
@@ -56,6 +57,7 @@ class GrblUnit:
         self.lines_done = 0
         self.pins: set[str] = set()         # input pins triggered (:mod:`.inputs`): P X Y Z D
         self.door_open = False
+        self.switches = switches            # False: no limit switch ever closes ($H seeks on)
         # ground truth (``truth=True``, for check-sender): [line as the parser took it, answer]
         self.taken: list[list[Any]] | None = [] if truth else None
         self._n_coded = 0
@@ -446,8 +448,41 @@ class GrblUnit:
             self.spindle_rpm = self._spindle_speed()
         self.state = "Jog" if pl.blocks[0].kind == "jog" else "Run"
 
+    def _homing_failed(self, t: float, code: int) -> None:
+        """limits.c: a homing cycle that finds no switch: ALARM:code, the ``$H`` line answered
+        ok (after the alarm's half second), then grbl resets into Alarm."""
+        self._hard_stop(t)
+        self.state = "Alarm"
+        self._alarm(t, code)
+        self._finish(max(t, self._quiet_until), 0, None)
+        self._reset(t)
+
+    def place(self, position: list[float]) -> None:
+        """Put a machine that stands still at ``position`` (mm): a judge following a recording
+        starts the unit from where the recorded one stood. In a hold, the machine keeps the
+        rest of its way: standing short of where it was going, that rest is one block still
+        queued (as grbl's is when its hold ends inside the block)."""
+        pl = self.planner
+        where = [float(x) for x in position]
+        if pl.running:
+            return
+        if pl.blocks:
+            head = pl.blocks[0]
+            along = sum((w - s) * u for w, s, u in zip(where, head.start, head.unit, strict=True))
+            head.s_done = min(max(along, 0.0), head.length)
+            return
+        end = list(pl.position)
+        rest = pl.make(where, end, None, "line") if self.state in ("Hold", "Door") else None
+        pl.clear(where)
+        if rest is not None:
+            pl.push(rest)
+        self._check_pos = list(pl.position)
+
     def _block_done(self, t: float) -> None:
         pl = self.planner
+        if pl.blocks and pl.blocks[0].kind == "homeseek":
+            self._homing_failed(pl.blocks[0].t0 + pl.blocks[0].duration, 9)
+            return
         if pl.holding:
             # the hold's deceleration ended: stand still (Hold:0) until '~'
             self.hold_sub = 0

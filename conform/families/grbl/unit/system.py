@@ -209,6 +209,8 @@ def _home(u: GrblUnit, t: float) -> None:
     succeeds; the machine then stands at -pull-off on every axis (limits.c, positive homing
     direction by default).
     """
+    if not u.switches:
+        return _seek_without_switch(u, t)
     pos = u.planner.where(t)[0]
     seek = max(u.settings[25], 1e-6) / 60.0
     locate = max(u.settings[24], 1e-6) / 60.0
@@ -219,4 +221,32 @@ def _home(u: GrblUnit, t: float) -> None:
     u.state = "Home"
     u._busy_until = t + duration
     u._busy = ("home",)
+    return None
+
+
+HOMING_CYCLE_0 = (2,)   # config.h HOMING_CYCLE_0: Z first (then X and Y, cycle 1)
+SEARCH_SCALAR = 1.5     # config.h HOMING_AXIS_SEARCH_SCALAR
+
+
+def _seek_without_switch(u: GrblUnit, t: float) -> None:
+    """A unit whose limit switches never close (``switches=False``): limits.c limits_go_home
+    zeroes the first cycle's axes and seeks 1.5 times their travel toward the switch at the
+    seek rate; the switch is not found, so the seek's end is ALARM:9 (homing fail, approach).
+    A reset on the way is ALARM:6; either way the ``$H`` line is answered ok before the
+    banner, as a reset during homing is (protocol.c)."""
+    pos = list(u.planner.where(t)[0])
+    target = list(pos)
+    for axis in HOMING_CYCLE_0:
+        pos[axis] = 0.0
+        travel = SEARCH_SCALAR * u.settings[130 + axis]
+        target[axis] = -travel if int(u.settings[23]) & (1 << axis) else travel
+    u.planner.clear(pos)
+    move = u.planner.make(pos, target, max(u.settings[25], 1e-6) / 60.0, "homeseek")
+    u.state = "Home"
+    u._busy = ("home",)
+    if move is None:
+        u._homing_failed(t, 9)
+        return None
+    u.planner.push(move)
+    u.planner.start_head(t, 0.0)
     return None
