@@ -276,3 +276,16 @@ def test_a_grbl_recording_is_refused_by_another_family(tmp_path) -> None:
     with pytest.raises(UserError, match=r"^g: a grbl recording \(.*\), not marlin's: judge it "
                                         r"with a grbl variant \(grbl-1.1f.*\), not marlin-2.1$"):
         judge_recording(parse_text(text, "g"), family("marlin"), "marlin-2.1")
+
+
+def test_the_family_follows_the_recorded_lines_before_each_write() -> None:
+    """``judge_follow`` sees each recorded line before the host write it answered is played,
+    so a family can put the reference where the recorded unit was (for an artefact it
+    states); the lines are still compared."""
+    seen: list[tuple[str, int]] = []
+    unit = _Slow(0.0)
+    text = "0 > L0\n0.01 < ok L0\n0.2 > L1\n0.21 < ok L1\n0.22 < note\n"
+    v = judge(parse_text(text, "f"), unit, lambda x: x, "x",
+              follow=lambda u, line: seen.append((line, len(u.got))))
+    assert seen == [("ok L0", 0), ("ok L1", 1), ("note", 1)]
+    assert [d.recorded for d in v.differences] == [["note\n"]]
