@@ -178,6 +178,8 @@ def store_setting(u: GrblUnit, number: int, value: float) -> int:
     if not u.settings[number]:
         for other in setting.clears:        # settings.c case 22: homing off, soft limits off
             u.settings[other] = 0
+    if number == 13:                        # settings.c case 13: system_flag_wco_change
+        u._wco_counter = 0
     _apply(u)
     return 0
 
