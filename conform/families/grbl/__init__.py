@@ -42,11 +42,6 @@ class GrblFamily(Family):
 
         return is_answer
 
-    def judge_mask(self, variant: str) -> Callable[[str], str]:
-        from conform.families.grbl.emulate_judge import mask
-
-        return mask
-
     def judge_unit(self, variant: str) -> Any:
         """The recordings (shared/recordings/grbl-1.1f) come from grbl-sim, whose input pins
         read high: no limit switch ever closes, so its ``$H`` seeks on and fails. The unit

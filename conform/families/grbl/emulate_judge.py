@@ -2,9 +2,10 @@
 
 The engine (conform/emulator/judge.py) plays the recording's host writes into the reference
 unit and compares the answer lines; grbl tells it which lines close an answer (``ok`` and
-``error:N``, what a streaming sender counts), what may differ between two runs of the same
-build (:func:`mask`), and which lines are the same within the motion model's tolerance
-(:func:`near`: status reports while the machine moves).
+``error:N``, what a streaming sender counts), which lines are the same within the motion
+model's tolerance (:func:`near`: status reports while the machine moves) and where to place
+the reference after a moment-dependent stop (:class:`Follow`). grbl prints nothing that
+differs between two runs of one build at rest, so no line is masked.
 """
 
 from __future__ import annotations
@@ -23,12 +24,6 @@ def is_answer(line: str) -> bool:
     """``ok`` or ``error:N``: the end of the answer to one line (protocol.c,
     report_status_message)."""
     return _ANSWER.match(line) is not None
-
-
-def mask(line: str) -> str:
-    """grbl prints nothing that differs from one run of a build to the next at rest: the line
-    is compared whole."""
-    return line
 
 
 class Follow:
@@ -86,8 +81,9 @@ class Follow:
 
 
 def _fields(line: str) -> tuple[str, dict[str, str]] | None:
+    """A status report's state and its fields by name; None for any other line."""
     m = _STATUS.match(line)
-    if m is None or m[3] != _STATUS.match(line)[3]:
+    if m is None:
         return None
     fields = {}
     for part in m[2].split("|"):
