@@ -729,8 +729,22 @@ class GrblUnit:
                 self._execute(block, t, startup=text)
 
     # ============================================================ status report
+    def _in_steps(self, pos: list[float]) -> list[float]:
+        """The position as grbl knows it: whole steps of each axis ($100-$102 steps/mm; the
+        planner's targets are lround(mm x steps/mm), system_convert_axis_steps_to_mpos)."""
+        out = []
+        for i, p in enumerate(pos):
+            per_mm = self.settings.get(100 + i, 0.0)
+            if per_mm <= 0:
+                out.append(p)
+                continue
+            steps = math.floor(abs(p) * per_mm + 0.5)
+            out.append(math.copysign(steps, p) / per_mm if steps else 0.0)
+        return out
+
     def _status_report(self, t: float) -> bytes:
         pos, v = self.planner.where(t)   # the machine's position (check mode moves nothing)
+        pos = self._in_steps(pos)
         inches = bool(self.settings[13])
         name = self.state
         if self.state in ("Hold", "Door"):
