@@ -317,8 +317,9 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
     ``WAIT_EXTRA``, and never sooner after the previous write than in the recording (a
     reference that answers faster than the recorded link does not move the host's writes
     earlier against what the unit is doing); a write that came before any answer keeps its
-    recorded delay after the previous write. A reference that answers a line the firmware did not, or not at all,
-    shifts the count once (a timeout resets it), so one difference stays one difference.
+    recorded delay after the previous write. A reference that answers a line the firmware
+    did not, or not at all, shifts the count once (a timeout resets it), so one difference
+    stays one difference.
 
     What the unit says before the first host event (its banner) is dropped when the recording
     starts with the host: the recording joined a unit that was already running.
@@ -332,6 +333,7 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
         player.until(hosts[0].t)
         player.out.clear()
         player.reader = _Lines()
+        player.owed, player.answer_t = 0, 0.0
     t_prev, rec_prev = 0.0, 0.0
     slack = 0           # lines the reference owes beyond the recording, after a timeout
     for pace, e in zip(pacing(transcript, is_answer), hosts, strict=True):
