@@ -50,6 +50,31 @@ class GrblFamily(Family):
                             "".join(v.axes), f"rx {v.rx_buffer} B, planner {v.planner_blocks}",
                             f"line {v.line_max} chars") for v in spec.variants.values()]
 
+    line_ending = "\r\n"   # report.c: every line the unit prints ends CR LF
+
+    def judge_answers(self, variant: str) -> Callable[[str], bool]:
+        """``ok`` and ``error:N`` close the answer to one line (protocol.c, report.c
+        report_status_message); a streaming sender counts them."""
+        from conform.families.grbl.emulate_judge import is_answer
+
+        return is_answer
+
+    def judge_unit(self, variant: str) -> Any:
+        """The recordings (shared/recordings/grbl-1.1f) come from grbl-sim, whose input pins
+        read high: no limit switch ever closes, so its ``$H`` seeks on and fails. The unit
+        judged is given the same setting (``switches=False``)."""
+        return self.make_unit(variant, switches=False)
+
+    def judge_follow(self, variant: str) -> Callable[[Any, str], None] | None:
+        from conform.families.grbl.emulate_judge import Follow
+
+        return Follow()
+
+    def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
+        from conform.families.grbl.emulate_judge import near
+
+        return near
+
     def make_unit(self, variant: str, *, t0: float = 0.0, mutant: str | None = None,
                   **options: Any) -> SansIOUnit:
         """The reference unit, or the deviant unit ``mutant`` (conformance/mutants.py)."""
