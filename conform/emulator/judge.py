@@ -341,7 +341,10 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
         if pace.answered:
             need = pace.owed + slack
             bound = t_prev + gap * WAIT_FACTOR + WAIT_EXTRA
-            if player.until(bound, lambda need=need: player.owed <= need):
+            def answered(need: int = need) -> bool:
+                return player.owed <= need
+
+            if player.until(bound, answered):
                 slack = max(0, min(slack, player.owed - pace.owed))
                 t = max(t_prev + gap, player.answer_t + pace.since, player.unit.now)
             else:
@@ -437,7 +440,8 @@ def _opcodes(a: list[str], b: list[str], near: Callable[[str, str], bool] | None
              ) -> list[tuple[str, int, int, int, int]]:
     """difflib's opcodes of the two line lists, the differing blocks split further where
     ``near`` pairs their lines."""
-    ops = difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes()
+    ops: list[tuple[str, int, int, int, int]] = list(
+        difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes())
     if near is None:
         return ops
     out: list[tuple[str, int, int, int, int]] = []
