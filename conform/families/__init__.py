@@ -127,6 +127,10 @@ class Family:
     """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
     whose tables a folder holds."""
 
+    characterize_about: str = ""
+    """What ``conform characterize`` asks of this family's units, in a sentence or two for its
+    help (what is probed, and whether it moves or writes anything); empty: not listed."""
+
     check_sender: Any = None
     """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), run
     by the engine's supervisor (conform.sendercheck); None: this family judges no senders."""
