@@ -584,16 +584,17 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
-               announce: Callable[[str], None] | None = None, sequences: bool = True
-               ) -> TargetRun:
+               announce: Callable[[str], None] | None = None, sequences: bool = True,
+               seed: int = 1) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
     interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
-    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's)."""
+    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's); ``seed``
+    draws them (the command line's default, 1)."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
                         allow_eeprom=allow_eeprom,
-                        options=RunOptions(profile=profile, notes=list(notes or []),
+                        options=RunOptions(profile=profile, seed=seed, notes=list(notes or []),
                                            announce=announce))
     try:
         checks = [c for c in generate(runner.spec, vid)
