@@ -33,7 +33,7 @@ from conform.families.grbl.spec.load import GrblSpec, Variant
 from conform.families.grbl.unit.adopt import UnitState, start_from
 
 PROFILES = {"quick": (60, 15), "full": (300, 30)}   # examples, steps per example
-LINK_BUDGET = {"quick": 60.0, "full": 900.0}      # s of examples on a link
+LINK_BUDGET = {"quick": 45.0, "full": 900.0}      # s of examples on a link
 SHRINK_SECONDS = {"quick": 25.0, "full": 120.0}    # s of shrinking a difference on a link
 SETTLE = 0.25       # s: on a link, no step goes out this close before a change the reference
 SETTLE_GAP = 0.05   # expects; the wait runs this far past the change
@@ -80,6 +80,7 @@ class Outcome:
     cut: int = 0                                        # examples left out by the time budget
     unconfirmed: list[str] = field(default_factory=list)   # differences no replay showed again
     error: HarnessError | None = None                   # the link failed: the run stops
+    note: str = ""                                      # what the run left changed on the unit
 
 
 def compare_step(target_session: Any, reference_session: Any, data: bytes,
@@ -108,6 +109,7 @@ class Pair:
         self.t, self.r, self.normalize = target_session, reference_session, normalize
         self.linked = not target_session.target.emulated
         self.known: UnitState | None = None
+        self.first: UnitState | None = None   # the target's state before the first example
         self.offset = 0.0
 
     def start(self) -> None:
@@ -120,6 +122,8 @@ class Pair:
             self.known = read_eeprom(t)
             t.dirty = False
         state, said = read_state(t, self.known)
+        if self.first is None:
+            self.first = state
         r.fresh()
         start_from(r.target.unit, state)
         for data, lines in said:   # the same questions: the reference took the state, and its
@@ -129,6 +133,26 @@ class Pair:
                     f"the reference could not start from the target's state: after {data!r} "
                     f"the target answered {' | '.join(lines)}, the reference {' | '.join(theirs)}")
         self.offset = t.target.now() - r.target.now()
+
+    def put_back(self) -> str:
+        """A unit behind a link keeps the G54-G59 offsets the examples wrote (EEPROM): write
+        the first ones back (G10 L2). G28/G30 can be stored only where the machine stands
+        (G28.1/G30.1): changed ones are said, not moved to."""
+        if not self.linked or self.first is None:
+            return ""
+        t = self.t
+        t.fresh()
+        now, _said = read_state(t, self.known or UnitState())
+        for i, (was, got) in enumerate(zip(self.first.coords, now.coords, strict=True)):
+            if was != got:
+                words = "".join(f"{a}{x:.4f}" for a, x in zip("XYZ", was, strict=True))
+                t.talk(f"G10L2P{i + 1}{words}\n".encode())
+        moved = [f"{name} {', '.join(f'{x:.3f}' for x in getattr(now, name.lower()))} (was "
+                 f"{', '.join(f'{x:.3f}' for x in getattr(self.first, name.lower()))})"
+                 for name in ("G28", "G30")
+                 if getattr(now, name.lower()) != getattr(self.first, name.lower())]
+        return "; the examples left stored positions changed: " + ", ".join(moved) if moved \
+            else ""
 
     def _catch_up(self) -> None:
         lag = self.t.target.now() - self.offset - self.r.target.now()
@@ -259,6 +283,7 @@ def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v
             out.steps, out.why = out.steps[:n + 1], why
         else:
             out.steps, out.why = found
+    out.note = pair.put_back()
     return out
 
 
