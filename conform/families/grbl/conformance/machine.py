@@ -141,6 +141,7 @@ class Pair:
         if not self.linked or self.first is None:
             return ""
         t = self.t
+        t.restore()   # the settings first: $13 decides how $# reads
         t.fresh()
         now, _said = read_state(t, self.known or UnitState())
         for i, (was, got) in enumerate(zip(self.first.coords, now.coords, strict=True)):
@@ -171,6 +172,7 @@ class Pair:
             d = max(0.0, due - ref.now()) + SETTLE_GAP
             self.t.target.wait(d)
             waited += d
+        self._catch_up()
 
     def run(self, steps: Sequence[bytes]) -> tuple[str, int]:
         """Start, then send ``steps``: the first difference and its step ("", -1 if none)."""
