@@ -253,3 +253,16 @@ def test_a_banner_delayed_by_a_slow_link_is_not_a_reset():
                                              a, 0, 0, False, ""))
     assert grade == "FAIL" and "the first without an answer: wire line 1 'G21G90' (job line 1" \
         in said, said
+
+
+def test_within_buffer_names_the_line_that_overfilled_it():
+    from conform.families.grbl.analysis.analyze import analyze_streams
+    from conform.families.grbl.sendercheck.rules import within_buffer
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    job = [f"G1X-{i}.5Y-1.25F3000 (a comment)" for i in range(1, 9)]
+    host = [(0.0, b"".join(f"G1X-{i}.5Y-1.25F3000\n".encode() for i in range(1, 9)))]
+    a = analyze_streams(host, [(1.0, b"ok\r\n" * 8)])
+    grade, _w, said = within_buffer(SenderRun(SCENARIOS["stream"], job, a, 0, 0, False, ""))
+    assert grade == "FAIL" and "the most when wire line 8 'G1X-8.5Y-1.25F3000' (job line 8 " \
+        "'G1X-8.5Y-1.25F3000 (a comment)') went out" in said, said

@@ -171,6 +171,9 @@ def within_buffer(r: Any) -> Result:
         return ("PASS" if r.lost == 0 else "FAIL", f"at most {m['rx_buffer']} bytes in grbl's "
                 "buffer (ground truth: no byte dropped)", f"{r.lost} bytes dropped; {wire}")
     ok = m["max_bytes_in_flight"] <= m["rx_buffer"]
+    if not ok and r.analysis.exchanges:
+        worst = max(r.analysis.exchanges, key=lambda e: e.bytes_in_flight)
+        wire += f", the most when {on_wire(worst, r.job)} went out"
     return "PASS" if ok else "FAIL", f"at most {m['rx_buffer']} bytes in flight", wire
 
 
