@@ -148,6 +148,10 @@ class Family:
     """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
     whose tables a folder holds."""
 
+    characterize_about: str = ""
+    """What ``conform characterize`` asks of this family's units, in a sentence or two for its
+    help (what is probed, and whether it moves or writes anything); empty: not listed."""
+
     @property
     def check_sender(self) -> SenderShapes[Any, Any, Any] | None:
         """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``),

@@ -38,6 +38,10 @@ class GrblFamily(Family):
     name = "grbl"
     title = "grbl 1.1f"
     table_files = ("variants", "codes", "settings", "protocol", "status", "examples")
+    characterize_about = (
+        "the build's compile-time choices: version and build date, the $I options, receive "
+        "buffer and planner sizes, whether CR LF ends one line or two, the line-length limit. "
+        "Nothing moves, nothing is written to the EEPROM.")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.grbl.spec.load import load_grbl

@@ -40,6 +40,10 @@ class GveFamily(Family):
     needs_travel_bound = True   # checks size their moves within --max-steps pulses
     default_rank = 0   # the units conform was first written for: commands without a variant
     table_files = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
+    characterize_about = (
+        "the open questions A1-A29 of the manuals (the protocol digest's register): which "
+        "alternative the unit follows on each, written as a [dialect] profile. Probes that "
+        "move need --allow-motion --max-steps N, the EEPROM probe (A18) --allow-eeprom.")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.gve.spec import load_spec

@@ -35,6 +35,11 @@ class MarlinFamily(Family):
     title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
     default_rank = 300
     table_files = ("variants", "messages", "commands", "caps")
+    characterize_about = (
+        "the build's configuration: firmware and protocol version, the M115 capabilities, "
+        "ADVANCED_OK with the planner and command-queue sizes, MAX_CMD_SIZE, the host "
+        "keepalive, the emergency parser, how a repeated line number is treated. No motion, "
+        "no heat, no EEPROM write.")
     pytest_plugin = None
 
     @property
