@@ -222,7 +222,7 @@ class Family:
         paces a recording's host writes by them. The default: every line does."""
         return _every_line
 
-    def judge_unit(self, variant: str) -> Any:
+    def judge_unit(self, variant: str) -> SansIOUnit:
         """The reference unit ``conform emulate judge`` plays a recording into: by default
         ``make_unit(variant)``; a family whose recordings come from firmware in a stated
         setting (a simulator with no switches wired, say) gives its unit that setting."""
