@@ -139,3 +139,27 @@ def test_the_emergency_parser_checks_fail_on_a_unit_without_it():
     assert grades["halt/m112-numbered-while-busy"] is Grade.FAIL
     assert grades["halt/m112-while-busy"] is Grade.PASS
     assert grades["halt/m112"] is Grade.PASS
+
+
+def test_the_halt_counts_only_answers_to_its_own_lines():
+    """SIGTERM's halt behind a line still in flight: that line's ok is not taken for one of
+    the halt's; it is stopped only once the answer to the mark behind its four lines came
+    (so after five oks here), and a dead unit is not called stopped."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.marlin.conformance.checks import HALT_MARK, halt
+
+    target = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:m")
+    target.reset()
+    target.begin_log()
+    target.send(b"G4 P300\n")                      # in flight when the halt begins
+    assert halt(target).startswith("stopped")
+    rx = b"".join(e.data for e in target.log if e.dir == "rx")
+    mark = rx.index(b'echo:Unknown command: "' + HALT_MARK)
+    assert rx[:mark].count(b"ok\n") == 5 and rx[mark:].count(b"ok\n") == 1
+
+    dead = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:dead")
+    dead.reset()
+    dead.send(b"G4 P300\n")
+    dead.send(b"M112\n")
+    assert halt(dead, attempts=1).startswith("stop NOT acknowledged")
