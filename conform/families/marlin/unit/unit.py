@@ -22,6 +22,7 @@ from typing import Any
 
 from conform.families.marlin.protocol.codec import checksum
 from conform.families.marlin.spec import MarlinSpec, Variant
+from conform.families.marlin.unit.settings import Settings
 
 EOL = b"\r\n"
 BACKSPACE = 0x08
@@ -102,6 +103,7 @@ class MarlinUnit:
         self._out: list[tuple[float, bytes]] = []
         self.deaf = False                   # after a deviant unit's choice (mutants)
         self._kind = ""
+        self.eeprom: dict[str, Any] = {}    # what M500 stored (kept across resets)
         self._reset_state(t0, boot)
 
     # -- power -----------------------------------------------------------------------------
@@ -129,6 +131,8 @@ class MarlinUnit:
         self.booting_until = t + boot
         self.ep_state = ""                  # emergency parser: the command seen so far
         self.wait: HeatWait | None = None   # M109 / M190 waiting
+        self.settings = Settings(self.v)    # unit/settings.py (loaded from the EEPROM at boot)
+        self.settings.load(self.eeprom, announce=False)
         self._say(self.booting_until, *self._banner())
 
     def power_off(self, t: float) -> None:
@@ -428,8 +432,9 @@ class MarlinUnit:
 
     # -- running one command (gcode.cpp process_parsed_command) --------------------------------
     def _command(self, code: str) -> Any:
-        """The table's command ``code`` when this build has it (None: unknown here)."""
-        return self.spec.command(code, self.v)
+        """The table's command ``code`` when this build has it (None: unknown here); every
+        T<n> is T0's row (gcode.cpp: case 'T' calls T(parser.codenum))."""
+        return self.spec.command("T0" if code[:1] == "T" else code, self.v)
 
     def _start(self, q: Queued) -> None:
         t = max(self.now, self.booting_until)
@@ -440,6 +445,8 @@ class MarlinUnit:
         cmd = self._command(code) if code else None
         kind = cmd.kind if cmd else ""
         self._settle(t)
+        if self.settings.debug & 1:         # M111 S1: gcode.cpp process_next_command echoes
+            self._say(t, "echo:" + q.text)
         if kind == "move":
             done = self._move(t, words) + self.line_time
         elif kind in ("dwell", "sync", "home"):
@@ -520,6 +527,10 @@ class MarlinUnit:
             words = _words(q.text)      # M876.cpp: S<n> answers the prompt
             if "S" in words:
                 self.truth.prompt_responses.append((t, int(words["S"])))
+        elif kind == "settings":
+            self._say(t, *self.settings.run(_code(q.text), _after_command(q.text),
+                                            _after_number(q.text), t, self.eeprom,
+                                            self._position_line))
         elif not kind:
             self._unknown(q, t)
         self._ok(q, t)
@@ -557,10 +568,10 @@ class MarlinUnit:
         dist = math.sqrt(sum(d * d for d in delta[:3])) or abs(delta[3])
         if dist < 1e-9:
             return t
-        speed = self.feed
+        speed = self.feed * self.settings.feed_percent / 100.0     # M220
         for i in range(4):
             if delta[i]:
-                speed = min(speed, self.v.max_feedrate[i] * dist / abs(delta[i]))
+                speed = min(speed, self.settings.max_feed[i] * dist / abs(delta[i]))
         ramp = speed * speed / ACCEL
         duration = dist / speed + speed / ACCEL if dist > ramp else 2 * math.sqrt(dist / ACCEL)
         start = t
@@ -573,8 +584,9 @@ class MarlinUnit:
         return start
 
     def _position_line(self) -> str:
-        p, s = self.position, self.stepped
-        counts = [round(s[i] * self.v.steps_per_mm[i]) for i in range(3)]
+        s, steps, off = self.stepped, self.settings.steps, self.settings.home_offset
+        p = [x + (off[i] if i < 3 else 0.0) for i, x in enumerate(self.position)]  # logical
+        counts = [round(s[i] * steps[i]) for i in range(3)]
         return (f"X:{p[0]:.2f} Y:{p[1]:.2f} Z:{p[2]:.2f} E:{p[3]:.2f} "
                 f"Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}")
 
