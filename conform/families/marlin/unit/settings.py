@@ -310,9 +310,10 @@ class Settings:
         return [f"echo:Print time: {shown}"]
 
     def m75(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
-        """gcode/stats/M75-M78.cpp M75: print_job_timer.start()."""
+        """gcode/stats/M75-M78.cpp M75: print_job_timer.start() (libs/stopwatch.cpp
+        Stopwatch::start: a stopped timer is reset first, so it counts from 0 again)."""
         if self.timer_start is None:
-            self.timer_start = t
+            self.timer_start, self.timer_total = t, 0.0
         return []
 
     def m77(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:

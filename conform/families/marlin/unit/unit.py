@@ -34,6 +34,7 @@ COOLING_SLOPE = ((1.5, 60.0), (1.0, 60.0))   # temperature.cpp MIN_COOLING_SLOPE
 ACCEL = 3000.0                # Configuration.h DEFAULT_ACCELERATION (mm/s²)
 DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
 HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
+EXTRUDE_MINTEMP = 170.0       # Configuration.h PREVENT_COLD_EXTRUSION, EXTRUDE_MINTEMP 170
 BOOT = 0.1                    # s from reset to "start" (the simulator; a real AVR board waits
                               # ~0.5-2 s in its bootloader)
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d+)")
@@ -452,7 +453,8 @@ class MarlinUnit:
         elif kind in ("dwell", "sync", "home"):
             end = self.planner[-1][0] if self.planner else t
             if kind == "dwell":
-                end += words.get("P", 0.0) / 1000.0 + words.get("S", 0.0)
+                # G4.cpp: P ms, but S s wins when both are given
+                end += words["S"] if "S" in words else words.get("P", 0.0) / 1000.0
             elif kind == "home":
                 end += 0.2 + max(abs(self.position[i]) for i in range(3)) / HOMING
                 self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
@@ -563,10 +565,18 @@ class MarlinUnit:
         for i, a in enumerate("XYZE"):
             if a in words:
                 rel = self.e_relative if a == "E" else self.relative
-                target[i] = (target[i] if rel else 0.0) + words[a]
+                # a logical coordinate: the M206 offset off (motion.h NATIVE_TO_LOGICAL)
+                off = self.settings.home_offset[i] if i < 3 else 0.0
+                target[i] = (target[i] if rel else -off) + words[a]
         delta = [b - a for a, b in zip(self.position, target, strict=True)]
+        if delta[3] and self.temp(0, t) < EXTRUDE_MINTEMP:
+            # planner.cpp _populate_block (PREVENT_COLD_EXTRUSION): E is taken as reached,
+            # nothing extruded
+            self._say(t, "echo: cold extrusion prevented")
+            delta[3] = 0.0
         dist = math.sqrt(sum(d * d for d in delta[:3])) or abs(delta[3])
         if dist < 1e-9:
+            self.position = target
             return t
         speed = self.feed * self.settings.feed_percent / 100.0     # M220
         for i in range(4):
