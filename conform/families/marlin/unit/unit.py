@@ -93,6 +93,7 @@ class Truth:
 
 
 class MarlinUnit:
+    settings_class = Settings           # unit/settings.py (a deviant unit may bring its own)
     def __init__(self, v: Variant, spec: MarlinSpec, *, t0: float = 0.0,
                  line_time: float = 0.0005, boot: float = 0.0, **_options: Any) -> None:
         self.v, self.spec = v, spec
@@ -132,7 +133,7 @@ class MarlinUnit:
         self.booting_until = t + boot
         self.ep_state = ""                  # emergency parser: the command seen so far
         self.wait: HeatWait | None = None   # M109 / M190 waiting
-        self.settings = Settings(self.v)    # unit/settings.py (loaded from the EEPROM at boot)
+        self.settings = self.settings_class(self.v)   # loaded from the EEPROM at boot
         self.settings.load(self.eeprom, announce=False)
         self._say(self.booting_until, *self._banner())
 
