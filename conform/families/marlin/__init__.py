@@ -14,6 +14,14 @@ from typing import Any
 
 from conform.families import Detection, Family, VariantInfo
 
+REAL_BOARD_NOTES = [
+    "settings checks set M92/M201/M203-M206/M301/M304/M220/M221/M111 and put back what "
+    "M503, M220, M221 read before each check",
+    "EEPROM checks end with M500 of the settings the unit had at their start: what its EEPROM "
+    "held before the run is replaced by them",
+    "motion checks home (G28) and move a few mm from there; G92 changes the logical "
+    "coordinates; M112 checks leave the unit halted until it is reset"]
+
 
 class MarlinFamily(Family):
     """Marlin's hooks. It answers both the engine's older hook set (``run_targets``) and the
@@ -77,21 +85,25 @@ class MarlinFamily(Family):
 
         motion = bool(permissions.allow_motion) if permissions is not None else \
             bool(family_values.pop("allow_motion", False))
-        return MarlinRunner(target, variant, allow_motion=motion, options=options)
+        eeprom = bool(permissions.allow_eeprom) if permissions is not None else False
+        return MarlinRunner(target, variant, allow_motion=motion, allow_eeprom=eeprom,
+                            options=options)
 
     def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_values: Any
                     ) -> list[Any]:
         from conform.families.marlin.conformance.checks import generate, select
 
-        return select(generate(self.load_tables(), variant), patterns)
+        return select(generate(self.load_tables(), variant, profile), patterns)
 
     def permission_notes(self, permissions: Any) -> list[str]:
         from conform.families.marlin.conformance.checks import HEATERS_ENV
 
         notes = [] if permissions.allow_motion else [
             "checks that move or halt the unit SKIPPED (no --allow-motion)"]
-        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"]
+        notes += [] if permissions.allow_eeprom else [
+            "EEPROM checks (M500) SKIPPED (no --allow-eeprom)"]
+        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"] + REAL_BOARD_NOTES
 
     def mutant_fault(self, name: str) -> str:
         from conform.families.marlin.conformance.mutants import MUTANTS

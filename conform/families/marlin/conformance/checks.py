@@ -48,6 +48,7 @@ class MarlinCheck:
     emulator_only: bool = False
     kills: bool = False       # leaves the unit halted until a reset (M112): on a real unit
                               # only the last of these runs, once
+    eeprom: bool = False      # writes the EEPROM (M500)
 
     @property
     def subject(self) -> str:
@@ -538,7 +539,7 @@ def move_and_wait(s: Session) -> Outcome:
     return s.oks(w.lines) == 1 and pos == want, f"M400 ok after the move; {want}", pos or got.text()
 
 
-def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
+def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
     v = spec.variant(vid)
     c = {m.kind: m.cite for m in spec.messages.values()}
     cmd = {k: x.cite for k, x in spec.commands.items()}
@@ -647,6 +648,9 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
+    from conform.families.marlin.conformance import depth
+
+    out += depth.generate(spec, vid, profile)
     return sorted(out, key=lambda c: ("/halt/" in c.id, c.kills))
 
 
@@ -700,7 +704,8 @@ class MarlinRunner(Runner):
 
     def __init__(self, target: Any, vid: str, *, spec: MarlinSpec | None = None,
                  allow_motion: bool = False, allow_heaters: bool | None = None,
-                 options: RunOptions | None = None, **_ignored: Any) -> None:
+                 allow_eeprom: bool = False, options: RunOptions | None = None,
+                 **_ignored: Any) -> None:
         super().__init__(target, vid, options)
         self.spec = spec or load_marlin()
         self.session = Session(target, self.spec, self.spec.variant(vid))
@@ -708,6 +713,7 @@ class MarlinRunner(Runner):
         if allow_heaters is None:
             allow_heaters = os.environ.get(HEATERS_ENV, "") == "1"
         self.heat_ok = allow_heaters or target.emulated
+        self.eeprom_ok = allow_eeprom or target.emulated
         self.killer: str | None = None      # the one check that may halt a real unit
 
     def run(self, checks: Sequence[Any], progress: Any = None) -> TargetRun:
@@ -728,6 +734,9 @@ class MarlinRunner(Runner):
         if check.motion and not self.motion_ok:
             return CheckResult(grade=Grade.SKIPPED, detail="moves the machine or halts it: "
                                "needs --allow-motion", **base)
+        if check.eeprom and not self.eeprom_ok:
+            return CheckResult(grade=Grade.SKIPPED, detail="writes the EEPROM (M500): needs "
+                               "--allow-eeprom", **base)
         if check.heat and not self.heat_ok:
             return CheckResult(grade=Grade.SKIPPED, detail=f"heats: needs {HEATERS_ENV}=1",
                                **base)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from conform.families.marlin.conformance.deviants import DEVIANTS
 from conform.families.marlin.spec import MarlinSpec, Variant
 from conform.families.marlin.unit.unit import HeatWait, MarlinUnit, Queued, _code
 
@@ -174,6 +175,7 @@ MUTANTS: dict[str, type[MarlinUnit]] = {
     "silent-shutdown": SilentShutdown,
     "slow-keepalive": SlowKeepalive,
 }
+MUTANTS.update(DEVIANTS)      # settings, EEPROM, reports, tools, messages, dwell, modes
 
 
 def make(v: Variant, spec: MarlinSpec, *, t0: float = 0.0, mutant: str | None = None,

@@ -27,6 +27,7 @@ from typing import Any
 
 from conform.families.marlin.protocol.codec import checksum
 from conform.families.marlin.spec import MarlinSpec, Variant
+from conform.families.marlin.unit.settings import Settings
 
 EOL = b"\r\n"
 BACKSPACE = 0x08
@@ -40,6 +41,7 @@ MAX_ACCEL = (3000.0, 3000.0, 100.0, 10000.0)   # Configuration.h DEFAULT_MAX_ACC
                               # planner limits a block's acceleration by each axis in it
 DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
 HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
+EXTRUDE_MINTEMP = 170.0       # Configuration.h PREVENT_COLD_EXTRUSION, EXTRUDE_MINTEMP 170
 BOOT = 0.1                    # s from reset to "start" (the simulator; a real AVR board waits
                               # ~0.5-2 s in its bootloader)
 QUICKSTOP = 1.0               # planner.cpp Planner::quick_stop: cleaning_buffer_counter =
@@ -50,8 +52,6 @@ FIRST_MOVE_DELAY = 0.125      # planner.h BLOCK_DELAY_FOR_1ST_MOVE (100 ms) befo
 HOMING_BUMP = ((5.0, 2.0), (5.0, 2.0), (2.0, 4.0))   # Configuration_adv.h HOMING_BUMP_MM and
                               # HOMING_BUMP_DIVISOR: back off and approach again, slower
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d+)")
-DEBUG_FLAGS = ("ECHO", "INFO", "ERRORS", "DRYRUN", "COMMUNICATION", "LEVELING", "DETAIL")
-"""core/serial.h MarlinDebugFlags, bit by bit; core/debug names them (M111.cpp)."""
 
 
 @dataclass
@@ -107,6 +107,7 @@ class Truth:
 
 
 class MarlinUnit:
+    settings_class = Settings           # unit/settings.py (a deviant unit may bring its own)
     def __init__(self, v: Variant, spec: MarlinSpec, *, t0: float = 0.0,
                  line_time: float = 0.0005, boot: float = 0.0, **_options: Any) -> None:
         self.v, self.spec = v, spec
@@ -118,6 +119,7 @@ class MarlinUnit:
         self._out: list[tuple[float, bytes]] = []
         self.deaf = False                   # after a deviant unit's choice (mutants)
         self._kind = ""
+        self.eeprom: dict[str, Any] = {}    # what M500 stored (kept across resets)
         self._reset_state(t0, boot)
 
     # -- power -----------------------------------------------------------------------------
@@ -149,8 +151,9 @@ class MarlinUnit:
         self.pending = bytearray()          # bytes the host wrote that wait outside the ring
         self.held_until = t                 # an early M410's synchronize() holds the loop
         self.homed = False                  # the axes' place is known (after G28)
-        self.debug = 0                      # M111 flags
-        self._say(self.booting_until, *self._banner())
+        self.settings = self.settings_class(self.v)   # loaded from the EEPROM at boot
+        loaded = self.settings.load(self.eeprom, announce=False)
+        self._say(self.booting_until, *self._banner(), *loaded)
 
     def power_off(self, t: float) -> None:
         """The board loses power (its USB cable pulled): it stops where it is and says
@@ -187,19 +190,15 @@ class MarlinUnit:
 
     def _banner(self) -> list[str]:
         """MarlinCore.cpp setup(): start, the reset cause (PowerUp), the version, the build's
-        date and free memory; then settings.load() (module/settings.cpp) on an EEPROM that
-        holds no settings of this version: the mismatch and the defaults loaded. As recorded
-        from 2.1.2.4 with an empty EEPROM. HAL_LINUX (the native build, HAL/LINUX/main.cpp
-        main()) greets with ``x86_64 Initialized`` before setup() runs."""
+        date and free memory (what settings.load() says follows: on an empty EEPROM the
+        version mismatch and the defaults loaded, as recorded). HAL_LINUX (the native build,
+        HAL/LINUX/main.cpp main()) greets with ``x86_64 Initialized`` before setup() runs."""
         v = self.v
         lines = ["x86_64 Initialized"] if v.on("HAL_LINUX") else []
         lines += ["start", "PowerUp", f"Marlin {v.firmware}",
                  "echo: Last Updated: 2024-06-16 | Author: (none, default config)",
                  "echo: Compiled: conform emulator",
                  "echo: Free Memory: 4096  PlannerBufferBytes: 1280"]
-        if v.on("EEPROM_SETTINGS"):
-            lines += ["echo:EEPROM version mismatch (EEPROM=? Marlin=V88)",
-                      "echo:Hardcoded Default Settings Loaded"]
         return lines
 
     # -- the sans-I/O interface --------------------------------------------------------------
@@ -516,13 +515,14 @@ class MarlinUnit:
 
     # -- running one command (gcode.cpp process_parsed_command) --------------------------------
     def _command(self, code: str) -> Any:
-        """The table's command ``code`` when this build has it (None: unknown here)."""
-        return self.spec.command(code, self.v)
+        """The table's command ``code`` when this build has it (None: unknown here); every
+        T<n> is T0's row (gcode.cpp: case 'T' calls T(parser.codenum))."""
+        return self.spec.command("T0" if code[:1] == "T" else code, self.v)
 
     def _start(self, q: Queued) -> None:
         t = max(self.now, self.booting_until)
         self.cur, self.cur_start, self.cur_busy = q, t, False
-        if self.debug & 1:
+        if self.settings.debug & 1:
             # gcode.cpp process_next_command: DEBUGGING(ECHO) echoes the command with
             # SERIAL_ECHOLN, a println: this one line ends in CR LF (as recorded)
             self._out.append((t, f"echo:{q.text}".encode("latin-1") + b"\r\n"))
@@ -537,7 +537,8 @@ class MarlinUnit:
         elif kind in ("dwell", "sync", "home"):
             end = self.planner[-1][0] if self.planner else t
             if kind == "dwell":
-                end += words.get("P", 0.0) / 1000.0 + words.get("S", 0.0)
+                # G4.cpp: P ms, but S s wins when both are given
+                end += words["S"] if "S" in words else words.get("P", 0.0) / 1000.0
             elif kind == "home":
                 end += self._homing_time()
                 self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
@@ -578,8 +579,7 @@ class MarlinUnit:
         elif kind == "quickstop":
             self._quickstop(t)
             done = t + QUICKSTOP + self.line_time
-        elif kind == "debug":
-            self._m111(words)
+
         if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not (
                 self.wait is not None and not self.v.on("BUSY_WHILE_HEATING")):
             self.cur_busy = True        # (a heating wait is NOT_BUSY without BUSY_WHILE_HEATING)
@@ -616,8 +616,10 @@ class MarlinUnit:
             words = _words(q.text)      # M876.cpp: S<n> answers the prompt
             if "S" in words:
                 self.truth.prompt_responses.append((t, int(words["S"])))
-        elif kind == "debug":
-            self._say(t, self._debug_line())
+        elif kind == "settings":
+            self._say(t, *self.settings.run(_code(q.text), _after_command(q.text),
+                                            _after_number(q.text), t, self.eeprom,
+                                            self._position_line))
         elif not kind:
             self._unknown(q, t)
         self._ok(q, t)
@@ -636,16 +638,6 @@ class MarlinUnit:
             bump, div = HOMING_BUMP[i]
             total += abs(self.position[i]) / feed[i] + bump / feed[i] + bump * div / feed[i]
         return total
-
-    def _m111(self, words: dict[str, float]) -> None:
-        """gcode/control/M111.cpp GcodeSuite::M111: S sets marlin_debug_flags; then
-        ``echo:DEBUG:`` and the names of the flags set, or ``off``."""
-        if "S" in words:
-            self.debug = int(words["S"]) & 0xFF
-
-    def _debug_line(self) -> str:
-        names = [n for bit, n in enumerate(DEBUG_FLAGS) if self.debug & (1 << bit)]
-        return "echo:DEBUG:" + (",".join(names) if names else "off")
 
     def _unknown(self, q: Queued, t: float) -> None:
         self._say(t, f'echo:Unknown command: "{_after_number(q.text)}"')
@@ -676,15 +668,23 @@ class MarlinUnit:
         for i, a in enumerate("XYZE"):
             if a in words:
                 rel = self.e_relative if a == "E" else self.relative
-                target[i] = (target[i] if rel else 0.0) + words[a]
+                # a logical coordinate: the M206 offset off (motion.h NATIVE_TO_LOGICAL)
+                off = self.settings.home_offset[i] if i < 3 else 0.0
+                target[i] = (target[i] if rel else -off) + words[a]
         delta = [b - a for a, b in zip(self.position, target, strict=True)]
+        if delta[3] and self.temp(0, t) < EXTRUDE_MINTEMP:
+            # planner.cpp _populate_block (PREVENT_COLD_EXTRUSION): E is taken as reached,
+            # nothing extruded
+            self._say(t, "echo: cold extrusion prevented")
+            delta[3] = 0.0
         dist = math.sqrt(sum(d * d for d in delta[:3])) or abs(delta[3])
         if dist < 1e-9:
+            self.position = target
             return t
-        speed = self.feed
+        speed = self.feed * self.settings.feed_percent / 100.0     # M220
         for i in range(4):
             if delta[i]:
-                speed = min(speed, self.v.max_feedrate[i] * dist / abs(delta[i]))
+                speed = min(speed, self.settings.max_feed[i] * dist / abs(delta[i]))
         accel = min([ACCEL] + [MAX_ACCEL[i] * dist / abs(delta[i]) for i in range(4) if delta[i]])
         ramp = speed * speed / accel
         duration = dist / speed + speed / accel if dist > ramp else 2 * math.sqrt(dist / accel)
@@ -701,11 +701,13 @@ class MarlinUnit:
         return start
 
     def _position_line(self) -> str:
-        """motion.cpp report_current_position_projected (M114 without D): current_position,
-        then ``Count`` from planner.position, the steps the planner ends at (right after
-        ``G1 X10`` is queued: Count X:800, as recorded), not where the steppers are."""
-        p = self.position
-        counts = [round(p[i] * self.v.steps_per_mm[i]) for i in range(3)]
+        """motion.cpp report_current_position_projected (M114 without D): current_position
+        (logical: the M206 offset added), then ``Count`` from planner.position, the steps the
+        planner ends at (right after ``G1 X10`` is queued: Count X:800, as recorded), not
+        where the steppers are."""
+        steps, off = self.settings.steps, self.settings.home_offset
+        p = [x + (off[i] if i < 3 else 0.0) for i, x in enumerate(self.position)]  # logical
+        counts = [round(self.position[i] * steps[i]) for i in range(3)]
         return (f"X:{p[0]:.2f} Y:{p[1]:.2f} Z:{p[2]:.2f} E:{p[3]:.2f} "
                 f"Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}")
 
