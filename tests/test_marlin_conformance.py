@@ -69,7 +69,7 @@ def test_serve_answers_over_a_pty():
         from conform.emulator.control import send_control
 
         assert send_control(control, "reset").startswith("ok")
-        assert read_lines(port, 3)[:2] == ["start", "echo:Marlin 2.1.2.4"]
+        assert read_lines(port, 3)[:3] == ["x86_64 Initialized", "start", "PowerUp"]
         truth = json.loads(send_control(control, "truth")[3:])
         assert truth["executed"] == {"1": 1} and truth["resets"]
         port.close()
@@ -91,6 +91,30 @@ def test_conform_run_over_the_pty(tmp_path):
         grades = {c["id"].split("/", 2)[2]: c["grade"] for c in results["checks"]}
         assert grades["line/repeat-silent"] == "PASS"
         assert grades["halt/m112"] == "SKIPPED"          # a real unit: needs --allow-motion
+    finally:
+        stop(proc)
+
+
+@pytest.mark.slow
+def test_a_real_unit_is_halted_once_by_the_last_halt_check(tmp_path):
+    """Over a pty (not emulated for the runner) with --allow-motion: of the three checks that
+    leave the unit halted only the last planned one runs, after every other check, and says
+    the unit is left halted; the other two are SKIPPED naming it; nothing ERRORs."""
+    proc, path, _ = start()
+    try:
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
+                            "marlin-2.1", "--baud", "250000", "--report", str(tmp_path), "-q",
+                            "--allow-motion", "--check", "*/halt/*", "--check", "*/reply/*"],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stdout + p.stderr
+        checks = json.loads((tmp_path / "results.json").read_text())["checks"]
+        grades = [c["grade"] for c in checks]
+        assert "ERROR" not in grades and "FAIL" not in grades
+        kills = [c for c in checks if "/halt/m112" in c["id"]]
+        ran = [c for c in kills if c["grade"] == "PASS"]
+        assert len(kills) == 3 and len(ran) == 1 and checks[-1] is ran[0]
+        assert "left halted" in ran[0]["detail"]
+        assert all(ran[0]["id"] in c["detail"] for c in kills if c is not ran[0])
     finally:
         stop(proc)
 
