@@ -78,6 +78,11 @@ def figures(a: Any) -> list[tuple[str, str]]:
     return rows
 
 
+def _span(ax: Any, a: Any) -> None:
+    """Every plot over the whole session (the report's --time-range narrows it after)."""
+    ax.set_xlim(0.0, max(float(a.metrics["duration_s"]), 1e-3))
+
+
 def _xy(series: Any) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(series.t, float), np.asarray(series.y, float)
 
@@ -94,6 +99,7 @@ def latency_plot(a: Any) -> str | None:
         et, _ = _xy(p.errors)
         ax.plot(et, np.full(len(et), np.nanmax(y) if len(y) else 0.0), "v", color="tab:red",
                 ms=5, label="line rejected")
+    _span(ax, a)
     return over_time(fig, ax, a, "ms", "Time from a line to its ok")
 
 
@@ -104,6 +110,7 @@ def resend_plot(a: Any) -> str | None:
     t, y = _xy(p.resends)
     fig, ax = new_figure(7.5, 2.6)
     ax.plot(t, y, "o", color="tab:red", ms=3, label="Resend: N (the line asked for)")
+    _span(ax, a)
     return over_time(fig, ax, a, "line number", "The unit's resend requests")
 
 
@@ -115,6 +122,7 @@ def busy_plot(a: Any) -> str | None:
     ax.broken_barh([(s, max(e - s, 0.05)) for s, e in p.busy], (0, 1), color="tab:orange",
                    label="busy: processing")
     ax.set_yticks([])
+    _span(ax, a)
     return over_time(fig, ax, a, "", "When the unit said busy (a command blocking)")
 
 
@@ -126,6 +134,9 @@ def in_flight_plot(a: Any) -> str | None:
     fig, ax = new_figure(7.5, 2.6)
     tt, yy = thin_points(t, y)
     ax.step(tt, yy, where="post", lw=0.8, label="lines sent, not yet answered")
+    ax.set_ylim(0, max(yy.max(), 1) + 1)
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    _span(ax, a)
     return over_time(fig, ax, a, "lines", "Lines in flight when each line was sent")
 
 
