@@ -144,7 +144,7 @@ def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool)
     """
     import json
 
-    from conform.emulator.judge import judge, read_transcript, render
+    from conform.emulator.judge import judge_recording, read_transcript, render
     from conform.families import family_for_variant
 
     transcript = read_transcript(recording)
@@ -152,7 +152,7 @@ def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool)
     if not name:
         raise UserError(f"{recording}: the recording names no variant: give --variant")
     fam = family_for_variant(name)
-    verdict = judge(transcript, fam.make_unit(name), fam.judge_mask(name), name, settle)
+    verdict = judge_recording(transcript, fam, name, settle)
     if as_json:
         click.echo(json.dumps(verdict.to_dict()))
     else:

@@ -95,6 +95,10 @@ def _whole_line(line: str) -> str:
     return line
 
 
+def _every_line(line: str) -> bool:
+    return True
+
+
 class Family:
     """What a protocol family provides to the engine, with a default for every optional ability
     (docs/architecture.md, docs/writing-a-family.md).
@@ -180,6 +184,23 @@ class Family:
         differs from run to run of the same firmware (temperatures, build dates) masked.
         The default compares lines whole."""
         return _whole_line
+
+    line_ending: str = "\n"
+    """How the unit ends its answer lines. A text transcript cannot hold a CR, so ``conform
+    emulate judge`` gives each of its unit lines this ending before comparing."""
+
+    def judge_answers(self, variant: str) -> Callable[[str], bool]:
+        """Which unit lines (without their ending) close the answer to one host line: what an
+        ok-paced sender waits for before it writes its next line. ``conform emulate judge``
+        paces a recording's host writes by them. The default: every line does."""
+        return _every_line
+
+    def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
+        """Two answer lines (after ``judge_mask``) that differ but are the same within what
+        the family states may differ between two runs (e.g. positions reported while the
+        machine moves, within the motion model's tolerance); None (the default): lines are
+        the same only when equal."""
+        return None
 
     def mutants(self) -> Sequence[str]:
         """Names of its deviant units (``emu:VARIANT:MUTANT``); empty when it has none."""

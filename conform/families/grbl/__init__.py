@@ -11,7 +11,7 @@ scenarios, sessions and rules); ``serve`` (the emulator on a pty/TCP), ``cli`` (
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from conform.families import Detection, Family, FleetColumn, VariantInfo
@@ -32,6 +32,25 @@ class GrblFamily(Family):
         return [VariantInfo(v.id, self.name, v.title, f"Grbl {v.version} ({v.build})",
                             "".join(v.axes), f"rx {v.rx_buffer} B, planner {v.planner_blocks}",
                             f"line {v.line_max} chars") for v in spec.variants.values()]
+
+    line_ending = "\r\n"   # report.c: every line the unit prints ends CR LF
+
+    def judge_answers(self, variant: str) -> Callable[[str], bool]:
+        """``ok`` and ``error:N`` close the answer to one line (protocol.c, report.c
+        report_status_message); a streaming sender counts them."""
+        from conform.families.grbl.emulate_judge import is_answer
+
+        return is_answer
+
+    def judge_mask(self, variant: str) -> Callable[[str], str]:
+        from conform.families.grbl.emulate_judge import mask
+
+        return mask
+
+    def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
+        from conform.families.grbl.emulate_judge import near
+
+        return near
 
     def make_unit(self, variant: str, *, t0: float = 0.0, mutant: str | None = None,
                   **options: Any) -> Any:

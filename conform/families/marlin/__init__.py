@@ -56,10 +56,28 @@ class MarlinFamily(Family):
         spec = self.load_tables()
         return make(spec.variant(variant), spec, t0=t0, **options)
 
+    line_ending = "\n"     # serial.h SERIAL_EOL: a bare LF (a println's lines end CR LF)
+
     def judge_mask(self, variant: str) -> Callable[[str], str]:
         from conform.families.marlin.protocol.codec import mask_volatile
 
         return mask_volatile
+
+    def judge_answers(self, variant: str) -> Callable[[str], bool]:
+        """``ok`` closes the answer to one line (queue.cpp ok_to_send; M105's ``ok T:``)."""
+        from conform.families.marlin.protocol.codec import is_answer
+
+        return is_answer
+
+    def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
+        """M114 answers within POSITION_TOLERANCE (protocol/codec.py): where a quickstop
+        leaves the axes depends on the moment it is read."""
+        from functools import partial
+
+        from conform.families.marlin.protocol.codec import near_position
+
+        v = self.load_tables().variant(variant)
+        return partial(near_position, steps=v.steps_per_mm[:3])
 
     def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
                **family_values: Any) -> Any:

@@ -267,9 +267,10 @@ class Analyser:
             self.asked = None
             while self.pending:
                 self._settle(self.pending.popleft())
-            self.add("loop", Finding("reset", t - self.t0, "warning", "the unit restarted "
-                                     "(start): line numbers begin again at 1, queued lines are "
-                                     "lost", "MarlinCore.cpp setup()"))
+            if self.host_lines:     # the boot at a capture's start, before the host wrote: no loss
+                self.add("loop", Finding("reset", t - self.t0, "warning", "the unit restarted "
+                                         "(start): line numbers begin again at 1, queued lines "
+                                         "are lost", "MarlinCore.cpp setup()"))
         self._judge_storms()
 
     def _error(self, line: str) -> None:
