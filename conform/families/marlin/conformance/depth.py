@@ -387,7 +387,7 @@ def report_checks(spec: MarlinSpec, vid: str, profile: str) -> list[MarlinCheck]
     v = spec.variant(vid)
     cmd = {k: x.cite for k, x in spec.commands.items()}
     out: list[MarlinCheck] = []
-    number = re.compile(r"-?\d+\.\d\d")
+    number = re.compile(r"-?(?:0|[1-9]\d*)\.\d\d")    # as printed: no padding
 
     def layout(s: Session) -> Outcome:
         got = s.talk(b"M503\n")
@@ -416,8 +416,9 @@ def report_checks(spec: MarlinSpec, vid: str, profile: str) -> list[MarlinCheck]
 
     def print_time(s: Session) -> Outcome:
         got = s.talk(b"M31\n")
+        # libs/duration_t.h toString: the largest unit first, none that is 0 before it
         ok = len(got.lines) == 2 and bool(re.fullmatch(
-            r"echo:Print time: (\d+[ydhm] )*\d+s", got.lines[0]))
+            r"echo:Print time: ([1-9]\d*[ydhm] (\d+[dhm] )*)?\d+s", got.lines[0]))
         return ok, "echo:Print time: [<n>h ][<n>m ]<n>s | ok", got.text()
 
     def timer(restart: bool) -> Callable[[Session], Outcome]:
