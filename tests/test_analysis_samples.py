@@ -123,3 +123,34 @@ def test_grbl_samples_stream_the_whole_job(name: str, method: str) -> None:
     # the unit ended where the job's last line leads, standing
     last = re.search(r"X([-\d.]+)Y([-\d.]+)", lines[-1])
     assert a.reports[-1][1].startswith(f"<Idle|MPos:{last[1]},{last[2]},0.000|")
+
+
+# -- Marlin: recorded live through `conform proxy` between `conform send` and `conform emulate
+# -- serve marlin-2.1` with noise on the host's bytes (captures/README.md); figures from the job
+
+RING = CAPTURES / "jobs" / "marlin-ring.gcode"
+
+
+def test_marlin_sample_takes_the_whole_job_once_despite_the_noise(tmp_path) -> None:
+    from conform.families import family
+
+    job = [x.strip() for x in RING.read_text().splitlines()
+           if x.strip() and not x.startswith(";")]
+    a = family("marlin").analyze(str(CAPTURES / "marlin-noisy.mcap"), keep_lines=True)
+    m = a.metrics
+    taken = [h.text for h in a.lines if h.accepted]
+    # the sender's M110 first, the job line by line, then its final M400 and M114
+    assert taken == ["M110 N0", *job, "M400", "M114"]
+    assert m["accepted"] == len(job) + 3 and m["oks"] == m["host_lines"]
+    # every line the noise damaged was rejected, asked for again and sent again
+    assert m["resends"] == m["checksum_errors"] == m["host_lines"] - m["accepted"] > 0
+    assert (m["twice_confirmed"], m["twice_possible"], m["never_confirmed"],
+            m["never_possible"]) == (0, 0, 0, 0)
+    # the G4 S5 of the job blocks for 5 s: busy: processing at least twice (every 2 s)
+    assert m["busy_periods"] >= 1 and m["busy_s"] >= 5
+    assert [f.kind for f in a.findings if f.severity in ("hazard", "error")] == []
+    files = a.write_report(str(tmp_path))
+    page = files["html"].read_text()
+    assert 'class="verdict ERROR"' in page and f"rejected {m['resends']} line(s)" in page
+    assert page.count("data:image/png;base64,") == 4      # latency, resends, busy, in flight
+    assert "ok_p50_ms" not in page and "time from a line to its ok" in page

@@ -207,6 +207,28 @@ def test_analysis_report_first_screen(browser, tmp_path, capsys):
     assert images == 0, "a plot did not load"
 
 
+def test_marlin_analysis_report_first_screen(browser, tmp_path, capsys):
+    out = tmp_path / "marlin"
+    with pytest.raises(SystemExit) as info:
+        main(["analyze", str(REPO / "captures" / "marlin-noisy.mcap"), "--no-progress",
+              "--report", str(out)])
+    assert info.value.code == 0
+    capsys.readouterr()
+    assert _load(browser, out / "index.html", "marlin-analysis") == []
+    # the verdict first, in a sentence, in its colour; then the figures in words
+    verdict = _on_first_screen(browser, ".verdict")
+    assert verdict.startswith("ERROR: The unit rejected 10 line(s)"), verdict
+    background = browser.execute_script(
+        "return getComputedStyle(document.querySelector('.verdict')).backgroundColor")
+    assert background == "rgb(253, 226, 200)"   # the error colour of the shared stylesheet
+    figures = _on_first_screen(browser, "table.session")
+    assert "time from a line to its ok" in figures and "ok_p50_ms" not in figures
+    plots = browser.execute_script(
+        "return [...document.images].map(i => [i.alt, i.complete && i.naturalWidth > 0])")
+    assert [alt.split(" ")[0] for alt, _ in plots] == ["time", "the", "when", "lines"]
+    assert all(ok for _alt, ok in plots), plots
+
+
 def test_fleet_report_loads_and_names_its_counts(browser, tmp_path, capsys):
     out = tmp_path / "fleet"
     with pytest.raises(SystemExit):

@@ -53,7 +53,7 @@ def test_the_reference_agrees_with_marlins_answers() -> None:
     ("resend-off-by-one", "N2 G4 P0;wait*111",
      ["Error:No Checksum with line number, Last Line: 1\n", "Resend: 2\n"],
      ["Error:No Checksum with line number, Last Line: 0\n", "Resend: 1\n"]),
-    ("silent-unknown", "G21", ['echo:Unknown command: "G21"\n'], []),
+    ("silent-unknown", "G20", ['echo:Unknown command: "G20"\n'], []),
 ])
 def test_a_deviant_unit_disagrees_where_it_deviates(mutant, after, recorded, reference) -> None:
     v = judged(mutant)

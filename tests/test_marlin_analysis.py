@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
@@ -184,3 +185,23 @@ def test_a_fleet_streams_a_marlin_captures_tables_in_one_pass(storm, tmp_path, m
     assert [p.parent.parent.name for p in tables] == ["findings", "lines"]
     assert pq.read_table(tables[1]).num_rows == row["exchanges"]
     assert not [p for p in (tmp_path / "t" / "marlin").iterdir() if p.name.startswith(".")]
+
+
+def test_report_gives_the_verdict_then_the_diagnosis_when_there_is_one(tmp_path):
+    """The place the Marlin diagnosis fills: its sentence right after the verdict, its
+    details after the figures (the pieces every analysis report shares)."""
+    from types import SimpleNamespace
+
+    from conform.families import family
+
+    a = family("marlin").analyze(str(Path(__file__).resolve().parent.parent / "captures" /
+                                     "marlin-noisy.mcap"))
+    plain = a.write_report(str(tmp_path / "plain"))["html"].read_text()
+    assert 'class="diagnosis"' not in plain
+    a.diagnosis = SimpleNamespace(headline="Most likely the link: 10 lines damaged on the way",
+                                  causes=[], reception=[], resume=None)
+    page = a.write_report(str(tmp_path / "diag"))["html"].read_text()
+    verdict, diagnosis = page.index('class="verdict'), page.index('class="diagnosis"')
+    badges, details = page.index('class="badge'), page.index('class="diagnosis-details"')
+    assert verdict < diagnosis < badges < details
+    assert "Diagnosis: Most likely the link: 10 lines damaged on the way" in page

@@ -71,7 +71,7 @@ def test_serve_answers_over_a_pty():
         from conform.emulator.control import send_control
 
         assert send_control(control, "reset").startswith("ok")
-        assert read_lines(port, 3)[:2] == ["start", "echo:Marlin 2.1.2.4"]
+        assert read_lines(port, 3)[:3] == ["x86_64 Initialized", "start", "PowerUp"]
         truth = json.loads(send_control(control, "truth")[3:])
         assert truth["executed"] == {"1": 1} and truth["resets"]
         port.close()
@@ -93,6 +93,30 @@ def test_conform_run_over_the_pty(tmp_path):
         grades = {c["id"].split("/", 2)[2]: c["grade"] for c in results["checks"]}
         assert grades["line/repeat-silent"] == "PASS"
         assert grades["halt/m112"] == "SKIPPED"          # a real unit: needs --allow-motion
+    finally:
+        stop(proc)
+
+
+@pytest.mark.slow
+def test_a_real_unit_is_halted_once_by_the_last_halt_check(tmp_path):
+    """Over a pty (not emulated for the runner) with --allow-motion: of the three checks that
+    leave the unit halted only the last planned one runs, after every other check, and says
+    the unit is left halted; the other two are SKIPPED naming it; nothing ERRORs."""
+    proc, path, _ = start()
+    try:
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
+                            "marlin-2.1", "--baud", "250000", "--report", str(tmp_path), "-q",
+                            "--allow-motion", "--check", "*/halt/*", "--check", "*/reply/*"],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stdout + p.stderr
+        checks = json.loads((tmp_path / "results.json").read_text())["checks"]
+        grades = [c["grade"] for c in checks]
+        assert "ERROR" not in grades and "FAIL" not in grades
+        kills = [c for c in checks if "/halt/m112" in c["id"]]
+        ran = [c for c in kills if c["grade"] == "PASS"]
+        assert len(kills) == 3 and len(ran) == 1 and checks[-1] is ran[0]
+        assert "left halted" in ran[0]["detail"]
+        assert all(ran[0]["id"] in c["detail"] for c in kills if c is not ran[0])
     finally:
         stop(proc)
 
@@ -126,8 +150,10 @@ def test_ctrl_c_and_signals_halt_a_real_unit(tmp_path, sig):
 
 
 def test_the_emergency_parser_checks_fail_on_a_unit_without_it():
-    """marlin-2.1-adv's checks against a plain marlin-2.1 unit: M108 cannot end M109's wait and
-    M112 waits for the dwell, as queue.cpp reads nothing while a command blocks."""
+    """marlin-2.1-adv's checks against a plain marlin-2.1 unit: a NUMBERED M108 cannot end
+    M109's wait and a numbered M112 waits for the dwell (queue.cpp's critical commands look
+    at the line's first letters); unnumbered, both act at once on either unit, as the real
+    firmware does (recordings/marlin-2.1.2.4/blocking-reads.transcript)."""
     from conform.conformance.target import EmuTarget
     from conform.families import family
 
@@ -135,5 +161,63 @@ def test_the_emergency_parser_checks_fail_on_a_unit_without_it():
     run = run_checks(target, "marlin-2.1-adv", patterns=["*/halt/*"])
     grades = {c.id.split("/", 2)[2]: c.grade for c in run.checks}
     assert grades["halt/m108-breaks-m109"] is Grade.FAIL
-    assert grades["halt/m112-while-busy"] is Grade.FAIL
+    assert grades["halt/m112-numbered-while-busy"] is Grade.FAIL
+    assert grades["halt/m112-while-busy"] is Grade.PASS
     assert grades["halt/m112"] is Grade.PASS
+
+
+def test_the_halt_counts_only_answers_to_its_own_lines():
+    """SIGTERM's halt behind a line still in flight: that line's ok is not taken for one of
+    the halt's; it is stopped only once the answer to the mark behind its four lines came
+    (so after five oks here), and a dead unit is not called stopped."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.marlin.conformance.checks import HALT_MARK, halt
+
+    target = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:m")
+    target.reset()
+    target.begin_log()
+    target.send(b"G4 P300\n")                      # in flight when the halt begins
+    assert halt(target).startswith("stopped")
+    rx = b"".join(e.data for e in target.log if e.dir == "rx")
+    mark = rx.index(b'echo:Unknown command: "' + HALT_MARK)
+    assert rx[:mark].count(b"ok\n") == 5 and rx[mark:].count(b"ok\n") == 1
+
+    dead = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:dead")
+    dead.reset()
+    dead.send(b"G4 P300\n")
+    dead.send(b"M112\n")
+    assert halt(dead, attempts=1).startswith("stop NOT acknowledged")
+
+
+def test_heating_checks_wait_for_a_sane_temperature():
+    """Right after a reset the firmware reads T:0.00 for a while (recorded on the native
+    build): the heating check asks M105 again until the reading is sane and only then heats;
+    a sensor that never reads sane gets no M109 at all."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.marlin.conformance.checks import run_checks
+    from conform.families.marlin.unit.unit import MarlinUnit
+
+    spec = family("marlin").load_tables()
+
+    class ColdSensor(MarlinUnit):
+        until = 2.0
+
+        def _temps_line(self) -> str:
+            line = super()._temps_line()
+            return line.replace("T:25.00", "T:0.00") if self.now < self.until else line
+
+    def grade(until):
+        ColdSensor.until = until
+        target = EmuTarget(lambda: ColdSensor(spec.variant("marlin-2.1"), spec), "emu:cold")
+        run = run_checks(target, "marlin-2.1", patterns=["*/heat/m109-residency"])
+        sent = b"".join(e.data for c in run.checks for e in c.log if e.dir == "tx")
+        return run.checks[0], sent
+
+    check, sent = grade(2.0)
+    assert check.grade is Grade.PASS and sent.count(b"M105") >= 3
+    assert sent.index(b"M109") > sent.rindex(b"M105\n", 0, sent.index(b"M109"))
+    check, sent = grade(1e9)
+    assert check.grade is Grade.FAIL and "no sane temperature" in check.actual
+    assert b"M109" not in sent

@@ -86,17 +86,28 @@ def test_without_busy_while_heating_the_wait_says_nothing_but_reports():
     assert sum(bool(W.match(x)) for _, x in got) == 13
 
 
-def test_m108_ends_the_wait_only_through_the_emergency_parser():
+def test_m108_plain_ends_the_wait_numbered_only_through_the_emergency_parser():
+    """An unnumbered M108 ends M109's wait as it is read on either unit (queue.cpp critical
+    commands, read by the wait's idle()); a numbered one only through the emergency parser,
+    without it it waits its turn behind M109 (recordings/marlin-2.1.2.4)."""
+    from conform.families.marlin.protocol.codec import frame
+
+    for vid in ("marlin-2.1-adv", "marlin-2.1"):
+        u = unit(S.variant(vid))
+        u.receive(b"M109 S200\n", 1.0)
+        u.poll(3.2)
+        got = run(u, b"M108\n", 3.2, 60.0)
+        oks = [t for t, x in got if x.startswith("ok")]
+        assert len(oks) == 2 and oks[0] < 3.21 and not [x for _, x in got if W.match(x)], vid
     adv = unit(S.variant("marlin-2.1-adv"))
-    adv.receive(b"M109 S200\n", 1.0)
+    adv.receive(frame(1, "M109 S200"), 1.0)
     adv.poll(3.2)
-    got = run(adv, b"M108\n", 3.2, 60.0)
-    oks = [t for t, x in got if x.startswith("ok")]
-    assert len(oks) == 2 and oks[0] < 3.21 and not [x for _, x in got if W.match(x)]
+    oks = [t for t, x in run(adv, frame(2, "M108"), 3.2, 60.0) if x.startswith("ok")]
+    assert len(oks) == 2 and oks[0] < 3.21
     plain = unit()
-    plain.receive(b"M109 S35\n", 1.0)
+    plain.receive(frame(1, "M109 S35"), 1.0)
     plain.poll(2.5)
-    got = run(plain, b"M108\n", 2.5, 60.0)
+    got = run(plain, frame(2, "M108"), 2.5, 60.0)
     oks = [t for t, x in got if x == "ok"]
     window_at = 1.0 + (35 - V.temp_window - AMBIENT) / HEAT_RATE[0]
     assert oks[0] == pytest.approx(window_at + V.temp_residency, abs=1e-3) and len(oks) == 2

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 
 def conform(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "conform", *args], capture_output=True,
@@ -42,3 +44,36 @@ def test_a_job_streams_through_resends_and_lost_answers(emulate, tmp_path: Path)
     assert state["position"][:2] == [x, y] and state["halted"] is False
     analysed = conform("analyze", str(tmp_path / "s.mcap"))
     assert analysed.returncode == 0 and "protocol family marlin" in analysed.stdout
+
+
+@pytest.mark.slow
+def test_send_without_a_variant_opens_the_port_once(emulate, tmp_path: Path, monkeypatch):
+    """The probe that finds the unit (each family's question) and the stream share one open
+    of the port: a board that resets when its port is opened (DTR) resets once."""
+    from click.testing import CliRunner
+
+    import conform.link.ports as ports
+    from conform.cli.main import cli
+
+    job = tmp_path / "job.gcode"
+    job.write_text("G90\nG1 X1 F6000\n")
+    emulate("serve", "marlin-2.1", "--baud", "115200", "--link", str(tmp_path / "m.pty"))
+    opened = []
+    real = ports._open
+
+    def counting(url, *a, **k):
+        opened.append(url)
+        return real(url, *a, **k)
+
+    monkeypatch.setattr(ports, "_open", counting)
+    r = CliRunner().invoke(cli, ["send", str(job), "--target", str(tmp_path / "m.pty"),
+                                 "--allow-motion", "-q"])
+    assert r.exit_code == 0, r.output
+    assert "sent 2 of 2 job lines" in r.output and "(marlin-2.1)" in r.output
+    assert opened == [str(tmp_path / "m.pty")]
+    with ports.held_open("loop://", 9600):
+        a, b = ports.open_port("loop://", 9600), ports.open_port("loop://", 9600)
+        a.close()
+        b.write(b"x")
+        assert a.serial is b.serial and not b.closed
+    assert b.closed

@@ -78,21 +78,35 @@ def test_m110_takes_the_last_n_on_the_line():
     assert lines(u, frame(101, "G90"), 5) == ["ok"]
 
 
-def test_queue_fills_while_a_dwell_blocks_and_rx_overflows():
+def test_lines_are_read_and_checked_while_a_dwell_blocks():
+    """MarlinCore.cpp idle() -> manage_inactivity() -> queue.get_available_commands(): as
+    recorded (blocking-reads.transcript), a line error is answered during the dwell, good
+    lines wait in the queue (BUFSIZE 4, the dwell's own slot included), and what does not
+    fit waits outside the ring on the native build: nothing is lost."""
     u = unit()
-    rx = S.variant("marlin-2.1").rx_buffer
-    u.receive(b"G4 S3\n", 2.0)
-    u.poll(2.1)
-    data = b"".join(frame(n, "G90") for n in range(1, 20))
+    assert lines(u, frame(1, "G4 S3"), 2.0, until=2.1) == []
+    assert lines(u, b"N2 G90*1\n", 2.5, until=2.6) == [
+        "Error:checksum mismatch, Last Line: 1", "Resend: 2", "ok"]      # during the dwell
+    assert lines(u, frame(4, "G90"), 3.0, until=3.1) == [
+        "Error:Line Number is not Last Line Number+1, Last Line: 1", "Resend: 2", "ok"]
+    data = b"".join(frame(n, "G90") for n in range(2, 20))
+    u.receive(data, 3.5)
+    assert len(u.queue) == 3 and u.lost == 0 and u.pending
+    out = [(round(t, 2), x.decode().strip()) for t, x in u.poll(10.0)]
+    assert out[0] == (4.0, "echo:busy: processing") and out[1] == (5.0, "ok")
+    assert [x for _, x in out[2:]] == ["ok"] * 18 and u.truth.executed[19] == 1
+
+
+def test_an_avr_board_drops_what_does_not_fit():
+    import dataclasses
+
+    v = S.variant("marlin-2.1")
+    u = MarlinUnit(dataclasses.replace(v, options={**v.options, "RX_WAITS_OUTSIDE": False}), S)
+    u.poll(1.0)
+    u.receive(frame(1, "G4 S3"), 2.0)
+    data = b"".join(frame(n, "G90") for n in range(2, 30))
     u.receive(data, 2.2)
-    assert u.lost == len(data) - rx                        # nothing is read during the dwell
-    whole = data[:rx].count(b"\n")
-    out = [x.decode().strip() for _, x in u.poll(10.0)]
-    assert out.count("echo:busy: processing") == 1          # at 4.0 s (the dwell ends at 5.0)
-    assert out == ["echo:busy: processing"] + ["ok"] * (1 + whole)
-    # the cut line runs into the next one sent: its checksum is the other line's
-    assert lines(u, frame(whole + 5, "G90"), 11) == [
-        f"Error:checksum mismatch, Last Line: {whole}", f"Resend: {whole + 1}", "ok"]
+    assert u.lost == len(data) - v.rx_buffer
 
 
 def test_keepalive_interval_and_m105_m114_m115():
@@ -112,19 +126,54 @@ def test_advanced_ok_and_the_emergency_parser():
     assert lines(u, b"G90\n", 3) == ["ok P15 B3"]
     u.receive(b"G4 S3\n", 4.0)
     u.receive(frame(2, "M112"), 4.5)                          # acted on as it arrives
-    assert [x for _, x in u.poll(4.5)] == [b"Error:Printer halted. kill() called!\n"]
+    assert [x for _, x in u.poll(4.5)] == [b"echo:M112 Shutdown\n",
+                                           b"Error:Printer halted. kill() called!\n"]
     assert lines(u, b"M105\n", 6, until=20) == []
 
 
-def test_m112_without_the_emergency_parser_waits_for_the_dwell():
+HALT = ["echo:M112 Shutdown", "Error:Printer halted. kill() called!"]
+
+
+def test_m112_plain_acts_at_once_numbered_waits_for_the_dwell():
+    """queue.cpp get_serial_commands' critical commands (no emergency parser): a line that
+    starts with M112 kills as it is read, during a dwell too; a numbered one starts with N
+    and runs in its turn, after the dwell's ok (blocking-reads.transcript, halt.transcript)."""
     u = unit()
     u.receive(b"G4 S3\n", 2.0)
-    u.receive(b"M112\n", 2.5)           # waits in the receive buffer: nothing is read meanwhile
+    u.receive(b"M112\n", 2.5)
     out = [(round(t, 1), x.decode().strip()) for t, x in u.poll(10)]
-    assert out[-2:] == [(5.0, "ok"), (5.0, "Error:Printer halted. kill() called!")]
+    assert out == [(2.5, x) for x in HALT]
     u = unit()
-    u.receive(b"G4 S3\nM112\n", 2.0)   # read together: M112 acted on as it is queued
-    assert [x for _, x in u.poll(10)] == [b"Error:Printer halted. kill() called!\n"]
+    u.receive(frame(1, "G4 S3"), 2.0)
+    u.receive(frame(2, "M112"), 2.5)
+    out = [(round(t, 1), x.decode().strip()) for t, x in u.poll(10)]
+    assert out == [(4.0, "echo:busy: processing"), (5.0, "ok")] + [(5.0, x) for x in HALT]
+    assert lines(u, b"M105\n", 11, until=20) == []
+
+
+def test_m410_plain_stops_a_move_as_it_is_read():
+    """A plain M410 one second into a 5 s move stops it there (quickstop_stepper), holds the
+    loop 1 s (Planner::quick_stop), and the queued M410 takes 1 s more: ok 2 s later."""
+    u = unit()
+    assert lines(u, b"G1 X50 F600\n", 2.0, until=2.05) == ["ok"]
+    out = lines(u, b"M410\n", 3.0, until=6.0)
+    assert out == ["ok"]
+    m114 = lines(u, b"M114\n", 6.0)
+    x = float(m114[0].split()[0][2:])
+    assert 8.0 < x < 9.0 and m114[0].endswith(f"Count X:{round(x * 80)} Y:0 Z:0")
+
+
+def test_m114_counts_the_planner_and_lowercase_is_unknown():
+    u = unit()
+    lines(u, b"G1 X10 F600\n", 2.0, until=2.05)
+    assert lines(u, b"M114\n", 2.1, until=2.15)[0] == \
+        "X:10.00 Y:0.00 Z:0.00 E:0.00 Count X:800 Y:0 Z:0"
+    assert lines(u, b"m105\n", 4.0) == ['echo:Unknown command: "m105"', "ok"]
+    assert lines(u, b"X10\n", 5.0) == ['echo:Unknown command: "X10"', "ok"]
+    assert lines(u, b"M1\x0005\n", 6.0) == ['echo:Unknown command: "M1"', "ok"]   # NUL ends it
+    assert lines(u, b"M111 S1\n", 7.0) == ["echo:DEBUG:ECHO", "ok"]
+    u.receive(b"M105\n", 8.0)
+    assert u.poll(9.0)[0][1] == b"echo:M105\r\n"
 
 
 def test_reset_banner_and_line_number_zero():
@@ -132,7 +181,7 @@ def test_reset_banner_and_line_number_zero():
     lines(u, frame(1, "G90"), 2)
     u.power_cycle(3.0)
     out = lines(u, b"", 3.0, until=4.0)
-    assert out[0] == "start" and out[1] == "echo:Marlin 2.1.2.4"
+    assert out[:4] == ["x86_64 Initialized", "start", "PowerUp", "Marlin 2.1.2.4"]
     assert lines(u, frame(1, "G90"), 5) == ["ok"]
     assert u.truth.executed == {1: 2} and u.truth.resets == [3.0]
 

@@ -61,10 +61,13 @@ def cli(job: str, target: str, variant: str | None, baud: int, timeout: float | 
     if timeout is not None and (not math.isfinite(timeout) or not 0 < timeout <= MAX_TIMEOUT):
         raise UserError(f"--timeout {timeout:g}: seconds, more than 0 and at most "
                         f"{MAX_TIMEOUT:g}")
-    fam, variant = _family_of(target, variant, baud)
-    mine = split("send", fam.name, family_values)
-    fam.send_job(job, target, variant=variant, baud=baud, allow_motion=allow_motion,
-                 record=record, timeout=timeout, quiet=quiet, **mine)
+    from conform.link.ports import held_open
+
+    with held_open(target, baud):       # the probe and the stream share one open of the port
+        fam, variant = _family_of(target, variant, baud)
+        mine = split("send", fam.name, family_values)
+        fam.send_job(job, target, variant=variant, baud=baud, allow_motion=allow_motion,
+                     record=record, timeout=timeout, quiet=quiet, **mine)
 
 
 def _family_of(target: str, variant: str | None, baud: int) -> tuple[Family, str | None]:

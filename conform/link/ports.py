@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import select
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import serial
 
@@ -127,6 +129,13 @@ def open_port(
     """
     if not url:
         raise LinkError("no port given")
+    if (url, baud) in _HELD:
+        return _held(url, baud, timeout, write_timeout)
+    return _open(url, baud, timeout, write_timeout)
+
+
+def _open(url: str, baud: int, timeout: float | None, write_timeout: float | None
+          ) -> SerialEndpoint:
     try:
         port = serial.serial_for_url(
             url,
@@ -142,6 +151,44 @@ def open_port(
     except (serial.SerialException, ValueError, OSError) as exc:
         raise LinkError(f"{url}: cannot open: {_one_line(exc)}") from None
     return SerialEndpoint(port, url, timeout)
+
+
+_HELD: dict[tuple[str, int], SerialEndpoint | None] = {}
+
+
+class _Borrowed(SerialEndpoint):
+    """The held port as one caller sees it: its own default read timeout; closing it leaves
+    the port open for the next caller."""
+
+    def close(self) -> None:
+        pass
+
+
+def _held(url: str, baud: int, timeout: float | None, write_timeout: float | None
+          ) -> SerialEndpoint:
+    first = _HELD[(url, baud)]
+    if first is None or first.closed:
+        first = _HELD[(url, baud)] = _open(url, baud, timeout, write_timeout)
+    return _Borrowed(first.serial, url, timeout)
+
+
+@contextmanager
+def held_open(url: str, baud: int) -> Iterator[None]:
+    """While inside, every ``open_port(url, baud)`` gets the one port opened by the first of
+    them, and closing it leaves it open; it is closed at the end. A board that resets when
+    its port is opened (DTR) then resets once, not once for each question asked of it
+    before the work (a probe, then the stream)."""
+    key = (url, baud)
+    if key in _HELD:            # already held further out: that hold closes it
+        yield
+        return
+    _HELD[key] = None
+    try:
+        yield
+    finally:
+        port = _HELD.pop(key, None)
+        if port is not None:
+            port.close()
 
 
 def _one_line(exc: BaseException) -> str:

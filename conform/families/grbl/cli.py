@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from typing import Any
+
 from rich.console import Console
 from rich.table import Table
 
@@ -11,12 +14,54 @@ from conform.families.grbl.spec.load import load_grbl
 PARTS = ("settings", "errors", "alarms", "commands", "realtime", "messages")
 
 
+def one(g: Any, what: str) -> list[tuple[str, str]] | None:
+    """One row of the tables by its name: a command (``$H``), a setting (``$110``), an error
+    (``error:9``), an alarm (``ALARM:1``) or a realtime byte (``?``, ``0x18``)."""
+    key = what.strip()
+    cmd = next((c for c in g.commands.values() if c.name.upper() == key.upper()), None)
+    if cmd is not None:
+        return [("command", cmd.name), ("allowed in", cmd.states),
+                ("prints", ", ".join(cmd.prints) or "ok only"), ("meaning", cmd.meaning),
+                ("source", cmd.cite)]
+    m = re.fullmatch(r"\$(\d+)", key)
+    if m and int(m.group(1)) in g.settings:
+        st = g.settings[int(m.group(1))]
+        return [("setting", key), ("name", st.name), ("unit", st.unit), ("type", st.type),
+                ("range", f"{st.text(st.lo)}..{st.text(st.hi)}" if st.hi < 1e30 else
+                 f">= {st.text(st.lo)}"), ("default", st.text(st.default)), ("source", st.cite)]
+    m = re.fullmatch(r"(error|alarm):(\d+)", key, re.IGNORECASE)
+    if m:
+        codes = g.errors if m.group(1).lower() == "error" else g.alarms
+        c = codes.get(int(m.group(2)))
+        if c is not None:
+            return [("code", key), ("name", c.name), ("meaning", c.meaning),
+                    ("emulated", "yes" if c.emulated else "no"), ("source", c.cite)]
+        return None
+    byte = int(key, 16) if re.fullmatch(r"0x[0-9a-fA-F]{1,2}", key) else \
+        ord(key) if len(key) == 1 else None
+    r = g.realtime.get(byte) if byte is not None else None
+    if r is not None:
+        return [("byte", f"0x{r.byte:02X}"), ("name", r.name), ("effect", r.effect),
+                ("meaning", r.meaning), ("source", r.cite)]
+    return None
+
+
 def show(variant: str, what: str | None, console: Console) -> None:
     g = load_grbl()
     v = g.variant(variant)
     part = (what or "").lower()
     if part and part not in PARTS:
-        raise UserError(f"{v.id}: nothing called {what!r} (one of: {', '.join(PARTS)})")
+        found = one(g, what or "")
+        if found is None:
+            raise UserError(f"{v.id}: nothing called {what!r} (one of: {', '.join(PARTS)}, "
+                            "or a command, setting, error or alarm such as $H, $110, error:9)")
+        table = Table(title=f"{v.id}: {what}", show_header=False)
+        table.add_column("field")
+        table.add_column("value", overflow="fold")
+        for row in found:
+            table.add_row(*row)
+        console.print(table)
+        return
     if not part:
         table = Table(title=f"{v.title} ({v.id})", show_header=False)
         table.add_column("field")

@@ -26,6 +26,14 @@ if TYPE_CHECKING:
     from conform.families import AnalysisResult, ProbeAnswer
     from conform.sendercheck.family import Family as SenderShapes
 
+REAL_BOARD_NOTES = [
+    "settings checks set M92/M201/M203-M206/M301/M304/M220/M221/M111 and put back what "
+    "M503, M220, M221 read before each check",
+    "EEPROM checks end with M500 of the settings the unit had at their start: what its EEPROM "
+    "held before the run is replaced by them",
+    "motion checks home (G28) and move a few mm from there; G92 changes the logical "
+    "coordinates; M112 checks leave the unit halted until it is reset"]
+
 
 class MarlinFamily(Family):
     """Marlin's hooks (the Family base class's: ``plan_checks``, ``runner``, ``mutants``,
@@ -64,32 +72,55 @@ class MarlinFamily(Family):
         spec = self.load_tables()
         return make(spec.variant(variant), spec, t0=t0, **options)
 
+    line_ending = "\n"     # serial.h SERIAL_EOL: a bare LF (a println's lines end CR LF)
+
     def judge_mask(self, variant: str) -> Callable[[str], str]:
         from conform.families.marlin.protocol.codec import mask_volatile
 
         return mask_volatile
+
+    def judge_answers(self, variant: str) -> Callable[[str], bool]:
+        """``ok`` closes the answer to one line (queue.cpp ok_to_send; M105's ``ok T:``)."""
+        from conform.families.marlin.protocol.codec import is_answer
+
+        return is_answer
+
+    def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
+        """M114 answers within POSITION_TOLERANCE (protocol/codec.py): where a quickstop
+        leaves the axes depends on the moment it is read."""
+        from functools import partial
+
+        from conform.families.marlin.protocol.codec import near_position
+
+        v = self.load_tables().variant(variant)
+        return partial(near_position, steps=v.steps_per_mm[:3])
 
     def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
                permissions: Permissions | None = None,
                **family_values: Any) -> Runner[Any]:
         from conform.families.marlin.conformance.checks import MarlinRunner
 
-        motion = permissions is not None and permissions.allow_motion
-        return MarlinRunner(target, variant, allow_motion=motion, options=options)
+        motion = bool(permissions.allow_motion) if permissions is not None else \
+            bool(family_values.pop("allow_motion", False))
+        eeprom = bool(permissions.allow_eeprom) if permissions is not None else False
+        return MarlinRunner(target, variant, allow_motion=motion, allow_eeprom=eeprom,
+                            options=options)
 
     def plan_checks(self, variant: str, *, permissions: Permissions | None = None, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_values: Any
                     ) -> Sequence[Check]:
         from conform.families.marlin.conformance.checks import generate, select
 
-        return select(generate(self.load_tables(), variant), patterns)
+        return select(generate(self.load_tables(), variant, profile), patterns)
 
     def permission_notes(self, permissions: Permissions) -> list[str]:
         from conform.families.marlin.conformance.checks import HEATERS_ENV
 
         notes = [] if permissions.allow_motion else [
             "checks that move or halt the unit SKIPPED (no --allow-motion)"]
-        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"]
+        notes += [] if permissions.allow_eeprom else [
+            "EEPROM checks (M500) SKIPPED (no --allow-eeprom)"]
+        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"] + REAL_BOARD_NOTES
 
     def mutant_fault(self, name: str) -> str:
         from conform.families.marlin.conformance.mutants import MUTANTS

@@ -4,9 +4,11 @@
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 from rich.table import Table
+from rich.text import Text
 
 from conform.errors import UserError
 from conform.families.marlin.spec import diff, load_marlin
@@ -20,7 +22,8 @@ def rows(variant: str, part: str) -> tuple[str, tuple[str, ...], list[tuple[str,
     v = spec.variant(variant)
     if part == "":
         fields = ("firmware", "baud", "bufsize", "max_cmd_size", "rx_buffer", "block_buffer",
-                  "keepalive", "extruders", "steps_per_mm", "max_feedrate")
+                  "keepalive", "extruders", "steps_per_mm", "max_feedrate", "first_home_ms",
+                  "motion_time_pct")
         return (f"{v.title} ({v.id})", ("field", "value", "source"),
                 [(f, str(getattr(v, f)), v.cite.get(f, "")) for f in fields])
     if part == "commands":
@@ -42,7 +45,43 @@ def rows(variant: str, part: str) -> tuple[str, tuple[str, ...], list[tuple[str,
             raise UserError(f"{v.id} is a base variant (no delta to show)")
         return (f"{v.base} → {v.id}", ("what", v.base, v.id, "source"),
                 list(diff(spec.variant(v.base), v)))
-    raise UserError(f"{v.id}: nothing called {part!r} (one of: {', '.join(PARTS)})")
+    if re.fullmatch(r"[gmt]\d+", part):
+        return command(spec, v, part.upper())
+    raise UserError(f"{v.id}: nothing called {part!r} (one of: {', '.join(PARTS)}, or a "
+                    "command such as M115)")
+
+
+def command(spec: Any, v: Any, code: str) -> tuple[str, tuple[str, ...], list[tuple[str, ...]]]:
+    """One command of the build: what the unit does with it, its source; a setting's
+    power-up values; M115's capability lines."""
+    from conform.families.marlin.unit import settings as st
+
+    row = spec.commands.get("T0" if code[0] == "T" else code)
+    title = f"{v.id}: {code}"
+    if row is None:
+        return title, ("field", "value"), [
+            ("in this build", "no: the unit answers echo:Unknown command: \"" + code + "\" and ok"),
+            ("source", "gcode.cpp GcodeSuite::process_parsed_command (unknown_command_warning)")]
+    built = spec.command(row.code, v) is not None
+    out = [("in this build", "yes" if built else f"no: needs {row.option}"),
+           ("kind", row.kind), ("moves", "yes" if row.motion else "no"),
+           ("heats", "yes" if row.heat else "no"), ("source", row.cite)]
+    if code[0] == "T":
+        out.insert(1, ("tools", f"T0..T{v.extruders - 1} (EXTRUDERS {v.extruders}); "
+                                f"T{v.extruders} and up: echo:T<n> Invalid extruder"))
+    if code in st.ORDER:
+        values = st.defaults(v)[code]
+        out.insert(1, ("power-up", st.report_line(code, values).strip()))
+        out.insert(2, ("M503 heading", st.table().headings[code]))
+    if code == "M115":
+        caps = [f"Cap:{c.name}:{c.value(v)}" for c in spec.caps] if v.on(
+            "EXTENDED_CAPABILITIES_REPORT") else []
+        out.insert(1, ("first line", f"FIRMWARE_NAME:Marlin {v.firmware} (…) SOURCE_CODE_URL:"
+                       f"{v.source_url} PROTOCOL_VERSION:{v.protocol_version} MACHINE_TYPE:"
+                       f"{v.machine_name} EXTRUDER_COUNT:{v.extruders} UUID:{v.uuid}"))
+        out.insert(2, ("capabilities", " ".join(caps) or "none (EXTENDED_CAPABILITIES_REPORT "
+                                                          "off)"))
+    return title, ("field", "value"), out
 
 
 def show(variant: str, what: str | None, console: Any, as_json: bool = False) -> None:
@@ -55,7 +94,7 @@ def show(variant: str, what: str | None, console: Any, as_json: bool = False) ->
     for col in cols:
         table.add_column(col, overflow="fold")
     for r in body:
-        table.add_row(*r)
+        table.add_row(*(Text(x) for x in r))   # as written (":REPEAT:" is no emoji)
     console.print(table)
     if not what:
         console.print(f"parts: {', '.join(PARTS)} (conform spec show {variant} PART)")

@@ -51,6 +51,7 @@ class MarlinAnalysis(ResultBase):
     motion: int = 0                     # motion lines taken (G0-G3)
     lines_kept: bool = False            # ``lines`` holds every host line
     tables: dict[str, Path] | None = None   # the tables written as the capture streamed
+    plotted: Any = None                 # analysis/series.py Plotted: what the report draws
 
     def summary_lines(self) -> list[str]:
         m = self.metrics
@@ -138,6 +139,7 @@ def analyze_streams(host: Iterable[Chunk], unit: Iterable[Chunk], *,
             table.close()
     a = MarlinAnalysis(path, "marlin", variant, detected, kept, findings, metrics)
     a.motion = core.motion
+    a.plotted = core.plotted
     a.lines_kept = keep_lines
     if core.dropped:
         a.notes.append(f"{core.dropped} findings not listed (counted in finding_counts; "

@@ -30,6 +30,7 @@ import numpy as np
 
 from conform.analysis.summaries import Quantiles
 from conform.families.marlin.analysis.records import CLAUSE_Q, Finding, HostLine
+from conform.families.marlin.analysis.series import Plotted
 
 MAX_LISTED = 50
 MAX_KEPT = 1000            # findings listed per group; the rest are counted
@@ -148,6 +149,7 @@ class Analyser:
         self.counts: dict[str, int] = {}
         self.dropped = 0
         self.last_n = self.epoch = self.sent_max = 0
+        self._now = t0
         self.asked: int | None = None
         self.pending: deque[HostLine] = deque()   # taken or unnumbered, waiting for their ok
         self.window: deque[HostLine] = deque()    # sent, not yet handed to on_line
@@ -170,6 +172,7 @@ class Analyser:
         self.twice_c = self.twice_p = 0
         self.never: dict[tuple[int, int], HostLine] = {}
         self.last_taken_t = 0.0
+        self.plotted = Plotted()             # what the report draws (analysis/series.py)
 
     def add(self, group: str, f: Finding) -> None:
         self.counts[f.kind] = self.counts.get(f.kind, 0) + 1
@@ -187,6 +190,7 @@ class Analyser:
         if self.on_line is not None:
             self.window.append(x)
         x.epoch = self.epoch
+        self.plotted.in_flight.add(t - self.t0, len(self.pending) + 1)
         if x.n is None:
             x.accepted = True
             self.pending.append(x)
@@ -218,6 +222,7 @@ class Analyser:
 
     def unit(self, t: float, line: str) -> None:
         self._tick(t)
+        self._now = t
         if line.startswith("ok"):
             self.oks += 1
             if self.in_error:
@@ -232,6 +237,7 @@ class Analyser:
                 x = self.pending.popleft()
                 x.t_ok = t
                 self._lat.append(t - x.t)
+                self.plotted.latency.add(x.t - self.t0, (t - x.t) * 1000.0)
                 if len(self._lat) >= 65536:
                     self._flush_latency()
                 self._settle(x)
@@ -249,6 +255,7 @@ class Analyser:
                 return
             self.asked = asked
             self.resends += 1
+            self.plotted.resends.add(t - self.t0, asked)
             if self.storm is None:
                 self.storm = Storm(t, t)
             self.storm.ask(t, asked)
@@ -260,9 +267,10 @@ class Analyser:
             self.asked = None
             while self.pending:
                 self._settle(self.pending.popleft())
-            self.add("loop", Finding("reset", t - self.t0, "warning", "the unit restarted "
-                                     "(start): line numbers begin again at 1, queued lines are "
-                                     "lost", "MarlinCore.cpp setup()"))
+            if self.host_lines:     # the boot at a capture's start, before the host wrote: no loss
+                self.add("loop", Finding("reset", t - self.t0, "warning", "the unit restarted "
+                                         "(start): line numbers begin again at 1, queued lines "
+                                         "are lost", "MarlinCore.cpp setup()"))
         self._judge_storms()
 
     def _error(self, line: str) -> None:
@@ -270,6 +278,8 @@ class Analyser:
             last = int(line.rsplit("Last Line:", 1)[1])
         except ValueError:
             return
+        self.plotted.errors.add(self._now - self.t0, 0 if "checksum" in line else
+                                1 if "Line Number" in line else 2)
         if "checksum" in line:
             self.errors_cs += 1
         elif "Line Number" in line:
@@ -294,6 +304,8 @@ class Analyser:
         if prev is None or t - prev > self.keepalive * 1.5:
             if self._busy_start is not None and prev is not None:
                 self.busy_s += prev - self._busy_start + self.keepalive
+                self.plotted.busy_period(self._busy_start - self.keepalive - self.t0,
+                                         prev - self.t0)
             self.busy_periods += 1
             self._busy_start = t
         self._busy_prev = t
@@ -396,6 +408,8 @@ class Analyser:
                                       {"n": x.n, "confirmed": sure}))
         if self._busy_start is not None and self._busy_prev is not None:
             self.busy_s += self._busy_prev - self._busy_start + self.keepalive
+            self.plotted.busy_period(self._busy_start - self.keepalive - self.t0,
+                                     self._busy_prev - self.t0)
         if self.busy_periods and self.busy_first is not None:
             self.add("busy", Finding("busy", self.busy_first - self.t0, "info",
                                      f"{self.busy_periods} busy periods, {self.busy_s:.1f} s in "

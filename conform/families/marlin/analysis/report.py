@@ -3,7 +3,6 @@ report), lines.parquet and findings.parquet (the tables)."""
 
 from __future__ import annotations
 
-import html
 from pathlib import Path
 from typing import Any
 
@@ -18,20 +17,9 @@ def _summary(a: Any) -> str:
 
 
 def _html(a: Any) -> str:
-    e = html.escape
-    rows = "".join(f"<tr><td>{e(k)}</td><td>{e(str(v))}</td></tr>" for k, v in a.metrics.items()
-                   if k != "finding_counts")
-    found = "".join(f"<tr class='{e(f.severity)}'><td>{f.t:.4f}</td><td>{e(f.severity)}</td>"
-                    f"<td>{e(f.kind)}</td><td>{e(f.message)}</td><td>{e(f.clause)}</td></tr>"
-                    for f in a.findings[:2000])
-    return ("<!doctype html><html><head><meta charset='utf-8'><title>Marlin capture analysis"
-            "</title><style>body{font-family:sans-serif}td{padding:2px 8px}.hazard{background:"
-            "#fdd}.error{background:#fee}</style></head><body>"
-            f"<h1>Marlin capture analysis</h1><p>{e(a.path)} — variant {e(a.variant)} "
-            f"({e(a.detected)})</p><p>{'<br>'.join(e(x) for x in a.summary_lines()[:2])}</p>"
-            f"<h2>Metrics</h2><table>{rows}</table><h2>Findings ({len(a.findings)})</h2>"
-            "<table><tr><th>t (s)</th><th>severity</th><th>kind</th><th>what</th><th>source"
-            f"</th></tr>{found}</table></body></html>\n")
+    from conform.families.marlin.analysis.htmlreport import render_html
+
+    return render_html(a)
 
 
 def write_report(a: Any, directory: str) -> dict[str, Path]:

@@ -45,6 +45,9 @@ class MarlinCheck:
     motion: bool = False      # moves axes, or leaves the unit dead (M112)
     heat: bool = False
     emulator_only: bool = False
+    kills: bool = False       # leaves the unit halted until a reset (M112): on a real unit
+                              # only the last of these runs, once
+    eeprom: bool = False      # writes the EEPROM (M500)
 
     @property
     def subject(self) -> str:
@@ -220,13 +223,21 @@ def m155(s: Session) -> Outcome:
 
 
 def keepalive(s: Session) -> Outcome:
-    """G4 S5 blocks the handler for 5 s: busy: processing every DEFAULT_KEEPALIVE_INTERVAL."""
+    """G4 S5 blocks the handler for 5 s: busy: processing every DEFAULT_KEEPALIVE_INTERVAL,
+    the first one interval after the dwell began (gcode.cpp host_keepalive): exactly
+    5 // interval of them, each at its time (a unit with a 4 s keepalive says one, at 4 s)."""
     got = s.talk(b"G4 S5\n", timeout=8.0)
-    busy = sum(1 for x in got.lines if s.spec.classify(x)[0] == "busy")
-    want = int(5 // s.v.keepalive) if s.v.keepalive else 0
-    ok = busy in (want, want - 1) and want > 0 and got.lines and _ok_kind(s, got.lines[-1])
-    return bool(ok), f"{want} x echo:busy: processing (every {s.v.keepalive} s), then ok", \
-        f"{busy} busy lines; {got.text()[-80:]}"
+    times = [t - got.t0 for t, x in zip(got.times, got.lines, strict=True)
+             if s.spec.classify(x)[0] == "busy"]
+    k = s.v.keepalive
+    want = int(5 // k) if k else 0
+    late = [f"{t:.1f} s" for i, t in enumerate(times) if not k * (i + 1) - 0.5 <= t <= k * (i + 1)
+            + 0.5]
+    ok = (len(times) == want and want > 0 and not late and got.lines
+          and _ok_kind(s, got.lines[-1]))
+    return bool(ok), f"{want} x echo:busy: processing (at {k} s, {2 * k} s …), then ok", \
+        f"{len(times)} busy lines at {', '.join(f'{t:.1f}' for t in times) or '-'} s; " \
+        f"{got.text()[-60:]}"
 
 
 def max_cmd_size(s: Session) -> Outcome:
@@ -260,17 +271,24 @@ def advanced_ok(s: Session) -> Outcome:
     return bool(m) and got.lines[0] == want, want, got.text()
 
 
+KILLED = ["echo:M112 Shutdown", "Error:Printer halted. kill() called!"]
+
+
 def m112_halt(s: Session) -> Outcome:
+    """MarlinCore.cpp kill(M112_KILL_STR): the LCD message echoed, the halt, then nothing
+    (recorded: halt.transcript)."""
     s.target.send(b"M112\n")
     a = s.wait(1.0)
     b = s.talk(b"M105\n", answers=1, timeout=1.5)
-    want = "Error:Printer halted. kill() called!"
-    return a.lines == [want] and not b.lines, f"{want}; then silence", f"{a.text()}; {b.text()}"
+    return a.lines == KILLED and not b.lines, " | ".join(KILLED) + "; then silence", \
+        f"{a.text()}; {b.text()}"
 
 
 def m112_while_busy(s: Session) -> Outcome:
-    """With EMERGENCY_PARSER M112 acts as its bytes arrive; without, it waits in the receive
-    buffer until the blocking command before it ends."""
+    """An unnumbered M112 during a dwell halts as soon as it is read, before the dwell's ok:
+    with EMERGENCY_PARSER as its bytes arrive, without it because the idle loop reads lines
+    while the dwell blocks and get_serial_commands acts on a critical command as it is read
+    (recorded: blocking-reads.transcript)."""
     s.target.send(b"G4 S3\n")
     s.wait(0.3)
     s.target.send(b"M112\n")
@@ -279,18 +297,68 @@ def m112_while_busy(s: Session) -> Outcome:
     halted = next((i for i, x in enumerate(got.lines) if s.spec.classify(x)[0] == "halted"), None)
     if halted is None:
         return False, "Error:Printer halted. kill() called!", got.text()
-    oks_before = s.oks(got.lines[:halted])
+    return s.oks(got.lines[:halted]) == 0 and got.t - got.t0 < 1.0, \
+        "halted within 1 s, before the dwell's ok", got.text()
+
+
+def m112_numbered_while_busy(s: Session) -> Outcome:
+    """A numbered M112 during a dwell: the emergency parser skips the N and acts as the bytes
+    arrive; without it the line starts with N, is no critical command, and halts in its
+    turn, right after the dwell's ok (recorded: blocking-reads.transcript, N14 M112)."""
+    s.target.send(s.numbered("G4 S3"))
+    s.wait(0.3)
+    s.target.send(s.numbered("M112"))
+    got = s.collect(until=lambda ls: any(s.spec.classify(x)[0] == "halted" for x in ls),
+                    timeout=4.5, linger=0.0)
+    halted = next((i for i, x in enumerate(got.lines) if s.spec.classify(x)[0] == "halted"), None)
+    if halted is None:
+        return False, "Error:Printer halted. kill() called!", got.text()
+    before = s.oks(got.lines[:halted])
     if s.v.on("EMERGENCY_PARSER"):
-        return oks_before == 0, "halted at once, before the dwell's ok", got.text()
-    return oks_before == 1, "the dwell's ok, then halted", got.text()
+        return before == 0, "halted at once, before the dwell's ok", got.text()
+    return before == 1 and got.lines[halted - 1:halted + 1] == KILLED, \
+        "the dwell's ok, then " + " | ".join(KILLED), got.text()
+
+
+def checked_while_busy(s: Session) -> Outcome:
+    """MarlinCore.cpp idle() -> manage_inactivity() -> queue.get_available_commands(): a
+    damaged line sent during a dwell is answered during it (Error, Resend:, ok within 1 s),
+    a good line waits in the queue and runs after the dwell's ok (recorded:
+    blocking-reads.transcript, answered 5-10 ms after it was written)."""
+    s.target.send(s.numbered("G4 S3"))
+    s.wait(0.3)
+    err = s.talk(_damaged(s, "G90", 2), timeout=1.0)
+    good = s.talk(s.numbered("M105", 2), answers=2, timeout=4.0)
+    want = ["Error:checksum mismatch, Last Line: 1", "Resend: 2", "ok"]
+    in_time = err.t - err.t0 < 1.0
+    order = [k for k in good.kinds(s.spec) if k.startswith("ok")]
+    ok = err.lines[:3] == want and in_time and order[:2] in (["ok", "ok_temp"],
+                                                             ["ok_adv", "ok_temp"])
+    return ok, " | ".join(want) + " within 1 s (during the dwell); then the dwell's ok and " \
+        "N2's ok T:", f"{err.text()} ({err.t - err.t0:.1f} s); {good.text()}"
+
+
+def m108_ends_m109(s: Session) -> Outcome:
+    """Without EMERGENCY_PARSER an unnumbered M108 still ends M109's wait at once: the idle
+    loop reads it during the wait and get_serial_commands clears wait_for_heatup as it is
+    read; M109's ok, then M108's own ok in its turn."""
+    got, why = _wait_for_temperature(s, "M109", m108_after=1.5)
+    want = "M109's ok within 1 s of M108, then M108's ok"
+    if got is None:
+        return False, want, why
+    _, ok_t = _countdown(s, got)
+    sent = got.t0 + 1.5
+    ok = ok_t is not None and ok_t - sent < 1.0 and s.oks(got.lines) == 2
+    return ok, want, f"M109's ok {ok_t - sent:.1f} s after M108; {s.oks(got.lines)} ok" \
+        if ok_t is not None else got.text()[-80:]
 
 
 def m108_breaks_m109(s: Session) -> Outcome:
-    """EMERGENCY_PARSER: M108 ends a heating wait as it arrives (nothing else is read while
-    M109 waits); the heater is switched off after."""
-    s.target.send(b"M109 S200\n")
+    """EMERGENCY_PARSER: a numbered M108 ends a heating wait as it arrives (without the
+    parser a numbered M108 waits its turn behind M109); the heater is switched off after."""
+    s.target.send(s.numbered("M109 S200"))
     s.wait(0.5)
-    s.target.send(b"M108\n")
+    s.target.send(s.numbered("M108"))
     got = s.collect(until=lambda ls: s.oks(ls) >= 2, timeout=2.0, linger=0.1)
     s.talk(b"M104 S0\n")
     return s.oks(got.lines) == 2, "M109's ok and M108's ok within 2 s", got.text()
@@ -300,13 +368,25 @@ _W = re.compile(r" W:(\?|\d+)$")
 _HEATERS = {"M109": (0, "t", "M104 S0"), "M190": (1, "b", "M140 S0")}
 
 
-def _temperature(s: Session, group: str) -> float | None:
-    """The heater's temperature from M105 (``t`` hotend, ``b`` bed)."""
-    got = s.talk(b"M105\n")
-    hit = s.spec.messages["ok_temp"].pattern.match(got.lines[0]) if got.lines else None
-    temps = hit and s.spec.messages["temps"].pattern.match(hit.group("temps"))
-    value = temps.group(group) if temps else None
-    return float(value) if value is not None else None
+SANE = (1.0, 120.0)
+"""°C a heater may read before a heating check heats it: right after a reset Marlin reads
+``T:0.00`` until the sensor's first samples are in (recorded for 2.1.2.4's native build), and
+a reading outside this is a sensor not read yet, or broken: nothing is heated from it."""
+
+
+def _temperature(s: Session, group: str, tries: int = 10) -> float | None:
+    """The heater's temperature from M105 (``t`` hotend, ``b`` bed), asked again (every
+    0.5 s, ``tries`` times) until the reading is sane (SANE); None if it never is."""
+    for i in range(tries):
+        if i:
+            s.wait(0.5)
+        got = s.talk(b"M105\n")
+        hit = s.spec.messages["ok_temp"].pattern.match(got.lines[0]) if got.lines else None
+        temps = hit and s.spec.messages["temps"].pattern.match(hit.group("temps"))
+        value = temps.group(group) if temps else None
+        if value is not None and SANE[0] <= float(value) <= SANE[1]:
+            return float(value)
+    return None
 
 
 def _wait_for_temperature(s: Session, code: str, m108_after: float | None = None
@@ -317,7 +397,8 @@ def _wait_for_temperature(s: Session, code: str, m108_after: float | None = None
     h, group, off = _HEATERS[code]
     now = _temperature(s, group)
     if now is None:
-        return None, "no temperature in M105's answer"
+        return None, (f"no sane temperature in M105's answer ({SANE[0]:g}-{SANE[1]:g} °C, "
+                      f"asked 10 times): nothing heated")
     residency = s.v.temp_residency if h == 0 else s.v.temp_bed_residency
     s.target.send(f"{code} S{round(now) + 5}\n".encode())
     first = Talk([], s.target.now(), s.target.now())
@@ -401,20 +482,6 @@ def busy_while_heating(s: Session) -> Outcome:
     return ok, want, f"{busy} busy lines in a {span:.1f} s wait"
 
 
-def m108_waits_behind_m109(s: Session) -> Outcome:
-    """Without EMERGENCY_PARSER nothing is read while M109 waits: M108 stays in the receive
-    buffer, the wait runs its full residency, then M108 is read (and has nothing to end)."""
-    got, why = _wait_for_temperature(s, "M109", m108_after=1.5)
-    want = "M109's wait counts down to W:0 and ok, then M108's ok"
-    if got is None:
-        return False, want, why
-    reports, ok_t = _countdown(s, got)
-    problems = _residency_problems(s, "M109", reports, ok_t)
-    if s.oks(got.lines) < 2:
-        problems.append(f"{s.oks(got.lines)} ok (M109 and M108: 2)")
-    return not problems, want, "; ".join(problems) or "M108 waited for the end of the wait"
-
-
 def m0_user_wait(s: Session) -> Outcome:
     """M0 exists only with HAS_RESUME_CONTINUE (no display: EMERGENCY_PARSER). With it, M0 S3
     waits, ``busy: paused for user`` while it does, and M108 (acted on by the emergency
@@ -455,7 +522,8 @@ def reset_banner(s: Session) -> Outcome:
     got = s.collect(until=lambda ls: "start" in ls, timeout=2.0, linger=0.2)
     s.n = 0
     b = s.talk(s.numbered("G90"))
-    ok = got.lines[:1] == ["start"] and _expect_ok(s, b, 1)
+    first = ["x86_64 Initialized", "start"] if s.v.on("HAL_LINUX") else ["start"]
+    ok = got.lines[:len(first)] == first and _expect_ok(s, b, 1)
     return ok, "start, echo: lines; then N1 accepted (line number back to 0)", \
         f"{got.text()[:60]}; {b.text()}"
 
@@ -470,7 +538,7 @@ def move_and_wait(s: Session) -> Outcome:
     return s.oks(w.lines) == 1 and pos == want, f"M400 ok after the move; {want}", pos or got.text()
 
 
-def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
+def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
     v = spec.variant(vid)
     c = {m.kind: m.cite for m in spec.messages.values()}
     cmd = {k: x.cite for k, x in spec.commands.items()}
@@ -515,12 +583,27 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
         MarlinCheck(f"{vid}/{Q}/buffer/error-empties-rx", "queue.cpp gcode_line_error (while "
                     "(read_serial(..) != -1))", "an error empties the receive buffer",
                     error_empties_rx, level=INFO),
-        MarlinCheck(f"{vid}/MarlinCore.cpp/halt/m112", c["halted"],
-                    "M112: Error:Printer halted, then nothing answered", m112_halt, motion=True),
+        MarlinCheck(f"{vid}/MarlinCore.cpp/halt/m112", c["halted"] + "; MarlinCore.cpp kill() "
+                    "(if (lcd_error) SERIAL_ECHO_START + the message: echo:M112 Shutdown)",
+                    "M112: echo:M112 Shutdown, Error:Printer halted, then nothing answered",
+                    m112_halt, motion=True, kills=True),
         MarlinCheck(f"{vid}/{'e_parser.h' if v.on('EMERGENCY_PARSER') else Q}/halt/m112-while-busy",
                     v.cite["options"] if v.on("EMERGENCY_PARSER") else
-                    "queue.cpp get_serial_commands (nothing is read while a command blocks)",
-                    "M112 during a dwell", m112_while_busy, motion=True),
+                    "queue.cpp get_serial_commands (critical commands: a line starting M112 "
+                    "calls kill() as it is read); MarlinCore.cpp idle() -> manage_inactivity() "
+                    "-> queue.get_available_commands() (read while a command blocks)",
+                    "an unnumbered M112 during a dwell halts at once", m112_while_busy,
+                    motion=True, kills=True),
+        MarlinCheck(f"{vid}/{'e_parser.h' if v.on('EMERGENCY_PARSER') else Q}/halt/"
+                    "m112-numbered-while-busy", v.cite["options"] if v.on("EMERGENCY_PARSER")
+                    else "queue.cpp get_serial_commands (critical commands look at the line's "
+                    "first letters: a numbered line starts with N and waits its turn)",
+                    "a numbered M112 during a dwell: at once with the emergency parser, after "
+                    "the dwell without", m112_numbered_while_busy, motion=True, kills=True),
+        MarlinCheck(f"{vid}/MarlinCore.cpp/line/checked-while-busy", "MarlinCore.cpp idle() -> "
+                    "manage_inactivity() -> queue.get_available_commands(); " +
+                    c["err_checksum"], "a bad line during a dwell is answered during it, a "
+                    "good one waits its turn", checked_while_busy),
         MarlinCheck(f"{vid}/MarlinCore.cpp/reset/banner", c["start"],
                     "a reset: start and the banner, line number 0", reset_banner,
                     emulator_only=True),
@@ -543,11 +626,12 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
                     cmd["M876"], "M876 S1 as HOST_PROMPT_SUPPORT says", m876),
     ]
     if not v.on("EMERGENCY_PARSER"):
-        out.append(MarlinCheck(f"{vid}/{Q}/heat/m108-waits-behind-m109", "queue.cpp "
-                               "get_serial_commands (not called while wait_for_hotend loops: "
-                               "M108 waits in the buffer); " + cmd["M108"],
-                               "M108 cannot end M109's wait without the emergency parser",
-                               m108_waits_behind_m109, heat=True))
+        out.append(MarlinCheck(f"{vid}/{Q}/heat/m108-ends-m109", "queue.cpp "
+                               "get_serial_commands (critical commands: a line starting M108 "
+                               "clears wait_for_heatup as it is read; wait_for_hotend's idle() "
+                               "reads it); " + cmd["M108"],
+                               "an unnumbered M108 ends M109's wait without the emergency "
+                               "parser", m108_ends_m109, heat=True))
     # M112 leaves a unit dead until it is reset: the halt checks come last (stable sort)
     if v.on("AUTO_REPORT_TEMPERATURES"):
         out.append(MarlinCheck(f"{vid}/M155.cpp/report/m155", cmd["M155"],
@@ -563,7 +647,10 @@ def generate(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
-    return sorted(out, key=lambda c: "/halt/" in c.id)
+    from conform.families.marlin.conformance import depth
+
+    out += depth.generate(spec, vid, profile)
+    return sorted(out, key=lambda c: ("/halt/" in c.id, c.kills))
 
 
 def select(checks: list[MarlinCheck], patterns: Sequence[str]) -> list[MarlinCheck]:
@@ -573,26 +660,41 @@ def select(checks: list[MarlinCheck], patterns: Sequence[str]) -> list[MarlinChe
 
 
 HALT = (b"M108\n", b"M410\n", b"M104 S0\n", b"M140 S0\n")
+HALT_MARK = b"M9999 conform-halt"
+"""Sent after the halt's own lines: no Marlin knows it, so its answer (gcode.cpp
+unknown_command_warning names it) comes only after each halt line was run and answered (one
+queue, in order). An ok of a line the host had in flight before the halt is then never
+taken for one of the halt's."""
 
 
 def halt(target: Any, attempts: int = 3) -> str:
     """Stop a Marlin unit: M108 ends a heating wait, M410 stops the steppers at once, the
-    heaters are switched off; acknowledged when the last gets its ok."""
+    heaters are switched off (all unnumbered: they act as they are read, during a blocking
+    command too); acknowledged when the answer to HALT_MARK, behind them, came."""
     notes = []
+    mark = b'echo:Unknown command: "' + HALT_MARK + b'"'
     for _ in range(attempts):
         try:
             for line in HALT:
                 target.send(line)
+            target.send(HALT_MARK + b"\n")
             deadline = target.now() + 3.0
             buf = b""
-            while target.now() < deadline and buf.count(b"ok") < len(HALT):
+            while target.now() < deadline and not _answered_after(buf, mark):
                 buf += target.receive(deadline)
-            if buf.count(b"ok") >= len(HALT):
-                return "stopped: M108, M410 (quickstop), heaters off, acknowledged by ok"
-            notes.append(f"{buf.count(b'ok')} of {len(HALT)} ok")
+            if _answered_after(buf, mark):
+                return "stopped: M108, M410 (quickstop), heaters off, each answered ok"
+            oks = sum(1 for x in buf.split(b"\n") if x == b"ok" or x.startswith(b"ok "))
+            notes.append(f"{oks} ok heard, the halt's lines not all answered")
         except Exception as exc:  # noqa: BLE001 - report, try again
             notes.append(f"not sent ({exc})")
     return "stop NOT acknowledged: " + "; ".join(notes)
+
+
+def _answered_after(buf: bytes, mark: bytes) -> bool:
+    """The mark's echo and the ok after it came."""
+    at = buf.find(mark)
+    return at >= 0 and b"\nok" in buf[at:]
 
 
 class MarlinRunner(Runner):
@@ -601,7 +703,8 @@ class MarlinRunner(Runner):
 
     def __init__(self, target: Any, vid: str, *, spec: MarlinSpec | None = None,
                  allow_motion: bool = False, allow_heaters: bool | None = None,
-                 options: RunOptions | None = None, **_ignored: Any) -> None:
+                 allow_eeprom: bool = False, options: RunOptions | None = None,
+                 **_ignored: Any) -> None:
         super().__init__(target, vid, options)
         self.spec = spec or load_marlin()
         self.session = Session(target, self.spec, self.spec.variant(vid))
@@ -609,6 +712,17 @@ class MarlinRunner(Runner):
         if allow_heaters is None:
             allow_heaters = os.environ.get(HEATERS_ENV, "") == "1"
         self.heat_ok = allow_heaters or target.emulated
+        self.eeprom_ok = allow_eeprom or target.emulated
+        self.killer: str | None = None      # the one check that may halt a real unit
+
+    def run(self, checks: Sequence[Any], progress: Any = None) -> TargetRun:
+        """A real unit is halted by M112 until it is reset (and the harness cannot reset a
+        board): of the checks that halt it only the last one planned runs, once, after every
+        other check; the others are SKIPPED and say which one ran."""
+        may = [c for c in checks if getattr(c, "kills", False)
+               and (self.motion_ok or not c.motion)]
+        self.killer = may[-1].id if may else None
+        return super().run(checks, progress)
 
     def run_check(self, check: MarlinCheck) -> CheckResult:
         base = dict(id=check.id, clause=check.clause, level=check.level, title=check.title,
@@ -619,9 +733,16 @@ class MarlinRunner(Runner):
         if check.motion and not self.motion_ok:
             return CheckResult(grade=Grade.SKIPPED, detail="moves the machine or halts it: "
                                "needs --allow-motion", **base)
+        if check.eeprom and not self.eeprom_ok:
+            return CheckResult(grade=Grade.SKIPPED, detail="writes the EEPROM (M500): needs "
+                               "--allow-eeprom", **base)
         if check.heat and not self.heat_ok:
             return CheckResult(grade=Grade.SKIPPED, detail=f"heats: needs {HEATERS_ENV}=1",
                                **base)
+        if check.kills and not self.target.emulated and check.id != self.killer:
+            return CheckResult(grade=Grade.SKIPPED, detail="a reset after each M112 (it "
+                               "halts the unit; on a real unit only one such check runs, the "
+                               f"last: {self.killer})", **base)
         t0 = time.perf_counter()
         s = self.session
         try:
@@ -636,6 +757,9 @@ class MarlinRunner(Runner):
             grade, expected, actual, detail = Grade.ERROR, "", "", f"HarnessError: {exc}"
         if grade is not Grade.PASS and not self.target.emulated and (check.motion or check.heat):
             detail = (detail + "; " if detail else "") + halt(self.target)
+        if check.kills and not self.target.emulated:
+            detail = (detail + "; " if detail else "") + "the unit is left halted (M112): " \
+                "reset it (power, the reset button or reopening the port) before using it"
         return CheckResult(grade=grade, expected=expected, actual=actual, detail=detail,
                            log=list(self.target.log), duration=time.perf_counter() - t0, **base)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from conform.families.marlin.conformance.deviants import DEVIANTS
 from conform.families.marlin.spec import MarlinSpec, Variant
 from conform.families.marlin.unit.unit import HeatWait, MarlinUnit, Queued, _code
 
@@ -71,7 +72,7 @@ class AnswersAfterHalt(MarlinUnit):
     """Goes on answering after M112."""
 
     def _kill(self, t: float) -> None:
-        self._say(t, "Error:Printer halted. kill() called!")
+        self._say(t, "echo:M112 Shutdown", "Error:Printer halted. kill() called!")
 
 
 class SilentUnknown(MarlinUnit):
@@ -129,6 +130,32 @@ class UserWaitAlways(MarlinUnit):
             super()._break_wait(t)
 
 
+class DeafWhileBusy(MarlinUnit):
+    """Reads nothing while a command blocks (as a reading of the main loop alone suggests):
+    a line error, and an unnumbered M112, are answered only after the block."""
+
+    def _read_serial(self) -> None:
+        if self.cur is None:
+            super()._read_serial()
+
+
+class SilentShutdown(MarlinUnit):
+    """Halts on M112 without echoing its message (no ``echo:M112 Shutdown``)."""
+
+    def _say(self, t: float, *lines: str) -> None:
+        super()._say(t, *(x for x in lines if x != "echo:M112 Shutdown"))
+
+
+class SlowKeepalive(MarlinUnit):
+    """Says busy: processing every 4 s instead of DEFAULT_KEEPALIVE_INTERVAL (2 s)."""
+
+    def _fire(self) -> None:
+        busy_due = self.cur is not None and self.cur_busy and self.next_busy <= self.now
+        super()._fire()
+        if busy_due and self.cur is not None:
+            self.next_busy = self.now + 2 * self.v.keepalive
+
+
 MUTANTS: dict[str, type[MarlinUnit]] = {
     "resend-off-by-one": ResendOffByOne,
     "no-ok-after-resend": NoOkAfterResend,
@@ -144,7 +171,11 @@ MUTANTS: dict[str, type[MarlinUnit]] = {
     "idle-while-heating": IdleWhileHeating,
     "prompt-without-support": PromptWithoutSupport,
     "user-wait-always": UserWaitAlways,
+    "deaf-while-busy": DeafWhileBusy,
+    "silent-shutdown": SilentShutdown,
+    "slow-keepalive": SlowKeepalive,
 }
+MUTANTS.update(DEVIANTS)      # settings, EEPROM, reports, tools, messages, dwell, modes
 
 
 def make(v: Variant, spec: MarlinSpec, *, t0: float = 0.0, mutant: str | None = None,

@@ -1,12 +1,17 @@
 """The Marlin reference unit: sans-I/O (bytes and time in, bytes out when due), on a virtual
 clock, modelling what Marlin 2.1.2.4's source does (specs/marlin cite the functions).
 
-Its main loop is MarlinCore's: between commands it reads the serial receive buffer into the
-command queue (queue.cpp ``get_serial_commands``: line numbers, checksums, errors and
-``Resend:``), then runs one queued command to its end (``advance``), which may block while the
-planner is full, a dwell runs or a heater warms up (``busy: processing`` keepalives meanwhile).
-While a command blocks nothing is read: bytes wait in the receive buffer, and what does not fit
-is lost. The emergency parser (where enabled) looks at every byte as it arrives.
+Its main loop is MarlinCore's: it reads the serial receive buffer into the command queue
+(queue.cpp ``get_serial_commands``: line numbers, checksums, errors and ``Resend:``), then runs
+one queued command to its end (``advance``), which may block while the planner is full, a dwell
+runs, the axes home or a heater warms up (``busy: processing`` keepalives meanwhile). Reading
+goes on while a command blocks: every blocking loop calls ``idle()``, whose
+``manage_inactivity()`` calls ``queue.get_available_commands()`` (MarlinCore.cpp). So a line
+error is answered during the block, good lines wait in the queue (the running command keeps
+its slot, BUFSIZE in all), and an unnumbered M108 / M112 / M410 acts as soon as it is read
+(get_serial_commands' "critical commands", without the emergency parser). The recordings of
+the real firmware (recordings/marlin-2.1.2.4/blocking-reads.transcript) show all of this.
+The emergency parser (where enabled) looks at every byte as it arrives.
 
 Ground truth: ``executed`` counts how many times each numbered line ran, ``log`` lists every
 command run (time, N, text).
@@ -22,6 +27,7 @@ from typing import Any
 
 from conform.families.marlin.protocol.codec import checksum
 from conform.families.marlin.spec import MarlinSpec, Variant
+from conform.families.marlin.unit.settings import Settings
 
 EOL = b"\r\n"
 BACKSPACE = 0x08
@@ -31,10 +37,20 @@ COOL_RATE = (1.0, 0.3)
 COOLING_SLOPE = ((1.5, 60.0), (1.0, 60.0))   # temperature.cpp MIN_COOLING_SLOPE_DEG/_TIME
                                              # (hotend) and ..._BED: °C that must drop in s
 ACCEL = 3000.0                # Configuration.h DEFAULT_ACCELERATION (mm/s²)
+MAX_ACCEL = (3000.0, 3000.0, 100.0, 10000.0)   # Configuration.h DEFAULT_MAX_ACCELERATION: the
+                              # planner limits a block's acceleration by each axis in it
 DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
 HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
+EXTRUDE_MINTEMP = 170.0       # Configuration.h PREVENT_COLD_EXTRUSION, EXTRUDE_MINTEMP 170
 BOOT = 0.1                    # s from reset to "start" (the simulator; a real AVR board waits
                               # ~0.5-2 s in its bootloader)
+QUICKSTOP = 1.0               # planner.cpp Planner::quick_stop: cleaning_buffer_counter =
+                              # TEMP_TIMER_FREQUENCY, and synchronize() waits it out: M410 takes
+                              # 1 s (recorded: 1.01-1.03 s)
+FIRST_MOVE_DELAY = 0.1        # planner.h BLOCK_DELAY_FOR_1ST_MOVE (100 ms) before the stepper
+                              # takes the first block
+HOMING_BUMP = ((5.0, 2.0), (5.0, 2.0), (2.0, 4.0))   # Configuration_adv.h HOMING_BUMP_MM and
+                              # HOMING_BUMP_DIVISOR: back off and approach again, slower
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d+)")
 
 
@@ -91,6 +107,7 @@ class Truth:
 
 
 class MarlinUnit:
+    settings_class = Settings           # unit/settings.py (a deviant unit may bring its own)
     def __init__(self, v: Variant, spec: MarlinSpec, *, t0: float = 0.0,
                  line_time: float = 0.0005, boot: float = 0.0, **_options: Any) -> None:
         self.v, self.spec = v, spec
@@ -102,6 +119,7 @@ class MarlinUnit:
         self._out: list[tuple[float, bytes]] = []
         self.deaf = False                   # after a deviant unit's choice (mutants)
         self._kind = ""
+        self.eeprom: dict[str, Any] = {}    # what M500 stored (kept across resets)
         self._reset_state(t0, boot)
 
     # -- power -----------------------------------------------------------------------------
@@ -115,6 +133,7 @@ class MarlinUnit:
         self.cur_start = self.cur_done = 0.0
         self.cur_busy = False
         self.planner: deque[tuple[float, list[float]]] = deque()   # (end time, end position)
+        self.planner_begin = t                       # when the first block's motion begins
         self.position = [0.0, 0.0, 0.0, 0.0]          # where the planner ends (current_position)
         self.stepped = [0.0, 0.0, 0.0, 0.0]           # where the steppers are
         self.relative = self.e_relative = False
@@ -129,7 +148,12 @@ class MarlinUnit:
         self.booting_until = t + boot
         self.ep_state = ""                  # emergency parser: the command seen so far
         self.wait: HeatWait | None = None   # M109 / M190 waiting
-        self._say(self.booting_until, *self._banner())
+        self.pending = bytearray()          # bytes the host wrote that wait outside the ring
+        self.held_until = t                 # an early M410's synchronize() holds the loop
+        self.homed = False                  # the axes' place is known (after G28)
+        self.settings = self.settings_class(self.v)   # loaded from the EEPROM at boot
+        loaded = self.settings.load(self.eeprom, announce=False)
+        self._say(self.booting_until, *self._banner(), *loaded)
 
     def power_off(self, t: float) -> None:
         """The board loses power (its USB cable pulled): it stops where it is and says
@@ -141,6 +165,7 @@ class MarlinUnit:
         self.cur = None
         self.wait = None
         self.rx.clear()
+        self.pending.clear()
         self.halted = True
 
     def power_cycle(self, t: float, boot: float = BOOT) -> None:
@@ -164,32 +189,51 @@ class MarlinUnit:
             self.cur_busy, self.next_busy = True, t + self.v.keepalive
 
     def _banner(self) -> list[str]:
+        """MarlinCore.cpp setup(): start, the reset cause (PowerUp), the version, the build's
+        date and free memory (what settings.load() says follows: on an empty EEPROM the
+        version mismatch and the defaults loaded, as recorded). HAL_LINUX (the native build,
+        HAL/LINUX/main.cpp main()) greets with ``x86_64 Initialized`` before setup() runs."""
         v = self.v
-        return ["start", f"echo:Marlin {v.firmware}", "",
-                "echo: Last Updated: 2024-06-19 | Author: (none, default config)",
-                "echo: Compiled: conform emulator",
-                "echo: Free Memory: 4096  PlannerBufferBytes: 1792",
-                "echo:  G21    ; Units in mm (mm)",
-                "echo:  M200 S0 D1.75",
-                f"echo:  M92 X{v.steps_per_mm[0]:.2f} Y{v.steps_per_mm[1]:.2f} "
-                f"Z{v.steps_per_mm[2]:.2f} E{v.steps_per_mm[3]:.2f}"]
+        lines = ["x86_64 Initialized"] if v.on("HAL_LINUX") else []
+        lines += ["start", "PowerUp", f"Marlin {v.firmware}",
+                 "echo: Last Updated: 2024-06-16 | Author: (none, default config)",
+                 "echo: Compiled: conform emulator",
+                 "echo: Free Memory: 4096  PlannerBufferBytes: 1280"]
+        return lines
 
     # -- the sans-I/O interface --------------------------------------------------------------
     def receive(self, data: bytes, t: float) -> None:
         self._advance(t)
         if self.halted or self.deaf:
             return
-        room = self.v.rx_buffer - len(self.rx)
-        if len(data) > room:
-            self.lost += len(data) - max(room, 0)
-            data = data[:max(room, 0)]
+        if self.v.on("RX_WAITS_OUTSIDE"):
+            self.pending += data
+            self._fill_rx(t)
+        else:
+            room = self.v.rx_buffer - len(self.rx)
+            if len(data) > room:
+                self.lost += len(data) - max(room, 0)
+                data = data[:max(room, 0)]
+            self._into_rx(data, t)
+        self._advance(t)
+
+    def _into_rx(self, data: bytes, t: float) -> None:
         if self.v.on("EMERGENCY_PARSER"):
             for b in data:
                 self._e_parser(b, t)
                 if self.halted:
                     return
         self.rx += data
-        self._advance(t)
+
+    def _fill_rx(self, t: float) -> None:
+        """RX_WAITS_OUTSIDE (the native build's reader thread, HAL/LINUX/main.cpp
+        read_serial_thread): only what fits in the ring is moved in, the rest waits in the
+        pty; nothing is lost."""
+        room = self.v.rx_buffer - len(self.rx)
+        if room > 0 and self.pending:
+            data = bytes(self.pending[:room])
+            del self.pending[:room]
+            self._into_rx(data, t)
 
     def poll(self, t: float) -> list[tuple[float, bytes]]:
         self._advance(t)
@@ -209,7 +253,7 @@ class MarlinUnit:
     # -- the main loop -----------------------------------------------------------------------
     def _next_event(self) -> float | None:
         times = [self.next_temp, self.next_pos]
-        if self.wait is not None and self.wait.next_report() <= self.wait.end:
+        if self.wait is not None and self.wait.next_report() <= self.wait.end + 1e-9:
             times.append(self.wait.next_report())
         if self.cur is not None:
             times.append(self.cur_done)
@@ -217,6 +261,8 @@ class MarlinUnit:
                 times.append(self.next_busy)
         elif (self.queue or self.rx) and self.now < self.booting_until:
             times.append(max(self.now, self.booting_until))
+        elif self.queue and self.held_until > self.now:
+            times.append(self.held_until)
         t = min(times)
         return None if t == math.inf else t
 
@@ -224,9 +270,10 @@ class MarlinUnit:
         for _ in range(1_000_000):
             if self.halted:
                 break
-            if self.cur is None and self.now >= self.booting_until:
+            if self.now >= self.booting_until:
                 self._read_serial()
-                if self.cur is None and self.queue and not self.halted:
+                if (self.cur is None and self.queue and not self.halted
+                        and self.now >= self.held_until):
                     self._start(self.queue.popleft())
             nxt = self._next_event()
             if nxt is None or nxt > t:
@@ -242,7 +289,7 @@ class MarlinUnit:
             self._say(t, f"echo:busy: {why}")
             self.next_busy = t + self.v.keepalive
         w = self.wait
-        if w is not None and w.next_report() <= min(t, w.end):
+        if w is not None and w.next_report() <= min(t, w.end) + 1e-9:   # (the report at the end too)
             self._say(t, f"{self._temps_line()} W:{w.w(t)}")
             w.reports += 1
         if self.next_temp <= t:
@@ -260,22 +307,33 @@ class MarlinUnit:
 
     # -- reading the serial port (queue.cpp get_serial_commands) -----------------------------
     def _read_serial(self) -> None:
-        i = 0
-        while i < len(self.rx) and len(self.queue) < self.v.bufsize and not self.halted:
-            c = self.rx[i]
-            i += 1
-            if c in EOL:
-                line = bytes(self.buf)
-                self.sis = 0
-                self.buf.clear()
-                if line:
-                    consumed = self._line_done(line)
-                    if consumed is False:     # gcode_line_error emptied the receive buffer
-                        self.discarded += len(self.rx) - i
-                        i = len(self.rx)
-            else:
-                self._stream_char(c)
-        del self.rx[:i]
+        """Lines into the queue while it has room (the running command keeps its slot:
+        RingBuffer holds BUFSIZE commands, the one being run included)."""
+        while not self.halted:
+            i = 0
+            while (i < len(self.rx) and not self.halted
+                   and len(self.queue) + (self.cur is not None) < self.v.bufsize):
+                c = self.rx[i]
+                i += 1
+                if c in EOL:
+                    line = bytes(self.buf).split(b"\0")[0]   # the line buffer is a C string
+                    self.sis = 0
+                    self.buf.clear()
+                    if line:
+                        consumed = self._line_done(line)
+                        if consumed is False:     # gcode_line_error emptied the receive buffer
+                            self.discarded += len(self.rx) - i
+                            i = len(self.rx)
+                else:
+                    self._stream_char(c)
+            del self.rx[:i]
+            full = len(self.queue) + (self.cur is not None) >= self.v.bufsize
+            before = len(self.pending)
+            if self.halted or full or not before:
+                break
+            self._fill_rx(self.now)
+            if len(self.pending) == before:
+                break
 
     def _stream_char(self, c: int) -> None:
         """queue.cpp process_stream_char: ';' starts a comment to the end of the line (a
@@ -325,15 +383,27 @@ class MarlinUnit:
             number = None
         text = line.decode("latin-1")
         if not self.v.on("EMERGENCY_PARSER") and command[:1] == b"M":
-            if command.startswith(b"M108"):
-                self._break_wait(t)
-            elif command.startswith(b"M112"):
-                self._kill(t)
+            self._critical(command[:4], t)
+            if self.halted:
                 return True
-            elif command.startswith(b"M410"):
-                self._quickstop(t)
         self.queue.append(Queued(text, number, t))
         return True
+
+    def _critical(self, code: bytes, t: float) -> None:
+        """queue.cpp get_serial_commands, "Process critical commands early" (without the
+        emergency parser): a line that STARTS with M108, M112 or M410 acts as it is read,
+        then is queued as any line (its ok comes in its turn). A numbered line starts with
+        N, so it only acts when its turn comes. M410's quickstop_stepper() ends with
+        planner.synchronize(), which holds the loop for the planner's 1 s quick-stop wait."""
+        if code == b"M108":
+            self._break_wait(t)
+        elif code == b"M112":
+            self._kill(t)
+        elif code == b"M410":
+            self._quickstop(t)
+            self.held_until = max(self.held_until, t + QUICKSTOP)
+            if self.cur is not None:
+                self.cur_done = max(self.cur_done, self.held_until)
 
     def _duplicate(self, n: int, line: bytes) -> bool:
         """queue.cpp: a number within last_N - 1 .. last_N ("A request-for-resend line was
@@ -409,17 +479,34 @@ class MarlinUnit:
             self.cur_done = min(self.cur_done, t + self.line_time)
 
     def _quickstop(self, t: float) -> None:
-        self._settle(t)
+        """MarlinCore.cpp quickstop_stepper: the planner emptied, the steppers stopped where
+        they are, and the position taken from them (whole steps)."""
+        self.stepped = self._stepped_at(t)
         self.planner.clear()
         self.position = list(self.stepped)
-        if self.cur is not None and self.cur_busy:
+        if self.cur is not None and self.cur_busy and self._kind in ("move", "sync"):
             self.cur_done = min(self.cur_done, t + self.line_time)
 
-    def _kill(self, t: float) -> None:
-        """MarlinCore.cpp kill(): the heaters off, Error:Printer halted, then minkill()
-        loops forever: nothing is read or answered until a reset."""
+    def _stepped_at(self, t: float) -> list[float]:
+        """Where the steppers are at ``t``, in whole steps (a move in progress is
+        interpolated along its block at its cruise speed)."""
         self._settle(t)
-        self._say(t, "Error:Printer halted. kill() called!")
+        at = list(self.stepped)
+        if self.planner:
+            begin = self.planner_begin
+            end, target = self.planner[0]
+            if begin < t < end:
+                f = (t - begin) / (end - begin)
+                at = [a + (b - a) * f for a, b in zip(self.stepped, target, strict=True)]
+        steps = self.v.steps_per_mm
+        return [round(at[i] * steps[i]) / steps[i] for i in range(4)]
+
+    def _kill(self, t: float) -> None:
+        """MarlinCore.cpp kill(M112_KILL_STR): the heaters off, the LCD message echoed to the
+        serial port (``echo:M112 Shutdown``), ``Error:Printer halted. kill() called!``, then
+        minkill() loops forever: nothing is read or answered until a reset."""
+        self._settle(t)
+        self._say(t, "echo:M112 Shutdown", "Error:Printer halted. kill() called!")
         self.halted = True
         self.cur = None
         self.wait = None
@@ -428,12 +515,17 @@ class MarlinUnit:
 
     # -- running one command (gcode.cpp process_parsed_command) --------------------------------
     def _command(self, code: str) -> Any:
-        """The table's command ``code`` when this build has it (None: unknown here)."""
-        return self.spec.command(code, self.v)
+        """The table's command ``code`` when this build has it (None: unknown here); every
+        T<n> is T0's row (gcode.cpp: case 'T' calls T(parser.codenum))."""
+        return self.spec.command("T0" if code[:1] == "T" else code, self.v)
 
     def _start(self, q: Queued) -> None:
         t = max(self.now, self.booting_until)
         self.cur, self.cur_start, self.cur_busy = q, t, False
+        if self.settings.debug & 1:
+            # gcode.cpp process_next_command: DEBUGGING(ECHO) echoes the command with
+            # SERIAL_ECHOLN, a println: this one line ends in CR LF (as recorded)
+            self._out.append((t, f"echo:{q.text}".encode("latin-1") + b"\r\n"))
         done = t + self.line_time
         code = _code(q.text)
         words = _words(q.text)
@@ -445,11 +537,13 @@ class MarlinUnit:
         elif kind in ("dwell", "sync", "home"):
             end = self.planner[-1][0] if self.planner else t
             if kind == "dwell":
-                end += words.get("P", 0.0) / 1000.0 + words.get("S", 0.0)
+                # G4.cpp: P ms, but S s wins when both are given
+                end += words["S"] if "S" in words else words.get("P", 0.0) / 1000.0
             elif kind == "home":
-                end += 0.2 + max(abs(self.position[i]) for i in range(3)) / HOMING
+                end += self._homing_time()
                 self.planner.append((end, [0.0, 0.0, 0.0, self.position[3]]))
                 self.position[:3] = [0.0, 0.0, 0.0]
+                self.homed = True
             done = end + self.line_time
         elif kind == "user_wait":
             # M0_M1.cpp: P ms or S s (none: until M108), after planner.synchronize();
@@ -484,6 +578,8 @@ class MarlinUnit:
             self.last_n = int(words["N"])
         elif kind == "quickstop":
             self._quickstop(t)
+            done = t + QUICKSTOP + self.line_time
+
         if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not (
                 self.wait is not None and not self.v.on("BUSY_WHILE_HEATING")):
             self.cur_busy = True        # (a heating wait is NOT_BUSY without BUSY_WHILE_HEATING)
@@ -510,7 +606,7 @@ class MarlinUnit:
         if kind == "report_temp":
             self._say(t, "ok " + self._temps_line().lstrip())
             return
-        if kind == "report_pos":
+        if kind in ("report_pos", "home"):      # G28.cpp ends with report_current_position
             self._say(t, self._position_line())
         elif kind == "firmware":
             self._say(t, *self._m115())
@@ -520,9 +616,28 @@ class MarlinUnit:
             words = _words(q.text)      # M876.cpp: S<n> answers the prompt
             if "S" in words:
                 self.truth.prompt_responses.append((t, int(words["S"])))
+        elif kind == "settings":
+            self._say(t, *self.settings.run(_code(q.text), _after_command(q.text),
+                                            _after_number(q.text), t, self.eeprom,
+                                            self._position_line))
         elif not kind:
             self._unknown(q, t)
         self._ok(q, t)
+
+    def _homing_time(self) -> float:
+        """G28.cpp / motion.cpp homeaxis per axis: to the switch at HOMING_FEEDRATE, back off
+        HOMING_BUMP_MM and approach again at the feedrate / HOMING_BUMP_DIVISOR. Before the
+        first homing the firmware does not know where the axes are: that homing takes
+        ``first_home_ms`` (the variant's: the native simulator starts its axes at fixed
+        pseudo-random places, so 2.1.2.4's first G28 took 16.25 s in every recording)."""
+        if not self.homed and self.v.first_home_ms:
+            return self.v.first_home_ms / 1000.0
+        feed = (HOMING, HOMING, 4.0)    # Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
+        total = 0.0
+        for i in range(3):
+            bump, div = HOMING_BUMP[i]
+            total += abs(self.position[i]) / feed[i] + bump / feed[i] + bump * div / feed[i]
+        return total
 
     def _unknown(self, q: Queued, t: float) -> None:
         self._say(t, f'echo:Unknown command: "{_after_number(q.text)}"')
@@ -543,7 +658,8 @@ class MarlinUnit:
     # -- motion ------------------------------------------------------------------------------
     def _settle(self, t: float) -> None:
         while self.planner and self.planner[0][0] <= t:
-            self.stepped = list(self.planner.popleft()[1])
+            self.planner_begin, target = self.planner.popleft()
+            self.stepped = list(target)
 
     def _move(self, t: float, words: dict[str, float]) -> float:
         if "F" in words and words["F"] > 0:
@@ -552,29 +668,47 @@ class MarlinUnit:
         for i, a in enumerate("XYZE"):
             if a in words:
                 rel = self.e_relative if a == "E" else self.relative
-                target[i] = (target[i] if rel else 0.0) + words[a]
+                # a logical coordinate: the M206 offset off (motion.h NATIVE_TO_LOGICAL)
+                off = self.settings.home_offset[i] if i < 3 else 0.0
+                target[i] = (target[i] if rel else -off) + words[a]
         delta = [b - a for a, b in zip(self.position, target, strict=True)]
+        if delta[3] and self.temp(0, t) < EXTRUDE_MINTEMP:
+            # planner.cpp _populate_block (PREVENT_COLD_EXTRUSION): E is taken as reached,
+            # nothing extruded
+            self._say(t, "echo: cold extrusion prevented")
+            delta[3] = 0.0
         dist = math.sqrt(sum(d * d for d in delta[:3])) or abs(delta[3])
         if dist < 1e-9:
+            self.position = target
             return t
-        speed = self.feed
+        speed = self.feed * self.settings.feed_percent / 100.0     # M220
         for i in range(4):
             if delta[i]:
-                speed = min(speed, self.v.max_feedrate[i] * dist / abs(delta[i]))
-        ramp = speed * speed / ACCEL
-        duration = dist / speed + speed / ACCEL if dist > ramp else 2 * math.sqrt(dist / ACCEL)
+                speed = min(speed, self.settings.max_feed[i] * dist / abs(delta[i]))
+        accel = min([ACCEL] + [MAX_ACCEL[i] * dist / abs(delta[i]) for i in range(4) if delta[i]])
+        ramp = speed * speed / accel
+        duration = dist / speed + speed / accel if dist > ramp else 2 * math.sqrt(dist / accel)
+        duration *= self.v.motion_time_pct / 100.0     # the machine's own pace (the variant's)
         start = t
         if len(self.planner) >= self.v.planner_blocks:      # wait for a free block
             start = self.planner[0][0]
             self._settle(start)
-        begin = max(start, self.planner[-1][0] if self.planner else start)
+        if self.planner:
+            begin = max(start, self.planner[-1][0])
+        else:
+            begin = self.planner_begin = start + FIRST_MOVE_DELAY
         self.planner.append((begin + duration, target))
         self.position = target
         return start
 
     def _position_line(self) -> str:
-        p, s = self.position, self.stepped
-        counts = [round(s[i] * self.v.steps_per_mm[i]) for i in range(3)]
+        """motion.cpp report_current_position_projected (M114 without D): current_position
+        (logical: the M206 offset added), then ``Count`` from planner.position, the steps the
+        planner ends at (right after ``G1 X10`` is queued: Count X:800, as recorded), not
+        where the steppers are."""
+        steps, off = self.settings.steps, self.settings.home_offset
+        p = [x + (off[i] if i < 3 else 0.0) for i, x in enumerate(self.position)]  # logical
+        counts = [round(self.position[i] * steps[i]) for i in range(3)]
         return (f"X:{p[0]:.2f} Y:{p[1]:.2f} Z:{p[2]:.2f} E:{p[3]:.2f} "
                 f"Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}")
 
@@ -654,7 +788,9 @@ def _after_number(text: str) -> str:
 
 
 def _code(text: str) -> str:
-    m = re.match(r"\s*([GMTgmt])\s*(\d+)", _after_number(text))
+    """The command letter and number; parser.cpp takes the letter as written: ``m105`` is
+    not M105 but an unknown command (as recorded)."""
+    m = re.match(r"\s*([GMT])\s*(\d+)", _after_number(text))
     return f"{m.group(1).upper()}{int(m.group(2))}" if m else ""
 
 
