@@ -226,8 +226,9 @@ def gve_sender(**kw) -> Sender:
 
 
 def grbl_job(n: int = 60) -> list[bytes]:
+    """``n`` short moves, then the program end a job file ends with."""
     return [b"G21G90G54F3000\n"] + [b"G1X%.3fY%.3f\n" % ((i % 10) * 0.5, (i % 7) * 0.3)
-                                    for i in range(n)]
+                                    for i in range(n)] + [b"M2\n"]
 
 
 def gve_job(n: int = 60, size: int = 400, checksums: bool = False) -> list[bytes]:

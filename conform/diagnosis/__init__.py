@@ -16,13 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from conform.diagnosis.causes import Cause, find_stalls, rank
+from conform.diagnosis.causes import ADVICE, Cause, find_stalls, rank
 from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
+from conform.diagnosis.outcome import Outcome, decide, prove_losses
 from conform.errors import UserError
 
 FORMAT = "conform-diagnosis/1"
 
-__all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause"]
+__all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause",
+           "Outcome"]
 
 
 @dataclass
@@ -30,26 +32,41 @@ class Diagnosis:
     path: str
     family: str
     facts: Facts
-    causes: list[Cause]
+    causes: list[Cause]             # what stopped it, most likely first (none: completed)
     reception: list[ParsedLine] | None = None
     resume: ResumePoint | None = None
     notes: list[str] = field(default_factory=list)
+    outcome: Outcome | None = None
+    hazards: list[Cause] = field(default_factory=list)     # seen on the way, not the end
+
+    def lead(self) -> Cause | None:
+        """What the diagnosis puts first: the stop cause, else the first hazard."""
+        return self.causes[0] if self.causes else (self.hazards[0] if self.hazards else None)
 
     def headline(self) -> str:
-        """The diagnosis in one sentence."""
-        if not self.causes:
-            n = len(self.facts.exchanges)
-            return (f"No stop, stall or anomaly found: {n} lines sent and the session ran to "
-                    "its end.")
-        c = self.causes[0]
-        return f"Most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+        """The diagnosis in one sentence: the outcome first, then what caused it."""
+        o = self.outcome
+        title = o.title() if o is not None else "Session"
+        if self.causes:
+            c = self.causes[0]
+            text = f"{title}: most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+            if o is not None and o.kind == "capture-damaged":
+                text = f"{title}: {o.summary} Within it: {c.kind}: {c.summary}"
+            return text
+        text = f"{title}: {o.summary}" if o is not None else title + "."
+        if self.hazards:
+            kinds = list(dict.fromkeys(h.kind for h in self.hazards))
+            text += f" Hazards on the way: {', '.join(kinds)}."
+        return text
 
     def to_json(self) -> dict[str, Any]:
         f = self.facts
         return {
             "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,
             "headline": self.headline(),
+            "outcome": None if self.outcome is None else self.outcome.to_json(),
             "causes": [c.to_json() for c in self.causes],
+            "hazards": [c.to_json() for c in self.hazards],
             "session": {"duration_s": round(f.duration, 6), "lines": len(f.exchanges),
                         "answered": sum(1 for e in f.exchanges if e.answer is not None),
                         "rx_capacity": f.rx_capacity, "queue_capacity": f.queue_capacity,
@@ -116,16 +133,47 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
     ends = [float(x.get("t", facts.t0)) - facts.t0 for x in raw.link_events]
     facts.duration = max([facts.duration, *ends])
     if not raw.status.complete:
+        facts.damaged = str(raw.status.problem or "incomplete")
         facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
                            "intact")
-    d = Diagnosis(path, fam.name, facts, rank(facts))
+    d = judge(path, fam.name, facts)
     rec = getattr(fam, "reception", None)
     if rec is not None:
         d.reception = rec(raw, variant=facts.variant)
     res = getattr(fam, "resume_state", None)
-    if res is not None:
+    if res is not None and d.outcome is not None and d.outcome.kind != "completed":
         d.resume = res(raw, facts, variant=facts.variant)
     return d
+
+
+def judge(path: str, family: str, facts: Facts) -> Diagnosis:
+    """The outcome from the facts, then the causes that fit it: a completed session has no
+    stop cause (what the ranking found becomes hazards, a stall at its end dropped: that is
+    the host done); a damaged capture's end is not judged; otherwise the cause the outcome
+    names leads."""
+    prove_losses(facts)
+    ranked = rank(facts)
+    o = decide(facts, ranked)
+    if o.kind in ("completed", "capture-damaged"):
+        return Diagnosis(path, family, facts, [], outcome=o,
+                         hazards=[c for c in ranked if not c.at_end])
+    causes = list(ranked)
+    if o.lead is not None:
+        lead = next((c for c in causes if c.kind == o.lead), None)
+        if lead is None:
+            lead = Cause(o.lead, 0.8, facts.duration, facts.duration, o.evidence,
+                         ADVICE[o.lead], o.summary, at_end=True)
+        else:
+            causes.remove(lead)
+            lead.confidence = max(lead.confidence, 0.8)
+            if o.kind in ("stopped", "aborted"):
+                lead.summary = o.summary
+                lead.evidence = [*o.evidence, *(x for x in lead.evidence
+                                                if x not in o.evidence)]
+        causes.insert(0, lead)
+    stop = [c for c in causes if c.at_end or c is causes[0]]
+    return Diagnosis(path, family, facts, stop, outcome=o,
+                     hazards=[c for c in causes if c not in stop])
 
 
 def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:

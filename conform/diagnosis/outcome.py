@@ -1,0 +1,181 @@
+"""How the session ended, decided from evidence before any cause is named.
+
+The outcome comes first because everything else depends on it: a job that ran to its end has
+no stop cause (what went wrong on the way is a hazard), a job stopped by its own sender was
+not lost by the link, a capture whose end is missing cannot say how the session ended.
+
+* ``completed``: every line the host sent was answered (a line sent again and answered then
+  counts), and the capture shows the end: the job's own end word answered, or the unit
+  reporting itself idle after the last answer. Without either, a session whose every line was
+  answered still counts as completed unless the unit was seen running when the host went
+  quiet, or the sender left (its port closed, its polls stopped): then the capture cannot tell
+  a finished job from a sender that quit between lines, and says so.
+* ``stopped``: by the sender (its own halt: a reset, an emergency stop, the family's halt
+  command with no motion after it; or it left with lines waiting) or by the link.
+* ``stalled``: lines wait for answers at the end and the unit never gives them (silent, held,
+  or the lines were lost on the way).
+* ``aborted``: the unit stopped the job itself (an alarm, a kill) and nothing ran after.
+* ``unfinished``: the capture ended while lines still waited, too soon to call it a stall.
+* ``capture-damaged``: the file is cut short or damaged; only what it holds is judged, and the
+  session's end is not claimed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from conform.diagnosis.facts import Event, Exchange, Facts
+
+OUTCOMES = {
+    "completed": "the job ran to its end",
+    "stopped": "the job was stopped before its end",
+    "stalled": "the session stopped moving: the host waits on answers that do not come",
+    "aborted": "the unit aborted the job itself",
+    "unfinished": "the capture ended while lines still waited for their answers",
+    "capture-damaged": "the capture file is damaged: only what it holds is judged",
+    "no-job": "the host sent no line",
+}
+STOP_KINDS = ("sender-stopped", "link-lost", "unit-silent", "deadlock", "unit-alarm")
+STALL_LEADS = ("deadlock", "buffer-overflow", "lost-line", "noise", "unit-silent",
+               "link-lost", "sender-stopped")
+
+
+@dataclass
+class Outcome:
+    kind: str
+    summary: str
+    evidence: list[str] = field(default_factory=list)
+    by: str | None = None           # stopped: "sender" or "link"; aborted: "unit"
+    lead: str | None = None         # the cause kind that must lead (None: none does)
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: v for k, v in asdict(self).items() if v is not None}
+
+    def title(self) -> str:
+        if self.kind == "stopped":
+            return f"Stopped by the {self.by}"
+        return {"completed": "Completed", "stalled": "Stalled", "aborted": "Aborted by the unit",
+                "unfinished": "Unfinished capture", "capture-damaged": "Capture damaged",
+                "no-job": "No job"}[self.kind]
+
+
+def _fmt(t: float) -> str:
+    return f"{t:.3f} s"
+
+
+def _line(e: Exchange) -> str:
+    return f"line {e.n + 1} `{e.text}`"
+
+
+def settled(f: Facts) -> tuple[list[Exchange], list[Exchange]]:
+    """(answered lines, lines still waiting at the end): a line without an answer counts as
+    settled when a line sent after it was answered (the session went on past it)."""
+    ex = f.exchanges
+    answered = [e for e in ex if e.t_answer is not None]
+    last = max((e.n for e in answered), default=-1)
+    return answered, [e for e in ex if e.t_answer is None and e.n > last]
+
+
+def _terminal(f: Facts, kind: str) -> list[Event]:
+    """Events of ``kind`` after which no accepted motion line was sent (nothing went on)."""
+    motion = [e.t_sent for e in f.exchanges if e.motion and e.accepted]
+    return [ev for ev in f.events if ev.kind == kind and not any(t > ev.t for t in motion)]
+
+
+def prove_losses(f: Facts) -> None:
+    """The engine's own proof of a loss: the unit reported itself idle after a line was sent
+    and that line is still unanswered at the end; it holds nothing of it, so the line (or
+    its answer) was lost on the way. Added as ``loss`` events (``proof`` in extra)."""
+    _answered, waiting = settled(f)
+    if not waiting:
+        return
+    first = waiting[0]
+    idle = [ev for ev in f.events if ev.kind == "idle" and ev.t > first.t_sent + f.answer_time]
+    if idle:
+        f.events.append(Event(idle[0].t, "loss", f"the unit reported itself idle at "
+                              f"{_fmt(idle[0].t)} with {_line(first)} unanswered "
+                              f"({len(waiting)} line(s) in all): it holds nothing of them",
+                              "idle with lines unanswered", line=first.n,
+                              extra={"proof": "answer missing"}))
+
+
+def decide(f: Facts, causes: list[Any]) -> Outcome:
+    """The outcome (see the module docstring); ``causes``: the ranked causes, for a stall's
+    kind."""
+    ex = f.exchanges
+    if not ex:
+        return Outcome("no-job", "The host sent no line in the capture.",
+                       [f"{len(f.host_times)} host read(s), no complete line"])
+    answered, waiting = settled(f)
+    at_end = [c for c in causes if getattr(c, "at_end", False)]
+    if f.damaged:
+        return Outcome("capture-damaged", f"The capture is damaged ({f.damaged}): its end is "
+                       f"not in the file; judged up to {_fmt(f.duration)}: {len(ex)} lines "
+                       f"sent, {len(answered)} answered.", [f"capture: {f.damaged}"])
+    halts = _terminal(f, "halt")
+    alarms = _terminal(f, "alarm")
+    if halts and (not alarms or halts[0].t <= alarms[0].t + 1e-6):
+        h = halts[0]
+        return Outcome("stopped", f"The sender stopped the job itself at {_fmt(h.t)}: "
+                       f"{h.text}.", [f"{_fmt(h.t)} {h.text}", "no motion line was sent after "
+                       "it"] + ([f"{len(waiting)} line(s) sent before it were never answered "
+                                 "(the unit discards them)"] if waiting else []),
+                       by="sender", lead="sender-stopped")
+    if alarms:
+        a = alarms[0]
+        return Outcome("aborted", f"The unit aborted the job at {_fmt(a.t)}: {a.text}.",
+                       [f"{_fmt(a.t)} {a.text}", "no motion line was taken after it"],
+                       by="unit", lead="unit-alarm")
+    if waiting:
+        first = waiting[0]
+        ev = [f"{len(waiting)} line(s) unanswered at the end of the capture, from "
+              f"{_line(first)} sent at {_fmt(first.t_sent)}"]
+        stalls = at_end or [c for c in causes if getattr(c, "stall", False)]
+        if stalls:
+            top = next((c for c in stalls if c.kind in STALL_LEADS), stalls[0])
+            if top.kind == "sender-stopped":
+                return Outcome("stopped", top.summary, ev, by="sender", lead=top.kind)
+            if top.kind == "link-lost":
+                return Outcome("stopped", top.summary, ev, by="link", lead=top.kind)
+            return Outcome("stalled", top.summary, ev, lead=top.kind)
+        return Outcome("unfinished", f"The capture ended {f.duration - first.t_sent:.3f} s "
+                       f"after {_line(first)} was sent, before its answer: too soon to call "
+                       "it a stall.", ev)
+    last = max(answered, key=lambda e: e.t_answer or 0.0)
+    t_last = last.t_answer or last.t_sent
+    ends = [e for e in f.events if e.kind == "job-end"]
+    idle = [e for e in f.events if e.kind == "idle" and e.t >= t_last - 1e-6]
+    t_sent = max(e.t_sent for e in ex)
+    states = [e for e in f.events if e.kind in ("idle", "running") and e.t >= ex[0].t_sent]
+    running = [states[-1]] if states and states[-1].kind == "running" else []
+    head = f"all {len(ex)} lines answered, the last at {_fmt(t_last)}"
+    if ends:
+        e = ends[-1]
+        return Outcome("completed", f"The job ran to its end: {head}, the program end "
+                       f"`{e.text.split('`')[1] if '`' in e.text else e.text}` answered"
+                       + (f", the unit idle at {_fmt(idle[0].t)}." if idle else "."),
+                       [head, f"{_fmt(e.t)} {e.text}"]
+                       + ([f"{_fmt(idle[0].t)} {idle[0].text}"] if idle else []))
+    if idle and (not running or idle[-1].t >= running[-1].t):
+        return Outcome("completed", f"The job ran to its end: {head}, then the unit reported "
+                       f"itself idle at {_fmt(idle[0].t)}.",
+                       [head, f"{_fmt(idle[0].t)} {idle[0].text}"])
+    gone = [c for c in at_end if c.kind == "sender-stopped"]
+    if running:
+        r = running[-1]
+        return Outcome("stopped", f"The sender sent its last line at {_fmt(t_sent)} and went "
+                       f"quiet while the unit was still running ({r.text} at {_fmt(r.t)}), "
+                       "with no program end and no idle report after: it left mid-job (a job "
+                       "without an end word that ends there looks the same).",
+                       [head, f"{_fmt(r.t)} {r.text}", "no program end, no idle report after "
+                        "the last answer"], by="sender", lead="sender-stopped")
+    if gone and any("polls stopped" in x or "closed its port" in x
+                    for x in gone[0].evidence):
+        return Outcome("stopped", "The sender left with every line answered and no program "
+                       "end or idle report in the capture: it stopped between lines, or its "
+                       "job ended without an end word.", [head, *gone[0].evidence[1:4]],
+                       by="sender", lead="sender-stopped")
+    return Outcome("completed", f"The job ran to its end as far as the capture shows: {head}; "
+                   "no program end and no idle report in it (a job without them ends so).",
+                   [head, "the unit's state after the last answer is not in the capture"])
