@@ -145,9 +145,12 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
     last = max(answered, key=lambda e: e.t_answer or 0.0)
     t_last = last.t_answer or last.t_sent
     ends = [e for e in f.events if e.kind == "job-end"]
-    idle = [e for e in f.events if e.kind == "idle" and e.t >= t_last - 1e-6]
+    t_motion = max((e.t_sent for e in ex if e.motion), default=ex[0].t_sent)
+    idle = sorted((e for e in f.events if e.kind == "idle" and e.t >= t_motion - 1e-6),
+                  key=lambda e: e.t)
     t_sent = max(e.t_sent for e in ex)
-    states = [e for e in f.events if e.kind in ("idle", "running") and e.t >= ex[0].t_sent]
+    states = sorted((e for e in f.events if e.kind in ("idle", "running") and
+                     e.t >= ex[0].t_sent), key=lambda e: e.t)
     running = [states[-1]] if states and states[-1].kind == "running" else []
     head = f"all {len(ex)} lines answered, the last at {_fmt(t_last)}"
     if ends:
@@ -157,9 +160,9 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
                        + (f", the unit idle at {_fmt(idle[0].t)}." if idle else "."),
                        [head, f"{_fmt(e.t)} {e.text}"]
                        + ([f"{_fmt(idle[0].t)} {idle[0].text}"] if idle else []))
-    if idle and (not running or idle[-1].t >= running[-1].t):
-        return Outcome("completed", f"The job ran to its end: {head}, then the unit reported "
-                       f"itself idle at {_fmt(idle[0].t)}.",
+    if idle and not running:
+        return Outcome("completed", f"The job ran to its end: {head}, the unit reporting "
+                       f"itself idle at {_fmt(idle[0].t)} after its last motion line.",
                        [head, f"{_fmt(idle[0].t)} {idle[0].text}"])
     gone = [c for c in at_end if c.kind == "sender-stopped"]
     if running:

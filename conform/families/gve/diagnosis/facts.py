@@ -21,6 +21,8 @@ EVENT_OF = {  # GVE finding kind -> neutral event kind
 }
 MOTION = ("C", "L")
 SLOW = ("H", "W")       # answered when the motion ends (§13.3)
+HALT = ("H", "J")       # the host's own halt (§13.5.9) and reset (§13.5.13)
+RUN_BIT = 0x40          # F's ST6 value: the motion runs (§13.5.12)
 
 
 def analysis_facts(a: Any, path: str) -> Facts:
@@ -63,6 +65,20 @@ def analysis_facts(a: Any, path: str) -> Facts:
                                     "input interrupt braked the motion",
                                     "GVE64 §13.7 (answer bit 3 INTA), §13.5.9", line=frame))
             in_inta = inta
+            if name in HALT:
+                events.append(Event(e.t_sent, "halt", f"the host sent `{text}` ("
+                                    + ("halt the running vector" if name == "H" else "reset")
+                                    + ")", "GVE64 §13.5.9, §13.5.13", line=frame))
+            elif name == "F" and clean and answer and "," in answer:
+                try:
+                    st6 = int(answer.split(",")[1][:2], 16)
+                except ValueError:
+                    continue
+                running = bool(st6 & RUN_BIT)
+                events.append(Event(e.t_answer or e.t_sent, "running" if running else "idle",
+                                    f"the unit answered `{answer}` to `{text}`: the motion "
+                                    + ("runs" if running else "has ended"),
+                                    "GVE64 §13.5.12 (F: ST6)", line=frame))
     for f in a.findings:
         kind = EVENT_OF.get(f.kind)
         if kind == "error-answer" and ("damaged on the way" in f.message or
