@@ -182,9 +182,9 @@ def test_cli_json_and_first_screen(tmp_path):
     doc = json.loads(p.stdout)
     assert [set(c) >= {"kind", "confidence", "t_start", "t_end", "evidence", "advice"}
             for c in doc["causes"]] == [True] * len(doc["causes"])
-    assert doc["lead"]["kind"] == "unit-silent"
+    assert doc["outcome"]["kind"] == "stalled" and doc["causes"][0]["kind"] == "unit-silent"
     conf = [c["confidence"] for c in doc["causes"]]
-    assert conf == sorted(conf, reverse=True)
+    assert conf[1:] == sorted(conf[1:], reverse=True)     # the outcome's cause first
     p = subprocess.run(run, capture_output=True, text=True, timeout=120, cwd=REPO)
     head = p.stdout.splitlines()[0]
     assert head.startswith("Stalled: most likely unit-silent") and head.endswith(".")
@@ -502,7 +502,7 @@ def test_sender_process_killed_through_the_proxy(tmp_path):
                 p.wait(10)
     doc = first(out)
     c = doc["lead"]
-    assert c["kind"] == "sender-stopped" and c["confidence"] >= 0.9, doc["causes"]
+    assert c["kind"] == "sender-stopped" and c["confidence"] >= 0.9, (doc["outcome"], doc["causes"])
     assert doc["resume"]["last_executed"] == doc["resume"]["last_acknowledged"]
 
 

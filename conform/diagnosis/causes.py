@@ -218,7 +218,8 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     gap = s.t_end - s.t_start
     before = s.t_start - BEFORE_S
     link = _events(f, ("link",), before, s.t_end)
-    closed = _events(f, ("sender-closed",), before, s.t_end + 0.5)
+    since = min([before, *(e.t_sent for e in pending)])    # it left while they waited
+    closed = _events(f, ("sender-closed",), since, s.t_end + 0.5)
     alarms = _events(f, ("alarm",), before, s.t_end)
     lost = _events(f, ("loss",), 0.0, s.t_end)        # proven on the wire, not a risk
     risk = _events(f, ("overflow",), 0.0, s.t_end)

@@ -131,6 +131,14 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         first = waiting[0]
         ev = [f"{len(waiting)} line(s) unanswered at the end of the capture, from "
               f"{_line(first)} sent at {_fmt(first.t_sent)}"]
+        closed = [e for e in f.events if e.kind == "sender-closed" and e.t >= first.t_sent]
+        if closed:
+            lead = next((c for c in causes if c.kind == "sender-stopped"), None)
+            return Outcome("stopped", f"The sender closed its port at {_fmt(closed[0].t)} "
+                           f"while {len(waiting)} line(s) still waited for their answers.",
+                           [*ev, f"{_fmt(closed[0].t)} {closed[0].text}"]
+                           + (lead.evidence[1:3] if lead is not None else []),
+                           by="sender", lead="sender-stopped")
         stalls = at_end or [c for c in causes if getattr(c, "stall", False)]
         if stalls:
             top = next((c for c in stalls if c.kind in STALL_LEADS), stalls[0])
