@@ -128,7 +128,8 @@ def proxied(d: Path) -> list[Entry]:
     import importlib.util
     import sys
 
-    from diag_proxy import conform_send, proxied as run, script
+    from diag_proxy import conform_send, script
+    from diag_proxy import proxied as run
 
     from conform.families.grbl.sendercheck.scenarios import default_job
 
