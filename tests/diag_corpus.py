@@ -28,6 +28,9 @@ from diag_sessions import (
     gve_job,
     gve_sender,
     gve_unit,
+    marlin_job,
+    marlin_sender,
+    marlin_unit,
     record,
 )
 
@@ -36,7 +39,7 @@ RECORDINGS = Path(os.environ.get("CONFORM_RECORDINGS",
                                  REPO.parent.parent / "shared" / "recordings"))
 if not RECORDINGS.exists():
     RECORDINGS = Path("/work/shared/recordings")
-GRBL, GVE = "grbl-1.1f", "gve64-v19"
+GRBL, GVE, MARLIN = "grbl-1.1f", "gve64-v19", "marlin-2.1"
 
 Entry = tuple[str, str, str, Path]
 
@@ -108,6 +111,36 @@ def fast(d: Path) -> list[Entry]:
     ses = drive(gve_unit(), gve_job(60, size=3000) + [b"!0H\r"], gve_sender(), tail=2.0)
     add("gve-sender-halt", "gve", "sender-stopped", ses, GVE,
         sender_closed=ses.host[-1][0] + 0.05)
+    # Marlin: ok-paced, numbered with checksums (as printcore) or plain
+    add("marlin-numbered", "marlin", "completed",
+        drive(marlin_unit(), marlin_job(60), marlin_sender(), tail=1.0), MARLIN)
+    add("marlin-plain", "marlin", "completed",
+        drive(marlin_unit(), marlin_job(60, numbered=False), marlin_sender(), tail=1.0), MARLIN)
+    add("marlin-noise", "marlin", "noise",
+        drive(marlin_unit(), marlin_job(200), marlin_sender(), Faults(noise=(0.3, 0.8)),
+              tail=3.0, t_max=30.0), MARLIN)
+    ses = drive(marlin_unit(), marlin_job(100), marlin_sender(), Faults(kill_after=40),
+                tail=3.0)
+    add("marlin-sender-killed", "marlin", "sender-stopped", ses, MARLIN,
+        sender_closed=ses.host[-1][0] + 0.05)
+    add("marlin-unit-frozen", "marlin", "unit-silent",
+        drive(marlin_unit(), marlin_job(100), marlin_sender(), Faults(mute_unit_at=0.3),
+              tail=3.0), MARLIN)
+    add("marlin-busy-forever", "marlin", "unit-busy",
+        drive(marlin_unit(), marlin_job(100), marlin_sender(),
+              Faults(unit_calls={0.3: lambda u, t: u.stall(t, 1e4)}), tail=3.0, t_max=12.0),
+        MARLIN)
+    add("marlin-unit-kill", "marlin", "unit-alarm",
+        drive(marlin_unit(), marlin_job(100), marlin_sender(),
+              Faults(unit_calls={0.3: lambda u, t: u._kill(t)}), tail=3.0), MARLIN)
+    job = marlin_job(100, numbered=False)
+    job.insert(40, b"M112\n")
+    ses = drive(marlin_unit(), job, marlin_sender(), tail=2.0)
+    add("marlin-sender-m112", "marlin", "sender-stopped", ses, MARLIN,
+        sender_closed=ses.host[-1][0] + 0.5)
+    add("marlin-cable-pulled", "marlin", "link-lost",
+        drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
+              Faults(cut=(0.3, 2.3)), tail=1.0, t_max=12.0), MARLIN)
     return out
 
 

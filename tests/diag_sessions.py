@@ -33,6 +33,8 @@ class Faults:
     # the n-th line written (counting resends)
     pause: dict[int, float] = field(default_factory=dict)   # the n-th line written in two
     # halves this many seconds apart (a converter that holds bytes back)
+    unit_calls: dict[float, Callable] = field(default_factory=dict)   # at t: call(unit, t),
+    # a fault inside the unit (its own kill, a command that never ends)
     seed: int = 1
 
 
@@ -81,6 +83,7 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
     next_send = t + s.gap
     next_poll = START + s.poll[0] if s.poll else None
     pending_rt = sorted(f.realtime.items())
+    pending_calls = sorted(f.unit_calls.items(), key=lambda kv: kv[0])
     dead = False
     stopped = False
     done_at: float | None = None
@@ -136,6 +139,8 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
                 next_send = t + s.gap
         while pending_rt and pending_rt[0][0] <= t:
             write(pending_rt.pop(0)[1], t)
+        while pending_calls and pending_calls[0][0] <= t:
+            pending_calls.pop(0)[1](unit, t)
         if dead or stopped:
             pass
         elif s.timeout is not None and waiting_since is not None and \
@@ -239,3 +244,30 @@ def gve_job(n: int = 60, size: int = 400, checksums: bool = False) -> list[bytes
     if checksums:
         return [b"!0%+\r"] + [append_checksum(b) + b"\r" for b in body]
     return [b + b"\r" for b in body]
+
+
+def marlin_unit():
+    return family("marlin").make_unit("marlin-2.1")
+
+
+def marlin_sender(**kw) -> Sender:
+    """Ok-paced, as printcore and ``conform send`` stream: the answer is the ``ok``; a
+    ``Resend:`` asks for the line again (its ``ok`` that follows is then not the answer)."""
+    return Sender(b"\n", lambda a: a.startswith(b"ok") or a.startswith(b"Resend:"),
+                  retry=lambda a: a.startswith(b"Resend:"), **kw)
+
+
+def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
+    """``n`` moves ending with M400 (wait for the moves to end), numbered with checksums
+    after an M110 as printcore numbers them, or plain."""
+    body = [b"G90"] + [b"G1 X%d Y%d F6000" % (i % 30, i % 7) for i in range(n)] + [b"M400"]
+    if not numbered:
+        return [b + b"\n" for b in body]
+    from functools import reduce
+    from operator import xor
+
+    out = []
+    for k, b in enumerate([b"M110 N0", *body]):
+        line = b"N%d %s" % (k, b)
+        out.append(line + b"*%d\n" % reduce(xor, line, 0))
+    return out

@@ -29,8 +29,8 @@ def test_in_process_corpus(tmp_path):
     rows = judge(fast(tmp_path))
     _check(rows)
     m = matrix(rows)
-    assert m["completed"] == {"completed": 5}
-    for family in ("grbl", "gve"):
+    assert m["completed"] == {"completed": 7}
+    for family in ("grbl", "gve", "marlin"):
         assert any(r["family"] == family and r["label"] != "completed" for r in rows)
 
 

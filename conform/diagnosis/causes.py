@@ -29,7 +29,7 @@ from conform.diagnosis.facts import Event, Exchange, Facts
 
 CAUSE_KINDS = ("sender-stopped", "unit-silent", "link-lost", "buffer-overflow", "deadlock",
                "starvation", "noise", "protocol-misuse", "unit-alarm", "overflow-risk",
-               "lost-line")
+               "lost-line", "unit-busy")
 
 ADVICE = {
     "sender-stopped": "The unit was ready and waiting: look at the sender (crash, closed "
@@ -47,6 +47,9 @@ ADVICE = {
     "overflow-risk": "More bytes were in flight than the receive buffer holds, though no loss "
                      "shows on the wire (the unit took them fast enough this time): count "
                      "every byte sent against the buffer before it costs a line.",
+    "unit-busy": "The unit kept saying it was working and never finished: look at what the "
+                 "line waits for (a heater that never reaches its target, a wait for the user, "
+                 "a very long move) before blaming the link.",
     "lost-line": "A line or its answer was lost on the way: check the cable and the sender's "
                  "recovery (ask the unit before sending it again).",
     "deadlock": "Each side waited for the other: the unit held its work while the host "
@@ -128,9 +131,11 @@ def find_stalls(f: Facts) -> list[Stall]:
         if b - a < limit:
             continue
         k = bisect.bisect_left(sends, b)
-        if k and any(x.t_answer is None or x.t_answer >= b - 1e-9 for x in ex[:k]
-                     if x.t_sent <= b):
-            found.append((max(a, ex[0].t_sent), b))
+        start = max(a, ex[0].t_sent)    # no stall before the host's first line
+        if k and b - start >= limit and any(
+                x.t_answer is None or x.t_answer >= b - 1e-9 for x in ex[:k]
+                if x.t_sent <= b):
+            found.append((start, b))
     found.sort()
     merged: list[list[float]] = []
     for a, b in found:
@@ -188,7 +193,8 @@ def _count_between(times: list[float], lo: float, hi: float) -> int:
 
 
 def _events(f: Facts, kinds: tuple[str, ...], lo: float, hi: float) -> list[Event]:
-    return [ev for ev in f.events if ev.kind in kinds and lo <= ev.t <= hi]
+    return [ev for ev in f.events if ev.kind in kinds and lo <= (ev.t_end or ev.t) and
+            ev.t <= hi]      # an event that lasts counts where it overlaps
 
 
 def _fmt(t: float) -> str:
@@ -249,6 +255,14 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     deaf = _events(f, ("deaf",), before, s.t_end)
     if pending and not never and not real_link and not alarms and not holds and not deaf:
         return out      # every line it waited on was answered: the unit was working, a wait
+    busy = _events(f, ("running",), s.t_start, s.t_end + 1e-6)
+    if never and busy and not real_link and not deaf and not alarms and \
+            busy[-1].t >= s.t_end - max(stall_threshold(f), 2.5):
+        add("unit-busy", 0.85, f"The unit said it was working ({busy[-1].text}) up to "
+            f"{_fmt(busy[-1].t)} and never answered {_line(never[0])}: it is busy, not lost.",
+            [f"{len(busy)} report(s) of the unit working in the stall, the last at "
+             f"{_fmt(busy[-1].t)}"], busy[-3:])
+        return out
     if deaf and not real_link:
         d = deaf[0]
         if d.extra.get("back") is not None:

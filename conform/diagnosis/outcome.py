@@ -36,9 +36,8 @@ OUTCOMES = {
     "capture-damaged": "the capture file is damaged: only what it holds is judged",
     "no-job": "the host sent no line",
 }
-STOP_KINDS = ("sender-stopped", "link-lost", "unit-silent", "deadlock", "unit-alarm")
-STALL_LEADS = ("deadlock", "buffer-overflow", "lost-line", "noise", "unit-silent",
-               "link-lost", "sender-stopped")
+STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "noise",
+               "unit-silent", "link-lost", "sender-stopped")
 
 
 @dataclass
@@ -150,6 +149,16 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         return Outcome("unfinished", f"The capture ended {f.duration - first.t_sent:.3f} s "
                        f"after {_line(first)} was sent, before its answer: too soon to call "
                        "it a stall.", ev)
+    taken = {e.text for e in ex if e.accepted}
+    refused = [e for e in ex if e.accepted is False and e.text not in taken]
+    if ex[-1].accepted is False and refused:
+        anomalies = [c for c in causes if c.kind in ("noise", "lost-line", "buffer-overflow",
+                                                     "protocol-misuse")]
+        return Outcome("stalled", f"The unit refused the last line the host sent "
+                       f"({_line(ex[-1])}, answered `{ex[-1].answer}`), and {len(refused)} "
+                       "refused line(s) were never taken on a later try: the job did not run "
+                       "to its end.", [f"{len(refused)} line(s) refused and never taken"],
+                       lead=anomalies[0].kind if anomalies else None)
     last = max(answered, key=lambda e: e.t_answer or 0.0)
     t_last = last.t_answer or last.t_sent
     ends = [e for e in f.events if e.kind == "job-end"]

@@ -79,8 +79,12 @@ def analysis_facts(a: Any, path: str) -> Facts:
                                     f"the unit answered `{answer}` to `{text}`: the motion "
                                     + ("runs" if running else "has ended"),
                                     "GVE64 §13.5.12 (F: ST6)", line=frame))
+    first_answer = min((e.t_answer for e in exchanges if e.t_answer is not None), default=None)
     for f in a.findings:
         kind = EVENT_OF.get(f.kind)
+        if f.kind == "garbage-sent" and first_answer is not None and \
+                float(f.t) < first_answer:
+            continue    # before the unit first answered: a sender probing the port, no noise
         if kind == "error-answer" and ("damaged on the way" in f.message or
                                        f.extra.get("code") == 2):
             kind = "noise"      # refused though sent right, or cut short: changed on the way

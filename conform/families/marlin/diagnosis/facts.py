@@ -10,6 +10,7 @@ again later under its number: a later try answers it). What the findings become:
 * lines run twice, numbers skipped or repeated without a request: the host's ``misuse``;
 * ``Error:Printer halted. kill() called!``: the unit's own kill (``alarm``) unless the host
   sent M112 just before (its emergency stop: ``halt``, as is M410 quickstop);
+* a number sent again that the unit did not take is no answered line: it was dropped silently;
 * ``echo:busy:`` keepalives: the unit says it is working (``running``); ``M400`` answered
   ``ok``: every move has ended (gcode M400 ``planner.synchronize()``): ``idle``.
 """
@@ -44,7 +45,9 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
     events: list[Event] = []
     for x in a.lines:
         word = _word(x.text)
-        answered = x.t_ok is not None or not x.accepted
+        # refused: answered by Error/Resend; a number sent again that it did not take was
+        # ignored without a word (queue.cpp: the last numbers again are dropped silently)
+        answered = x.t_ok is not None or (not x.accepted and not x.repeat)
         e = Exchange(x.seq, x.text if x.n is None else f"N{x.n} {x.text}", x.t - t0,
                      None if not answered else ((x.t_ok or x.t) - t0),
                      None if not answered else ("ok" if x.accepted else "Resend"),
@@ -77,7 +80,8 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
         extra = {"proof": "never taken"} if kind == "loss" else {}
         if f.kind == "resend-storm":
             extra = {"count": int(f.extra.get("requests", 1))}
-        events.append(Event(t, kind, f.message, f.clause, extra=extra))
+        t_end = float(f.extra["end"]) + offset if "end" in f.extra else None
+        events.append(Event(t, kind, f.message, f.clause, t_end=t_end, extra=extra))
     events += _busy(raw, t0)
     spec = load_marlin()
     v = spec.variant(a.variant)
