@@ -13,6 +13,9 @@ unit's reception (``reception``) and finds the resume point (``resume_state``);
 
 from __future__ import annotations
 
+import gc
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +25,7 @@ from conform.diagnosis.outcome import Outcome, decide, prove_losses
 from conform.errors import UserError
 
 FORMAT = "conform-diagnosis/1"
+RECEPTION_MAX = 200_000     # host lines up to which the unit's reception is replayed
 
 __all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause",
            "Outcome"]
@@ -111,6 +115,19 @@ def _link_events(raw: Any, t0: float) -> list[Event]:
     return out
 
 
+@contextmanager
+def _no_gc() -> Iterator[None]:
+    """The cyclic collector paused while records are made in bulk (it would scan them again
+    and again for cycles they do not have), resumed as it was."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
 def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
              family: str | None = None) -> Diagnosis:
     """Diagnose one capture file (``analysis``: its family's analysis, when already made;
@@ -127,7 +144,9 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
     fam = family_named(family) if family else _family_of(path, variant)
     facts_hook = getattr(fam, "diagnosis_facts", None)
     raw = read_raw(path)
-    facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook else None
+    with _no_gc():      # a long capture makes a million small records that never cycle
+        facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook \
+            else None
     if facts is None:
         raise UserError(f"{path}: the {fam.name} family gives no diagnosis")
     if not facts.host_times:
@@ -142,10 +161,14 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
         facts.damaged = str(raw.status.problem or "incomplete")
         facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
                            "intact")
-    d = judge(path, fam.name, facts)
+    with _no_gc():
+        d = judge(path, fam.name, facts)
     rec = getattr(fam, "reception", None)
-    if rec is not None:
+    if rec is not None and len(facts.exchanges) <= RECEPTION_MAX:
         d.reception = rec(raw, variant=facts.variant)
+    elif rec is not None:
+        d.notes.append(f"the lines as the unit read them are not replayed for a capture of "
+                       f"{len(facts.exchanges)} lines (at most {RECEPTION_MAX})")
     res = getattr(fam, "resume_state", None)
     if res is not None and d.outcome is not None and d.outcome.kind != "completed":
         d.resume = res(raw, facts, variant=facts.variant)
@@ -160,7 +183,7 @@ def judge(path: str, family: str, facts: Facts) -> Diagnosis:
     prove_losses(facts)
     ranked = rank(facts)
     o = decide(facts, ranked)
-    if o.kind in ("completed", "capture-damaged"):
+    if o.kind in ("completed", "capture-damaged", "findings-only"):
         return Diagnosis(path, family, facts, [], outcome=o,
                          hazards=[c for c in ranked if not c.at_end])
     causes = list(ranked)

@@ -86,6 +86,7 @@ class Facts:
     notes: list[str] = field(default_factory=list)
     family_data: Any = None             # the family's own analysis, for its other hooks
     damaged: str | None = None          # what is wrong with the capture file, when it is
+    lines_kept: bool = True             # False: too long, ``exchanges`` is empty
 
 
 @dataclass(slots=True)

@@ -35,6 +35,8 @@ OUTCOMES = {
     "unfinished": "the capture ended while lines still waited for their answers",
     "capture-damaged": "the capture file is damaged: only what it holds is judged",
     "no-job": "the host sent no line",
+    "findings-only": "the capture is longer than the diagnosis keeps line by line: only the "
+                     "analysis's findings are judged",
 }
 STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "noise",
                "unit-silent", "link-lost", "sender-stopped")
@@ -56,7 +58,7 @@ class Outcome:
             return f"Stopped by the {self.by}"
         return {"completed": "Completed", "stalled": "Stalled", "aborted": "Aborted by the unit",
                 "unfinished": "Unfinished capture", "capture-damaged": "Capture damaged",
-                "no-job": "No job"}[self.kind]
+                "no-job": "No job", "findings-only": "Not judged"}[self.kind]
 
 
 def _fmt(t: float) -> str:
@@ -103,6 +105,10 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
     """The outcome (see the module docstring); ``causes``: the ranked causes, for a stall's
     kind."""
     ex = f.exchanges
+    if not f.lines_kept:
+        return Outcome("findings-only", "The capture is too long to follow line by line: its "
+                       "ending is not judged; what its analysis found is listed.",
+                       ["the family's analysis kept no line table for it"])
     if not ex:
         return Outcome("no-job", "The host sent no line in the capture.",
                        [f"{len(f.host_times)} host read(s), no complete line"])
@@ -149,9 +155,11 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         return Outcome("unfinished", f"The capture ended {f.duration - first.t_sent:.3f} s "
                        f"after {_line(first)} was sent, before its answer: too soon to call "
                        "it a stall.", ev)
-    taken = {e.text for e in ex if e.accepted}
-    refused = [e for e in ex if e.accepted is False and e.text not in taken]
-    if ex[-1].accepted is False and refused:
+    refused: list[Exchange] = []
+    if ex[-1].accepted is False:
+        taken = {e.text for e in ex if e.accepted}
+        refused = [e for e in ex if e.accepted is False and e.text not in taken]
+    if refused:
         anomalies = [c for c in causes if c.kind in ("noise", "lost-line", "buffer-overflow",
                                                      "protocol-misuse")]
         return Outcome("stalled", f"The unit refused the last line the host sent "
