@@ -51,11 +51,13 @@ def _child(args: list[str]) -> tuple[float, float]:
     return cpu, rss
 
 
-def corpus(proxied: bool) -> list[dict]:
+def corpus(proxied: bool, varied: int, seed: int) -> list[dict]:
     import diag_corpus as C
 
     tmp = Path(tempfile.mkdtemp(prefix="conform-diag-bench-"))
     entries = C.fast(tmp / "fast") + C.samples()
+    if varied:
+        entries += C.varied(tmp / "varied", varied, seed=seed)
     if proxied:
         entries += C.proxied(tmp / "proxied")
     return C.judge(entries)
@@ -68,11 +70,15 @@ def main() -> None:
     ap.add_argument("--capture", help="time this capture instead of a synthetic one")
     ap.add_argument("--proxied", action="store_true",
                     help="add real sender programs through conform proxy (minutes)")
+    ap.add_argument("--varied", type=int, default=3,
+                    help="held-out variations of each kind, parameters drawn at random")
+    ap.add_argument("--seed", type=int, default=7, help="seed of the variations")
     ns = ap.parse_args()
+    from diag_corpus import CLEAN
 
-    rows = corpus(ns.proxied)
-    labels = sorted({r["label"] for r in rows}, key=lambda x: (x != "completed", x))
-    got = sorted({r["got"] for r in rows}, key=lambda x: (x != "completed", x))
+    rows = corpus(ns.proxied, ns.varied, ns.seed)
+    labels = sorted({r["label"] for r in rows}, key=lambda x: (x not in CLEAN, x))
+    got = sorted({r["got"] for r in rows}, key=lambda x: (x not in CLEAN, x))
     cells: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for r in rows:
         cells[r["label"]][r["got"]] += 1
@@ -86,14 +92,14 @@ def main() -> None:
     for r in rows:
         fam = per_family.setdefault(r["family"], {"clean": 0, "clean_ok": 0, "injected": 0,
                                                   "injected_ok": 0, "false_claims": 0})
-        kind = "clean" if r["label"] == "completed" else "injected"
+        kind = "clean" if r["label"] in CLEAN else "injected"
         fam[kind] += 1
         fam[f"{kind}_ok"] += r["got"] == r["label"]
         fam["false_claims"] += len(r["false_claims"])
     print()
     for name, f in sorted(per_family.items()):
         acc = f["injected_ok"] / f["injected"] if f["injected"] else None
-        print(f"{name}: clean {f['clean_ok']}/{f['clean']} completed with no stop cause, "
+        print(f"{name}: clean {f['clean_ok']}/{f['clean']} with their outcome and no stop cause, "
               f"{f['false_claims']} false loss claims; injected "
               f"{f['injected_ok']}/{f['injected']} led by their cause"
               + (f" ({acc:.0%}, target {ACCURACY_TARGET:.0%})" if acc is not None else ""))
@@ -122,7 +128,8 @@ def main() -> None:
                   "analyze_cpu_s": round(a_cpu, 3), "diagnose_cpu_s": round(d_cpu, 3),
                   "analyze_peak_mb": round(a_rss), "diagnose_peak_mb": round(d_rss),
                   "cpu_ratio": round(ratio, 3), "cpu_ratio_target": RATIO_TARGET}
-    print(json.dumps({"sessions": len(rows), "matrix": {k: dict(v) for k, v in cells.items()},
+    print(json.dumps({"sessions": len(rows), "varied": ns.varied, "seed": ns.seed,
+                      "proxied": ns.proxied, "matrix": {k: dict(v) for k, v in cells.items()},
                       "families": per_family, "wrong": wrong, "timing": timing}))
 
 

@@ -1,8 +1,11 @@
 """The diagnosis's labelled corpus: sessions whose ending is known because the test made it.
 
 Each entry is (name, family, label, capture): ``label`` is ``completed`` for a session that
-ran to its end (no stop cause may lead, no loss may be claimed), else the cause kind that must
-lead (the stop cause, or the first hazard of a session that completed despite the fault).
+ran to its end and shows it (a program end, the unit idle), ``ended`` for one whose every line
+was answered but whose end the wire cannot show (a job without an end word; a sender stopped
+between lines leaves the same trace): for both no stop cause may lead and no loss may be
+claimed. Otherwise the label is the cause kind that must lead (the stop cause, or the first
+hazard of a session that completed despite the fault).
 
 * ``fast()``: in-process on the virtual clock (tests/diag_sessions.py): clean sessions of the
   scripted senders of each family, and each injected fault;
@@ -61,15 +64,15 @@ def fast(d: Path) -> list[Entry]:
     add("grbl-no-polls", "grbl", "completed", drive(grbl_unit(), grbl_job(8), grbl_sender(),
                                                      tail=1.0), GRBL)
     ses = drive(gve_unit(), gve_job(60), gve_sender(), tail=1.0)
-    add("gve-simplex", "gve", "completed", ses, GVE)
+    add("gve-simplex", "gve", "ended", ses, GVE)      # the scripted sender asks no F at the end
     ses = drive(gve_unit(), gve_job(60, checksums=True), gve_sender(), tail=1.0)
-    add("gve-checksums", "gve", "completed", ses, GVE)
+    add("gve-checksums", "gve", "ended", ses, GVE)
     # injected faults
     ses = drive(grbl_unit(), grbl_job(80), grbl_sender(poll=poll), Faults(kill_after=40),
                 tail=3.0)
     add("grbl-sender-killed", "grbl", "sender-stopped", ses, GRBL)
     ses = drive(gve_unit(), gve_job(30), gve_sender(), Faults(kill_after=20), tail=2.0)
-    add("gve-sender-killed", "gve", "sender-stopped", ses, GVE,
+    add("gve-sender-killed", "gve", "ended", ses, GVE,      # between lines: no trace
         sender_closed=ses.host[-1][0] + 0.01)
     add("gve-unit-frozen", "gve", "unit-silent",
         drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0), GVE)
@@ -121,7 +124,7 @@ def fast(d: Path) -> list[Entry]:
               tail=3.0, t_max=30.0), MARLIN)
     ses = drive(marlin_unit(), marlin_job(100), marlin_sender(), Faults(kill_after=40),
                 tail=3.0)
-    add("marlin-sender-killed", "marlin", "sender-stopped", ses, MARLIN,
+    add("marlin-sender-killed", "marlin", "ended", ses, MARLIN,    # between lines
         sender_closed=ses.host[-1][0] + 0.05)
     add("marlin-unit-frozen", "marlin", "unit-silent",
         drive(marlin_unit(), marlin_job(100), marlin_sender(), Faults(mute_unit_at=0.3),
@@ -141,6 +144,113 @@ def fast(d: Path) -> list[Entry]:
     add("marlin-cable-pulled", "marlin", "link-lost",
         drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
               Faults(cut=(0.3, 2.3)), tail=1.0, t_max=12.0), MARLIN)
+    return out
+
+
+def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
+    """``k`` more sessions of each kind, their parameters drawn at random (seeded) rather than
+    the ones the rules were written against: job lengths, polling, when the fault strikes and
+    for how long. A held-out check of ``fast``."""
+    import random
+
+    rng = random.Random(seed)
+    d.mkdir(parents=True, exist_ok=True)
+    out: list[Entry] = []
+
+    def add(name: str, family: str, label: str, ses, variant: str, closed: float | None = None
+            ) -> None:
+        path = record(d / f"{name}.mcap", ses, variant,
+                      sender_closed=None if closed is None else ses.host[-1][0] + closed)
+        out.append((name, family, label, path))
+
+    def u(a: float, b: float) -> float:
+        return round(rng.uniform(a, b), 3)
+
+    for i in range(k):
+        n = rng.randrange(20, 90)
+        poll = (u(0.1, 0.5), b"?")
+        add(f"v{i}-grbl-clean", "grbl", "completed",
+            drive(grbl_unit(), grbl_job(n), grbl_sender(window=rng.randrange(40, 128),
+                                                        poll=poll), tail=1.5), GRBL)
+        add(f"v{i}-gve-clean", "gve", "ended",
+            drive(gve_unit(), gve_job(n, checksums=rng.random() < 0.5), gve_sender(),
+                  tail=1.0), GVE)
+        add(f"v{i}-marlin-clean", "marlin", "completed",
+            drive(marlin_unit(), marlin_job(n, numbered=rng.random() < 0.5), marlin_sender(),
+                  tail=1.0), MARLIN)
+        # killed once its polls show the unit running (before that: no trace, as above)
+        add(f"v{i}-grbl-killed", "grbl", "sender-stopped",
+            drive(grbl_unit(), grbl_job(80), grbl_sender(poll=(u(0.05, 0.2), b"?")),
+                  Faults(kill_after=rng.randrange(30, 70)), tail=3.0), GRBL)
+        add(f"v{i}-gve-killed", "gve", "ended",
+            drive(gve_unit(), gve_job(60), gve_sender(), Faults(kill_after=rng.randrange(5, 55)),
+                  tail=2.0), GVE, closed=u(0.005, 0.5))
+        add(f"v{i}-marlin-killed", "marlin", "ended",
+            drive(marlin_unit(), marlin_job(100), marlin_sender(),
+                  Faults(kill_after=rng.randrange(10, 90)), tail=3.0), MARLIN,
+            closed=u(0.005, 0.5))
+        add(f"v{i}-gve-frozen", "gve", "unit-silent",
+            drive(gve_unit(), gve_job(200), gve_sender(), Faults(mute_unit_at=u(0.05, 0.4)),
+                  tail=3.0), GVE)
+        add(f"v{i}-grbl-frozen", "grbl", "unit-silent",
+            drive(grbl_unit(), grbl_job(80), grbl_sender(), Faults(mute_unit_at=u(0.1, 1.0)),
+                  tail=3.0), GRBL)
+        add(f"v{i}-marlin-frozen", "marlin", "unit-silent",
+            drive(marlin_unit(), marlin_job(100), marlin_sender(),
+                  Faults(mute_unit_at=u(0.1, 1.0)), tail=3.0), MARLIN)
+        t, span = u(0.1, 1.0), u(1.5, 3.0)
+        g = u(0.05, 0.3)        # while the GVE job runs (300 lines take about 0.5 s)
+        add(f"v{i}-gve-cut", "gve", "link-lost",
+            drive(gve_unit(), gve_job(300), gve_sender(timeout=0.3),
+                  Faults(cut=(g, g + span), cut_events=rng.random() < 0.5), tail=1.0), GVE)
+        add(f"v{i}-grbl-cut", "grbl", "link-lost",
+            drive(grbl_unit(), grbl_job(80), grbl_sender(poll=poll),
+                  Faults(cut=(t, t + span), cut_events=False), tail=3.0, t_max=8.0), GRBL)
+        add(f"v{i}-marlin-cut", "marlin", "link-lost",
+            drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
+                  Faults(cut=(t, t + span)), tail=1.0, t_max=12.0), MARLIN)
+        t = u(0.05, 0.25)       # while the job runs
+        add(f"v{i}-gve-noise", "gve", "noise",
+            drive(gve_unit(), gve_job(200, checksums=True), gve_sender(),
+                  Faults(noise=(t, t + u(0.2, 0.5)), seed=rng.randrange(100)), tail=0.5), GVE)
+        add(f"v{i}-marlin-noise", "marlin", "noise",
+            drive(marlin_unit(), marlin_job(200), marlin_sender(),
+                  Faults(noise=(t, t + u(0.2, 0.5)), seed=rng.randrange(100)), tail=3.0,
+                  t_max=30.0), MARLIN)
+        job = [b"G21G90G54F3000\n"] + [b"G1X%gY%g\n" % ((j % 10) * 0.5, (j % 7) * 0.25)
+                                       for j in range(rng.randrange(300, 700))]
+        add(f"v{i}-grbl-overflow", "grbl", "buffer-overflow",
+            drive(grbl_unit(settings={120: 2000.0, 121: 2000.0, 122: 2000.0}), job,
+                  grbl_sender(window=10**9), tail=1.0), GRBL)
+        job = grbl_job(30)
+        job.insert(rng.randrange(3, 28), b"G38.2Z-5F100\n")
+        add(f"v{i}-grbl-alarm", "grbl", "unit-alarm",
+            drive(grbl_unit(), job, grbl_sender(poll=poll,
+                                                stop_on=lambda a: a.startswith(b"error")),
+                  tail=3.0), GRBL)
+        add(f"v{i}-grbl-deadlock", "grbl", "deadlock",
+            drive(grbl_unit(), grbl_job(80), grbl_sender(poll=poll),
+                  Faults(realtime={u(0.3, 1.5): b"!"}), tail=3.0, t_max=6.0), GRBL)
+        t = u(0.3, 1.5)
+        add(f"v{i}-grbl-halt", "grbl", "sender-stopped",
+            drive(grbl_unit(), grbl_job(80), grbl_sender(poll=poll),
+                  Faults(kill_after=80, realtime={t: b"!", t + 0.1: b"\x18"}),
+                  tail=2.0, t_max=t + 3.0), GRBL, closed=0.05)
+        add(f"v{i}-gve-halt", "gve", "sender-stopped",
+            drive(gve_unit(), gve_job(rng.randrange(10, 80), size=3000) + [b"!0H\r"],
+                  gve_sender(), tail=2.0), GVE, closed=u(0.05, 0.5))
+        job = marlin_job(100, numbered=False)
+        job.insert(rng.randrange(5, 95), b"M112\n")
+        add(f"v{i}-marlin-m112", "marlin", "sender-stopped",
+            drive(marlin_unit(), job, marlin_sender(), tail=2.0), MARLIN, closed=u(0.05, 0.5))
+        t = u(0.1, 1.0)
+        add(f"v{i}-marlin-kill", "marlin", "unit-alarm",
+            drive(marlin_unit(), marlin_job(100), marlin_sender(),
+                  Faults(unit_calls={t: lambda unit, at: unit._kill(at)}), tail=3.0), MARLIN)
+        add(f"v{i}-marlin-busy", "marlin", "unit-busy",
+            drive(marlin_unit(), marlin_job(100), marlin_sender(),
+                  Faults(unit_calls={t: lambda unit, at: unit.stall(at, 1e4)}), tail=3.0,
+                  t_max=t + 12.0), MARLIN)
     return out
 
 
@@ -202,13 +312,16 @@ def proxied(d: Path) -> list[Entry]:
     return out
 
 
+CLEAN = ("completed", "ended")
+
+
 def lead_of(doc: dict, label: str) -> str:
-    """What the diagnosis puts first, against ``label``: for a clean session ``completed``
-    when the outcome is completed and no stop cause leads (hazards may follow); for an
+    """What the diagnosis puts first, against ``label``: for a clean session its outcome
+    (``completed`` or ``ended``) when no stop cause leads (hazards may follow); for an
     injected one the leading cause's kind (the stop cause, or the first hazard of a session
     that completed despite the fault)."""
-    if label == "completed" and doc["outcome"]["kind"] == "completed" and not doc["causes"]:
-        return "completed"
+    if label in CLEAN and doc["outcome"]["kind"] in CLEAN and not doc["causes"]:
+        return doc["outcome"]["kind"]
     lead = (doc["causes"] or doc["hazards"] or [{"kind": doc["outcome"]["kind"]}])[0]
     return lead["kind"]
 
@@ -235,7 +348,7 @@ def judge(entries: list[Entry]) -> list[dict]:
         rows.append({"name": name, "family": family, "label": label,
                      "got": lead_of(doc, label),
                      "outcome": doc["outcome"]["kind"], "headline": doc["headline"],
-                     "false_claims": false_claims(doc) if label == "completed" and
+                     "false_claims": false_claims(doc) if label in CLEAN and
                      name not in REAL_LOSSES else [],
                      "resume": doc["resume"] is not None})
     return rows

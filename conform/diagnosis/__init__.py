@@ -183,7 +183,7 @@ def judge(path: str, family: str, facts: Facts) -> Diagnosis:
     prove_losses(facts)
     ranked = rank(facts)
     o = decide(facts, ranked)
-    if o.kind in ("completed", "capture-damaged", "findings-only"):
+    if o.kind in ("completed", "ended", "capture-damaged", "findings-only"):
         return Diagnosis(path, family, facts, [], outcome=o,
                          hazards=[c for c in ranked if not c.at_end])
     causes = list(ranked)

@@ -6,12 +6,13 @@ not lost by the link, a capture whose end is missing cannot say how the session 
 
 * ``completed``: every line the host sent was answered (a line sent again and answered then
   counts), and the capture shows the end: the job's own end word answered, or the unit
-  reporting itself idle after the last answer. Without either, a session whose every line was
-  answered still counts as completed unless the unit was seen running when the host went
-  quiet, or the sender left (its port closed, its polls stopped): then the capture cannot tell
-  a finished job from a sender that quit between lines, and says so.
+  reporting itself idle after its last motion line.
+* ``ended``: every line answered, but neither a program end nor the unit idle in the capture:
+  a job without an end word and a sender stopped between lines look the same on the wire, so
+  no stop is claimed and the resume point is offered in case.
 * ``stopped``: by the sender (its own halt: a reset, an emergency stop, the family's halt
-  command with no motion after it; or it left with lines waiting) or by the link.
+  command with no motion after it; it closed its port with lines waiting; or it went quiet
+  while the unit reported itself still running and no end word came) or by the link.
 * ``stalled``: lines wait for answers at the end and the unit never gives them (silent, held,
   or the lines were lost on the way).
 * ``aborted``: the unit stopped the job itself (an alarm, a kill) and nothing ran after.
@@ -33,6 +34,7 @@ OUTCOMES = {
     "stalled": "the session stopped moving: the host waits on answers that do not come",
     "aborted": "the unit aborted the job itself",
     "unfinished": "the capture ended while lines still waited for their answers",
+    "ended": "every line was answered, but the capture does not show the job's end",
     "capture-damaged": "the capture file is damaged: only what it holds is judged",
     "no-job": "the host sent no line",
     "findings-only": "the capture is longer than the diagnosis keeps line by line: only the "
@@ -58,7 +60,8 @@ class Outcome:
             return f"Stopped by the {self.by}"
         return {"completed": "Completed", "stalled": "Stalled", "aborted": "Aborted by the unit",
                 "unfinished": "Unfinished capture", "capture-damaged": "Capture damaged",
-                "no-job": "No job", "findings-only": "Not judged"}[self.kind]
+                "no-job": "No job", "findings-only": "Not judged",
+                "ended": "Ended"}[self.kind]
 
 
 def _fmt(t: float) -> str:
@@ -189,7 +192,6 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         return Outcome("completed", f"The job ran to its end: {head}, the unit reporting "
                        f"itself idle at {_fmt(idle[0].t)} after its last motion line.",
                        [head, f"{_fmt(idle[0].t)} {idle[0].text}"])
-    gone = [c for c in at_end if c.kind == "sender-stopped"]
     if running:
         r = running[-1]
         return Outcome("stopped", f"The sender sent its last line at {_fmt(t_sent)} and went "
@@ -198,12 +200,11 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
                        "without an end word that ends there looks the same).",
                        [head, f"{_fmt(r.t)} {r.text}", "no program end, no idle report after "
                         "the last answer"], by="sender", lead="sender-stopped")
-    if gone and any("polls stopped" in x or "closed its port" in x
-                    for x in gone[0].evidence):
-        return Outcome("stopped", "The sender left with every line answered and no program "
-                       "end or idle report in the capture: it stopped between lines, or its "
-                       "job ended without an end word.", [head, *gone[0].evidence[1:4]],
-                       by="sender", lead="sender-stopped")
-    return Outcome("completed", f"The job ran to its end as far as the capture shows: {head}; "
-                   "no program end and no idle report in it (a job without them ends so).",
-                   [head, "the unit's state after the last answer is not in the capture"])
+    left = [e for e in f.events if e.kind == "sender-closed" and e.t >= t_sent]
+    return Outcome("ended", f"Every line was answered ({head}) and the host then went quiet"
+                   + (f", closing its port at {_fmt(left[0].t)}" if left else "")
+                   + ": no program end and no idle report in the capture, so whether the job "
+                   "was whole it cannot tell (a job without an end word ends so; so does a "
+                   "sender stopped between lines).",
+                   [head, "the unit's state after the last answer is not in the capture"]
+                   + ([f"{_fmt(left[0].t)} {left[0].text}"] if left else []))
