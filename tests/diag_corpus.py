@@ -56,11 +56,13 @@ def fast(d: Path) -> list[Entry]:
         out.append((name, family, label, record(d / f"{name}.mcap", ses, variant, **kw)))
 
     poll = (0.2, b"?")
-    # clean sessions
-    add("grbl-counting", "grbl", "completed", drive(grbl_unit(), grbl_job(40),
-                                                     grbl_sender(poll=poll), tail=1.5), GRBL)
-    add("grbl-send-response", "grbl", "completed",
-        drive(grbl_unit(), grbl_job(30), grbl_sender(window=None, poll=poll), tail=1.5), GRBL)
+    # clean sessions; a sender that finished closes its port too (the proxy records it): once
+    # read as "sender-stopped (0.95) ... it closed its port"
+    ses = drive(grbl_unit(), grbl_job(40), grbl_sender(poll=poll), tail=1.5)
+    add("grbl-counting", "grbl", "completed", ses, GRBL, sender_closed=ses.host[-1][0] + 0.2)
+    ses = drive(grbl_unit(), grbl_job(30), grbl_sender(window=None, poll=poll), tail=1.5)
+    add("grbl-send-response", "grbl", "completed", ses, GRBL,
+        sender_closed=ses.host[-1][0] + 0.2)
     add("grbl-no-polls", "grbl", "completed", drive(grbl_unit(), grbl_job(8), grbl_sender(),
                                                      tail=1.0), GRBL)
     ses = drive(gve_unit(), gve_job(60), gve_sender(), tail=1.0)
@@ -115,8 +117,9 @@ def fast(d: Path) -> list[Entry]:
     add("gve-sender-halt", "gve", "sender-stopped", ses, GVE,
         sender_closed=ses.host[-1][0] + 0.05)
     # Marlin: ok-paced, numbered with checksums (as printcore) or plain
-    add("marlin-numbered", "marlin", "completed",
-        drive(marlin_unit(), marlin_job(60), marlin_sender(), tail=1.0), MARLIN)
+    ses = drive(marlin_unit(), marlin_job(60), marlin_sender(), tail=1.0)
+    add("marlin-numbered", "marlin", "completed", ses, MARLIN,
+        sender_closed=ses.host[-1][0] + 0.1)
     add("marlin-plain", "marlin", "completed",
         drive(marlin_unit(), marlin_job(60, numbered=False), marlin_sender(), tail=1.0), MARLIN)
     add("marlin-noise", "marlin", "noise",
