@@ -297,6 +297,10 @@ def proxied(d: Path) -> list[Entry]:
         for mode in ("incremental", "default"):
             add(f"grbl-streamer-{mode}", "grbl", "completed", GRBL,
                 script("grbl_streamer_sender.py", str(job), mode))
+    bcnc = _interpreter("CONFORM_BCNC_PYTHON", "bcnc", "bCNC")
+    if bcnc:
+        add("grbl-bcnc", "grbl", "completed", GRBL, script("bcnc_sender.py", str(job),
+                                                           python=bcnc))
     big = d / "big.gcode"
     big.write_text("\n".join(default_job(2000)) + "\n")
     add("grbl-conform-send-sigterm", "grbl", "sender-stopped", GRBL, conform_send(big),
@@ -312,7 +316,22 @@ def proxied(d: Path) -> list[Entry]:
         add("marlin-printcore", "marlin", "completed", "marlin-2.1",
             [sys.executable, str(REPO / "tests" / "senders" / "marlin_printcore.py"), "{port}",
              str(mjob)], baud=250000)
+    octo = _interpreter("CONFORM_OCTOPRINT_PYTHON", "octoprint", "octoprint.util.comm")
+    if octo:
+        add("marlin-octoprint", "marlin", "completed", "marlin-2.1",
+            script("marlin_octoprint.py", str(mjob), python=octo), baud=250000)
     return out
+
+
+def _interpreter(env: str, venv: str, module: str) -> str | None:
+    """An interpreter that has ``module``: $``env``, else /tmp/conform-senders/``venv``."""
+    import subprocess
+
+    path = os.environ.get(env) or f"/tmp/conform-senders/{venv}/bin/python"
+    if not Path(path).exists():
+        return None
+    ok = subprocess.run([path, "-c", f"import {module}"], capture_output=True).returncode == 0
+    return path if ok else None
 
 
 CLEAN = ("completed", "ended")
