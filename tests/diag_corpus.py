@@ -144,6 +144,10 @@ def fast(d: Path) -> list[Entry]:
     ses = drive(marlin_unit(), job, marlin_sender(), tail=2.0)
     add("marlin-sender-m112", "marlin", "sender-stopped", ses, MARLIN,
         sender_closed=ses.host[-1][0] + 0.5)
+    # an ok lost on the way back; the sender asks again after 1 s and meets silence
+    add("marlin-lost-ok", "marlin", "lost-line",
+        drive(marlin_unit(), marlin_job(60), marlin_sender(timeout=1.0),
+              Faults(drop_answer={20}), tail=3.0, t_max=8.0), MARLIN)
     add("marlin-cable-pulled", "marlin", "link-lost",
         drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
               Faults(cut=(0.3, 2.3)), tail=1.0, t_max=12.0), MARLIN)
@@ -246,6 +250,9 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
         job.insert(rng.randrange(5, 95), b"M112\n")
         add(f"v{i}-marlin-m112", "marlin", "sender-stopped",
             drive(marlin_unit(), job, marlin_sender(), tail=2.0), MARLIN, closed=u(0.05, 0.5))
+        add(f"v{i}-marlin-lost-ok", "marlin", "lost-line",
+            drive(marlin_unit(), marlin_job(80), marlin_sender(timeout=u(0.5, 2.0)),
+                  Faults(drop_answer={rng.randrange(3, 70)}), tail=3.0, t_max=10.0), MARLIN)
         t = u(0.1, 1.0)
         add(f"v{i}-marlin-kill", "marlin", "unit-alarm",
             drive(marlin_unit(), marlin_job(100), marlin_sender(),

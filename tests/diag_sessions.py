@@ -33,6 +33,8 @@ class Faults:
     # the n-th line written (counting resends)
     pause: dict[int, float] = field(default_factory=dict)   # the n-th line written in two
     # halves this many seconds apart (a converter that holds bytes back)
+    drop_answer: set[int] = field(default_factory=set)   # the k-th `ok` the unit sends (from
+    # 0) is lost on the way back
     unit_calls: dict[float, Callable] = field(default_factory=dict)   # at t: call(unit, t),
     # a fault inside the unit (its own kill, a command that never ends)
     seed: int = 1
@@ -88,6 +90,7 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
     stopped = False
     done_at: float | None = None
     cut_state = False
+    oks = 0
 
     def down(at: float) -> bool:
         return f.cut is not None and f.cut[0] <= at < f.cut[1]
@@ -117,6 +120,10 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
         for due, data in unit.poll(t):
             if (f.mute_unit_at is not None and due >= f.mute_unit_at) or down(due):
                 continue
+            if data.startswith(b"ok"):
+                oks += 1
+                if oks - 1 in f.drop_answer:
+                    continue
             on_wire.append((max(due, unit_wire) + len(data) * byte_t, data))
             unit_wire = on_wire[-1][0]
         while on_wire and on_wire[0][0] <= t:      # what has reached the sender by now

@@ -285,7 +285,7 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         if lost and never:
             kind = "buffer-overflow" if risk and risk[0].t <= lost[0].t else "lost-line"
             add(kind, 0.88, ("Bytes were lost in a receive-buffer overflow" if risk else
-                             "A line was lost on the way")
+                             "A line or its answer was lost on the way")
                 + f" (proof: {lost[0].text}), so {_line(first)} was never answered and the "
                 f"host waited from {_fmt(s.t_start)}.",
                 [f"{len(never)} line(s) never answered in the capture"],
@@ -399,7 +399,7 @@ SUMMARY = {
                        "from {t}, and the wire shows bytes lost: {first}.",
     "overflow-risk": "More bytes were in flight than the unit's receive buffer holds, from "
                      "{t} ({n} times); no loss shows on the wire: {first}.",
-    "lost-line": "A line was lost on the way at {t} ({n} in all): {first}.",
+    "lost-line": "A line or its answer was lost on the way at {t} ({n} in all): {first}.",
     "noise": "A burst of damaged bytes from {t} ({n} events).",
     "protocol-misuse": "The sender broke the protocol from {t} ({n} times): {first}.",
     "starvation": "The unit's queue ran dry {n} time(s) from {t} while the host was slow.",

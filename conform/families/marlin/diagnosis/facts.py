@@ -11,6 +11,7 @@ again later under its number: a later try answers it). What the findings become:
 * ``Error:Printer halted. kill() called!``: the unit's own kill (``alarm``) unless the host
   sent M112 just before (its emergency stop: ``halt``, as is M410 quickstop);
 * a number sent again that the unit did not take is no answered line: it was dropped silently;
+  when the first copy was taken and its ``ok`` never came, that silence proves the ``ok`` lost;
 * ``echo:busy:`` keepalives: the unit says it is working (``running``); ``M400`` answered
   ``ok``: every move has ended (gcode M400 ``planner.synchronize()``): ``idle``.
 """
@@ -62,6 +63,7 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
         if word == "M400" and x.t_ok is not None:
             events.append(Event(x.t_ok - t0, "idle", "`M400` answered ok: every move has "
                                 "ended", "gcode M400 planner.synchronize()", line=e.n))
+    events += _lost_oks(a.lines, ex)
     halts = [ev.t for ev in events if ev.kind == "halt"]
     offset = (a.lines[0].t - t0) if a.lines else 0.0     # findings count from the first line
     for f in a.findings:
@@ -88,6 +90,30 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
     return Facts("marlin", a.variant, path, float(a.metrics["duration_s"]) + offset, ex,
                  events, t0=t0, rx_capacity=v.rx_buffer, queue_capacity=v.bufsize,
                  queue_unit="commands", answer_time=0.5, notes=list(a.notes))
+
+
+def _lost_oks(lines: list[Any], ex: list[Exchange]) -> list[Event]:
+    """Proof of a lost ``ok``: a number the unit took, whose ``ok`` never came, sent again and
+    met with silence. queue.cpp drops a number it has already taken without a word, so the
+    silence says the unit had the line: its answer was lost on the way back."""
+    out: list[Event] = []
+    first: dict[tuple[int, int], Any] = {}
+    for x, e in zip(lines, ex, strict=True):
+        if x.n is None:
+            continue
+        key = (x.epoch, x.n)
+        if key not in first:
+            first[key] = x
+            continue
+        orig = first[key]
+        if x.repeat and not x.accepted and x.t_ok is None and orig.accepted and \
+                orig.t_ok is None:
+            out.append(Event(e.t_sent, "loss", f"N{x.n} sent again got no answer: the unit "
+                             "had taken it (it drops a number it has taken silently), so its "
+                             "`ok` was lost on the way back", "queue.cpp get_serial_commands",
+                             line=e.n, extra={"proof": "ok lost"}))
+            first[key] = x          # one proof per number
+    return out
 
 
 def _busy(raw: Any, t0: float) -> list[Event]:
