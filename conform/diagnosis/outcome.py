@@ -192,6 +192,14 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         return Outcome("completed", f"The job ran to its end: {head}, the unit reporting "
                        f"itself idle at {_fmt(idle[0].t)} after its last motion line.",
                        [head, f"{_fmt(idle[0].t)} {idle[0].text}"])
+    drops = [e for e in f.events if e.kind == "link" and e.t >= t_sent and
+             e.extra.get("kind") in ("disconnect", "error", "close")]
+    if drops:
+        d = drops[0]
+        return Outcome("stopped", f"The link dropped at {_fmt(d.t)} ({d.text}) after the "
+                       "host's last line, with no program end and no idle report before it; "
+                       "nothing was sent or answered after.", [head, f"{_fmt(d.t)} {d.text}"],
+                       by="link", lead="link-lost")
     if running:
         r = running[-1]
         return Outcome("stopped", f"The sender sent its last line at {_fmt(t_sent)} and went "
