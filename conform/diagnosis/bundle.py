@@ -151,6 +151,10 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
     for c in captures:
         if Path(c).resolve() == out.resolve():
             raise UserError(f"{out}: is one of the captures; the bundle goes elsewhere")
+    from conform.capture.reader import open_capture
+
+    for c in captures:      # a file that is not a capture is refused, not packed
+        open_capture(c).metadata  # noqa: B018 - reading it raises UserError for a non-capture
     subs = redactions(captures) if redact else []
     work = Path(tempfile.mkdtemp(prefix="conform-bundle-"))
     try:

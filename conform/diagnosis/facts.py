@@ -28,6 +28,12 @@ EVENT_KINDS = {
     "link": "the link dropped, failed or came back (a recorded link event)",
     "sender-closed": "the sender closed its port",
     "job-end": "the job's own end (a program end word)",
+    "halt": "the sender halted the unit itself (feed hold with reset, emergency stop, the "
+            "family's halt or reset command)",
+    "idle": "the unit reported itself idle or ready with nothing left to run",
+    "running": "the unit reported itself still running its work",
+    "deaf": "the unit answered none of the host's polls over a stretch (polls it always "
+            "answers at once, whatever it is doing)",
 }
 
 
@@ -81,6 +87,8 @@ class Facts:
     answer_time: float = 0.5            # an answer later than this is a wait, not a reply
     notes: list[str] = field(default_factory=list)
     family_data: Any = None             # the family's own analysis, for its other hooks
+    damaged: str | None = None          # what is wrong with the capture file, when it is
+    lines_kept: bool = True             # False: too long, ``exchanges`` is empty
 
 
 @dataclass(slots=True)

@@ -177,6 +177,13 @@ class MarlinFamily(Family):
 
         return analyze_capture(path, **options)
 
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
+        """``conform diagnose``: the analysis as neutral facts (diagnosis/facts.py)."""
+        from conform.families.marlin.diagnosis.facts import facts
+
+        return facts(raw, path, variant=variant, analysis=analysis)
+
     def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         """M115, the capability report (conformance/portprobe.py)."""
         from conform.families.marlin.conformance.portprobe import probe
