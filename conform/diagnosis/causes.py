@@ -327,7 +327,6 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                           for e in ex)
         if host_gone and answered_in:
             silent_conf = min(silent_conf, 0.4)     # the unit went on answering a dead host
-        came = "" if first.t_answer is None else f" until {_fmt(first.t_answer)}"
         add("unit-silent", silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
             f"answer to {_line(first)}, which "
             + (f"came only at {_fmt(first.t_answer)}" if first.t_answer is not None
