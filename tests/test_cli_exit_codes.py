@@ -165,7 +165,7 @@ def test_emulate_control_0_ok_1_refused(tmp_path, capsys, emulate):
 
 
 def test_spec_check_0_valid_2_for_a_bad_row(tmp_path, capsys):
-    tables = REPO / "conform" / "families" / "gve" / "spec" / "tables"
+    tables = REPO / "specs" / "gve"
     assert _code(["spec", "check", "--specs", str(tables)], capsys)[0] == 0
     bad = tmp_path / "tables"
     shutil.copytree(tables, bad)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable
+from typing import Self
 
 from conform.capture.merge import HostLines, Merger
 from conform.capture.recorder import Recorder
@@ -47,7 +48,7 @@ class _Live:
     def _event(self, kind: str, side: str, detail: str) -> None:
         self.recorder.link_event(kind, detail, side=side)
 
-    def __enter__(self):  # type: ignore[no-untyped-def]
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -185,7 +186,7 @@ class SniffCapture(_Live):
         self.runner.start()
         self._ticker.start()
 
-    def _emit(self, chunks: list) -> None:  # type: ignore[type-arg]
+    def _emit(self, chunks: list) -> None:
         for c in chunks:
             self.recorder.chunk(c.direction, c.data, c.t_read, c.t_first)
 

@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import sys
-from typing import Any
 
 import click
 
@@ -78,7 +77,7 @@ def cli() -> None:
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str | None,
               seed: int, quiet: bool, control_path: str | None, link_path: str | None,
               record_path: str | None, answer_delay: float, force: bool,
-              **family_values: Any) -> None:
+              **family_values: object) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
 
     \b

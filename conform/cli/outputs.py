@@ -7,16 +7,21 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
 from conform.errors import UserError, writable_folder
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from click.decorators import FC
+
 __all__ = ["force_option", "free_link", "fresh_output", "writable_folder"]
 
 
-def force_option(what: str = "FILE") -> Any:
+def force_option(what: str = "FILE") -> Callable[[FC], FC]:
     """``--force``: replace an existing output file."""
     return click.option("--force", is_flag=True,
                         help=f"Replace {what} if it exists (by default an existing file is "

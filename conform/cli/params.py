@@ -3,10 +3,15 @@ and targets the same way, so a mistake is the same one line (exit 2) everywhere.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 from click.shell_completion import CompletionItem
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from click.decorators import FC
 
 MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware limit
 
@@ -159,21 +164,21 @@ INPUT_PATH = InputPathType(dir_okay=True)
 OUTPUT_DIR = click.Path(file_okay=False, path_type=str)
 OUTPUT_FILE = click.Path(dir_okay=False, path_type=str)
 
-def json_option(what: str = "") -> Any:
+def json_option(what: str = "") -> Callable[[FC], FC]:
     """``--json`` (``as_json``): one JSON document on stdout; human messages go to stderr."""
     return click.option("--json", "as_json", is_flag=True,
                         help=f"One JSON document on stdout{': ' + what if what else ''}; "
                              "messages go to stderr.")
 
 
-def echo_json(doc: Any) -> None:
+def echo_json(doc: object) -> None:
     """The one JSON document of a ``--json`` command."""
     import json
 
     click.echo(json.dumps(doc, indent=1, default=str, ensure_ascii=False))
 
 
-def quiet_option() -> Any:
+def quiet_option() -> Callable[[FC], FC]:
     """``-q/--quiet``: the same on every long-running command (README, "Options that mean the
     same everywhere")."""
     return click.option("-q", "--quiet", is_flag=True,
@@ -185,7 +190,7 @@ def quiet_option() -> Any:
 DEFAULT_SEED = 1
 
 
-def seed_option() -> Any:
+def seed_option() -> Callable[[FC], FC]:
     """``--seed N``: one default and one meaning wherever it appears."""
     return click.option("--seed", type=NON_NEGATIVE_INT, default=DEFAULT_SEED,
                         show_default=True,

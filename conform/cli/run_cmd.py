@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
@@ -31,6 +31,9 @@ from conform.conformance.target import parse_target
 from conform.errors import UserError, writable_folder
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 from conform.stops import exit_status, shield
+
+if TYPE_CHECKING:
+    from conform.families import Family
 
 
 @family_options("run")
@@ -67,7 +70,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        inputs_control: str | None, quiet: bool, as_json: bool, **family_values: Any) -> None:
+        inputs_control: str | None, quiet: bool, as_json: bool, **family_values: object) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
     usage or link error, a check that could not be run (ERROR) or a run that stopped early.
 
@@ -121,7 +124,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         sys.exit(code)
 
 
-def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
+def _family_of(targets: tuple[str, ...], variant: str | None) -> Family:
     """The family whose units this run addresses (conform.families); one per run."""
     from conform.families import default_family, family, family_for_variant
 
@@ -145,7 +148,7 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
         for note in r.notes:
             if note.startswith("hint: "):
                 echo(f"  {note}")
-        told = set()
+        told: set[int] = set()
         for cause in (g for g in grouped if g.checks[0].target == r.target):
             echo(f"  FAIL ×{len(cause.checks)} {cause.sentence()}")
             told.update(id(c) for c in cause.checks)

@@ -13,12 +13,17 @@ unit's reception (``reception``) and finds the resume point (``resume_state``);
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 from conform.diagnosis.causes import Cause, find_stalls, rank
 from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.analysis.rawread import RawCapture
+    from conform.families import AnalysisResult, Family
 
 FORMAT = "conform-diagnosis/1"
 
@@ -44,7 +49,7 @@ class Diagnosis:
         c = self.causes[0]
         return f"Most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         f = self.facts
         return {
             "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,
@@ -63,7 +68,7 @@ class Diagnosis:
         }
 
 
-def _family_of(path: str, variant: str | None) -> Any:
+def _family_of(path: str, variant: str | None) -> Family:
     from conform.families import default_family, family
     from conform.families.peek import peek_family
 
@@ -75,7 +80,7 @@ def _family_of(path: str, variant: str | None) -> Any:
     return family(d.family)
 
 
-def _link_events(raw: Any, t0: float) -> list[Event]:
+def _link_events(raw: RawCapture, t0: float) -> list[Event]:
     """The capture's own link events: the proxy's sender pty closing is the sender leaving."""
     method = str(raw.metadata.get("conform.session", {}).get("capture_method", ""))
     out = []
@@ -94,7 +99,7 @@ def _link_events(raw: Any, t0: float) -> list[Event]:
     return out
 
 
-def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
+def diagnose(path: str, *, variant: str | None = None, analysis: AnalysisResult | None = None,
              family: str | None = None) -> Diagnosis:
     """Diagnose one capture file (``analysis``: its family's analysis, when already made;
     ``family``: its family's name, when already known)."""
@@ -128,7 +133,8 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
     return d
 
 
-def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:
+def headline_for(path: str, analysis: AnalysisResult, family: str | None,
+                 echo: Callable[[str], object]) -> None:
     """``conform analyze``: the diagnosis in one sentence first, and kept on the analysis for
     the top of its report (``analysis.diagnosis``); a capture it cannot judge says why.
     An analysis that streamed its tables (too long to keep) is not read whole again here."""
@@ -143,5 +149,6 @@ def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> Non
     except Exception as exc:  # noqa: BLE001 - the analysis stands without its diagnosis
         echo(f"diagnosis: failed ({type(exc).__name__}: {exc}); the analysis follows")
         return
-    analysis.diagnosis = d.to_json()
+    # kept on whatever result the family made, for the top of its report
+    setattr(analysis, "diagnosis", d.to_json())  # noqa: B010
     echo(f"diagnosis: {d.headline()}")

@@ -26,10 +26,10 @@ import zipfile
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from conform import __version__
 from conform.errors import UserError
+from conform.jsondoc import JsonObject
 
 FORMAT = "conform-bundle/1"
 MANIFEST = "manifest.json"
@@ -100,7 +100,7 @@ def redact_capture(src: str, dst: Path, subs: list[tuple[str, str]], extra: dict
         w.finish()
 
 
-def serial_ports(named: set[str], redact: bool) -> list[dict[str, Any]]:
+def serial_ports(named: set[str], redact: bool) -> list[JsonObject]:
     """This machine's serial ports (pyserial), those the captures name first."""
     try:
         from conform.cli.ports_cmd import listed_ports
@@ -165,7 +165,7 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
                 k += 1
                 name, stem = f"{Path(c).stem}-{k}{Path(c).suffix}", f"{Path(c).stem}-{k}"
             used.add(name)
-            entry: dict[str, Any] = {"name": name, "bytes": os.path.getsize(c)}
+            entry: dict[str, object] = {"name": name, "bytes": os.path.getsize(c)}
             (work / "captures").mkdir(exist_ok=True)
             if redact:
                 try:
@@ -242,7 +242,7 @@ def is_bundle(path: str) -> bool:
         return MANIFEST in z.namelist()
 
 
-def open_bundle(path: str) -> tuple[dict[str, Any], list[str]]:
+def open_bundle(path: str) -> tuple[JsonObject, list[str]]:
     """The manifest and the captures of a bundle, extracted to a folder removed at exit."""
     try:
         with zipfile.ZipFile(path) as z:

@@ -23,7 +23,6 @@ from __future__ import annotations
 import bisect
 import statistics
 from dataclasses import dataclass, field
-from typing import Any
 
 from conform.diagnosis.facts import Event, Exchange, Facts
 
@@ -74,7 +73,7 @@ class Cause:
     summary: str                # one sentence
     lines: list[int] = field(default_factory=list)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"kind": self.kind, "confidence": round(self.confidence, 3),
                 "t_start": round(self.t_start, 6), "t_end": round(self.t_end, 6),
                 "evidence": self.evidence, "advice": self.advice, "summary": self.summary,

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from conform.jsondoc import JsonObject
+
 EVENT_KINDS = {
     "alarm": "the unit reported an alarm, an interrupt or a halt of its own",
     "error-answer": "the unit refused a line (an error answer)",
@@ -54,9 +56,9 @@ class Event:
     rule: str = ""              # the clause or rule that fired
     t_end: float | None = None
     line: int | None = None     # the host line it concerns
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: JsonObject = field(default_factory=dict)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {k: v for k, v in asdict(self).items() if v not in (None, "", {})}
 
 
@@ -98,7 +100,7 @@ class ParsedLine:
     why: str = ""
     echo: str | None = None     # what the unit echoed of it, where it echoes
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {k: v for k, v in asdict(self).items() if v is not None}
 
 
@@ -113,7 +115,7 @@ class ResumePoint:
     resume_from: int | None           # the host line to resume at
     command: str                      # how to resume
     evidence: list[str] = field(default_factory=list)
-    state: dict[str, Any] = field(default_factory=dict)    # the modal state, named
+    state: dict[str, object] = field(default_factory=dict)    # the modal state, named
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return asdict(self)

@@ -12,7 +12,7 @@ from pathlib import Path
 import jinja2
 
 from conform.report.render import write_files
-from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN
+from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN, Verdict
 from conform.sendercheck.grade import CheckResults
 
 _HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender {{ verdict }}: {{ command }}</title>
@@ -48,7 +48,7 @@ capture <code>{{ s.session.capture }}</code></p>
 
 
 def _matrix(r: CheckResults) -> list:
-    rules = {}
+    rules: dict[str, list[Verdict]] = {}
     for s in r.scenarios:
         for v in s.verdicts:
             rules.setdefault(v.rule, []).append(v)

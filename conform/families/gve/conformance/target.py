@@ -180,7 +180,7 @@ class GveEmuTarget(GveTarget, EmuTarget):
                  linger: float = 0.05) -> GveReply:
         reply = super().exchange(line, timeout, lines, linger)
         try:
-            reply.moving = bool(self.unit.run) or self.unit.queue_len > 0
+            reply.moving = bool(self.unit.moving)
         except AttributeError:
             pass
         return reply
