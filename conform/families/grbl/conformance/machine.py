@@ -88,8 +88,13 @@ def compare_step(target_session: Any, reference_session: Any, data: bytes,
     """Send ``data`` to both; how their answers differ ("" when they agree)."""
     lines = data.count(b"\n")
     status = data.count(b"?") if not lines else 0
-    got = [normalize(s.talk(data, answers=lines, status=status, timeout=3.0, linger=0.05).lines)
-           for s in (target_session, reference_session)]
+    # the reference says how many answers to wait for: a held unit (feed hold, M0) answers its
+    # lines only after '~', which then answers them all, so waiting for one answer per line
+    # sent would cost the target's whole timeout at every step of a hold
+    ref = reference_session.talk(data, answers=lines, status=status, timeout=3.0, linger=0.05)
+    answers = sum(1 for x in ref.lines if x == "ok" or x.startswith("error:"))
+    tgt = target_session.talk(data, answers=answers, status=status, timeout=3.0, linger=0.05)
+    got = [normalize(tgt.lines), normalize(ref.lines)]
     if got[0] == got[1]:
         return ""
     return (f"after {data!r}: the target answered {' | '.join(got[0]) or '-'}, "
