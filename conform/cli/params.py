@@ -66,6 +66,9 @@ class TargetType(click.ParamType):
         if len(parts) > 3:
             self.fail(f"{text!r}: expected emu:VARIANT[:MUTANT]", param, ctx)
         known = _variant_ids()
+        if len(parts) > 1 and not parts[1]:
+            self.fail(f"{text!r} names no variant: emu:VARIANT (one of {', '.join(known)}), "
+                      "or emu alone for the default", param, ctx)
         if len(parts) > 1 and parts[1] and parts[1] not in known:
             self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
                       param, ctx)

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from conform import __version__
+from conform.capture.scan import check_magic
 from conform.errors import UserError
 
 FORMAT = "conform-bundle/1"
@@ -151,6 +152,7 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
     for c in captures:
         if Path(c).resolve() == out.resolve():
             raise UserError(f"{out}: is one of the captures; the bundle goes elsewhere")
+        check_magic(c)   # not a capture at all: one line now, not a bundle of errors
     subs = redactions(captures) if redact else []
     work = Path(tempfile.mkdtemp(prefix="conform-bundle-"))
     try:

@@ -1,0 +1,169 @@
+"""What a new user meets (issue: no false success): a command that could not do its job says
+so in one line and exits non-zero; nothing reports success for something that did not
+happen. Grouped so that each command-line behaviour costs at most one subprocess."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from conform.cli.main import main
+
+REPO = Path(__file__).resolve().parent.parent
+GOOD = str(REPO / "captures" / "good-rs232.mcap")
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
+
+
+def _code(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err and "internal error" not in err, err
+    return info.value.code, out, err
+
+
+@pytest.fixture
+def silent_port():
+    """A pty nobody answers on (what is written to it is read and dropped)."""
+    master, slave = pty.openpty()
+    stop = threading.Event()
+
+    def drain() -> None:
+        while not stop.is_set():
+            try:
+                os.read(master, 4096)
+            except OSError:
+                return
+
+    threading.Thread(target=drain, daemon=True).start()
+    yield os.ttyname(slave)
+    stop.set()
+    os.close(slave)
+    os.close(master)
+
+
+# -- false success: a dead port is not a unit that matches the manual ------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", [None, "gve64-v19", "grbl-1.1f", "marlin-2.1"])
+def test_characterize_on_a_silent_port_fails_fast_and_writes_nothing(variant, silent_port,
+                                                                      tmp_path, capsys):
+    out = tmp_path / "unit.toml"
+    t0 = time.monotonic()
+    code, _, err = _code(["characterize", silent_port, "-o", str(out), "-q",
+                          *(["--variant", variant] if variant else [])], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert "answer" in err and "--baud" in err, err
+    assert not out.exists(), "a profile of defaults was written for a dead port"
+    assert time.monotonic() - t0 < 20
+
+
+@pytest.mark.slow
+def test_run_on_a_silent_port_is_refused_before_any_check(silent_port, tmp_path, capsys):
+    code, _, err = _code(["run", "--target", silent_port, "-q", "--report",
+                          str(tmp_path / "r")], capsys)
+    assert code == 2 and f"{silent_port}: no unit answered" in err, err
+    assert not (tmp_path / "r" / "results.json").exists()
+
+
+def test_an_interrupted_characterisation_counts_only_answered_questions(tmp_path, capsys,
+                                                                        monkeypatch):
+    """Questions whose probe got no answer (a silent link, a refused probe) are not answered."""
+    from conform.families.gve import cli as gve_cli
+    from conform.families.gve.conformance.characterize import Finding
+
+    def probe(spec, tgt, vid, *, progress, findings, probing):  # noqa: ANN001, ANN202
+        for q in list(spec.questions)[:2]:
+            findings[q] = Finding(q, "not-probed", "x", [], [], [], "no answer (link lost)")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gve_cli, "probe", probe)
+    out = tmp_path / "unit.toml"
+    code, _, err = _code(["characterize", "emu:gve64-v19", "-o", str(out), "-q"], capsys)
+    assert code == 130 and "0 of 29 questions answered" in err, err
+    text = out.read_text()
+    assert "partial = true" in text and "after 0 of 29" in text
+
+
+def test_characterize_refuses_an_existing_profile_without_force(tmp_path, capsys):
+    out = tmp_path / "unit.toml"
+    out.write_text("mine\n")
+    code, _, err = _code(["characterize", "emu:gve64-v19", "-o", str(out)], capsys)
+    assert code == 2 and "-o" in err and "--force" in err, err
+    assert out.read_text() == "mine\n"
+    code, _, err = _code(["characterize", "emu:gve64-v19", "-o", str(out), "-q", "--force"],
+                         capsys)
+    assert code == 0 and out.read_text().startswith("# conform characterisation"), err
+
+
+@pytest.mark.slow
+def test_run_without_variant_asks_harmlessly_and_runs_the_family_that_answers(tmp_path,
+                                                                                emulate):
+    """A grbl on the port: `conform ports --probe`'s questions find it; GVE's `!0?` (`!` is
+    grbl's feed hold) never reaches it, and the run is grbl's."""
+    from conform.capture.reader import open_capture
+
+    rec = tmp_path / "grbl.mcap"
+    proc, port = emulate("serve", "grbl-1.1f", "--baud", "115200", "--record", str(rec))
+    run = subprocess.run([sys.executable, "-m", "conform", "run", "--target", port, "--check",
+                          "*/guide/example/build-info", "-q", "--report", str(tmp_path / "r")],
+                         capture_output=True, text=True, timeout=120, env=ENV)
+    proc.send_signal(signal.SIGINT)
+    proc.wait(20)
+    assert run.returncode == 0, run.stdout + run.stderr
+    results = json.loads((tmp_path / "r" / "results.json").read_text())
+    assert [r["variant"] for r in results["runs"]] == ["grbl-1.1f"]
+    host = open_capture(rec).stream("host")
+    assert b"?" in host and b"!" not in host, host[:200]
+
+
+@pytest.mark.slow
+def test_check_sender_stopped_by_sigterm_exits_143(tmp_path):
+    prog = "import sys, time; time.sleep(60)"
+    proc = subprocess.Popen([sys.executable, "-m", "conform", "check-sender", "--scenario",
+                             "clean", "--report", str(tmp_path / "r"), "--", sys.executable,
+                             "-c", prog, "{port}"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=ENV, cwd=tmp_path)
+    assert "clean" in proc.stderr.readline()   # the scenario has started
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, out + err
+    assert "interrupted (SIGTERM)" in err and "Ctrl-C" not in err, err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["run", "--matrix", "--target", "emu:grbl-1.1f"], "--matrix"),
+    (["run", "--target", "emu:", "--check", "*/V/valid"], "'emu:' names no variant"),
+    (["send", str(REPO / "captures" / "jobs" / "part.nc"), "--target", "emu:"],
+     "'emu:' names no variant"),
+    (["run", "--inputs-control", "/missing.sock"], "--inputs-control /missing.sock"),
+], ids=["matrix-of-one", "run-emu-empty", "send-emu-empty", "inputs-control-emu"])
+def test_run_options_that_would_be_dropped_are_refused(argv, says, tmp_path, capsys,
+                                                       monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _code([*argv, "-q"] if argv[0] == "run" else argv, capsys)
+    assert code == 2 and err.count("\n") == 1 and says in err, err
+    assert not (tmp_path / "reports").exists(), "a run was made"
+
+
+def test_bundle_of_a_file_that_is_no_capture_fails(tmp_path, capsys):
+    junk = tmp_path / "random.bin"
+    junk.write_bytes(os.urandom(3000))
+    code, _, err = _code(["bundle", str(junk), "-o", str(tmp_path / "x.zip")], capsys)
+    assert code == 2 and "not an MCAP file" in err, err
+    assert not (tmp_path / "x.zip").exists()
+
+
+def test_analyze_one_capture_says_the_scheduler_is_not_used(capsys):
+    code, _, err = _code(["analyze", GOOD, "--scheduler", "tcp://127.0.0.1:1"], capsys)
+    assert code in (0, None) and "--scheduler spreads several captures" in err, err
