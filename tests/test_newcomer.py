@@ -167,3 +167,99 @@ def test_bundle_of_a_file_that_is_no_capture_fails(tmp_path, capsys):
 def test_analyze_one_capture_says_the_scheduler_is_not_used(capsys):
     code, _, err = _code(["analyze", GOOD, "--scheduler", "tcp://127.0.0.1:1"], capsys)
     assert code in (0, None) and "--scheduler spreads several captures" in err, err
+
+
+# -- unclear messages: what is wrong and what to do ------------------------------------------
+
+def _marlin_profile(tmp_path: Path) -> str:
+    path = tmp_path / "printer.toml"
+    path.write_text('target = "emu:marlin-2.1"\nvariant = "marlin-2.1"\n\n[observed]\n'
+                    'firmware = "2.1.2.4"\n')
+    return str(path)
+
+
+@pytest.mark.parametrize("argv, code, says", [
+    (["run", "--seed", "abc"], 2, "'abc' is not a whole number"),
+    (["profile", "diff", GOOD], 2, "conform profile diff [OPTIONS] A B"),
+    (["emulate", "control", "{file}", "state"], 2, "a file, not a control socket"),
+    (["run", "--dialect", "{marlin}", "-q"], 2, "a marlin profile (marlin-2.1), not a GVE one"),
+    (["report", "{empty}.mcap"], 2, "`conform analyze"),
+    (["report", "{empty}.json"], 2, "not a conform results file"),
+    (["send", str(REPO / "captures" / "jobs" / "part.nc"), "--target", "emu:gve64-v19",
+      "--record", "{file}/x.mcap"], 2, "a file is in the way"),
+    (["send", str(REPO / "captures" / "jobs" / "raster.txt"), "--target", "emu:grbl-1.1f"], 2,
+     "is it a job of another family? Nothing was sent"),
+    (["bundle", GOOD, "-o", "{file}/x.zip"], 2, "a file is in the way"),
+    (["capture", "recover", GOOD, "-o", "{file}/x.mcap"], 2, "a file is in the way"),
+    (["report", "{results}", "-o", "{file}/again"], 2, "-o {file}/again"),
+    (["spec", "show", "marlin-2.1", "nothing"], 2, "or a command of marlin-2.1 (e.g. M115"),
+], ids=["seed", "missing-argument", "control-regular-file", "dialect-of-marlin",
+        "report-capture", "report-empty", "record-under-file", "send-other-family",
+        "bundle-under-file", "recover-under-file", "report-under-file", "spec-show-nothing"])
+def test_mistakes_say_what_is_wrong_and_what_to_do(argv, code, says, tmp_path, capsys):
+    file = tmp_path / "file"
+    file.write_text("x\n")
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    (tmp_path / "empty.json").write_bytes(b"")
+    results = tmp_path / "results.json"
+    if "{results}" in argv:
+        assert _code(["run", "--check", "*/V/valid", "--no-machine", "-q", "--report",
+                      str(tmp_path)], capsys)[0] == 0
+    names = {"file": str(file), "empty": str(tmp_path / "empty"), "results": str(results),
+             "marlin": _marlin_profile(tmp_path) if "{marlin}" in argv else ""}
+    got, _, err = _code([a.format(**names) for a in argv], capsys)
+    assert got == code and err.count("\n") == 1 and says.format(**names) in err, err
+
+
+@pytest.mark.parametrize("variant, name, shows", [
+    ("marlin-2.1", "M115", "gcode/host/M115.cpp"), ("marlin-2.1", "m115", "M115"),
+    ("grbl-1.1f", "$H", "homing cycle"), ("grbl-1.1f", "$J=G0X1F100", "Jog"),
+])
+def test_spec_show_one_command_of_every_family(variant, name, shows, capsys):
+    code, out, err = _code(["spec", "show", variant, name], capsys)
+    assert code == 0 and shows in out, err
+
+
+def test_a_cut_short_capture_is_not_said_to_have_run_to_its_end(tmp_path, capsys):
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((REPO / "captures" / "usb-latency.mcap").read_bytes()[:9000])
+    code, out, _ = _code(["analyze", str(cut)], capsys)
+    assert code == 1 and "capture damaged" in out
+    assert "ran to its end" not in out and "cut short" in out, out
+
+
+def test_a_check_that_could_not_run_says_why_in_words():
+    from conform.conformance.target import HarnessError, LinkSilent
+    from conform.families.gve.conformance.runner import could_not
+
+    said = could_not(LinkSilent("/dev/ttyUSB0: no answer 5.0 s after J, the reset command"))
+    assert said.startswith("the unit stopped answering: ") and "LinkSilent" not in said
+    assert could_not(HarnessError("x")) == "could not be run: x"
+
+
+@pytest.mark.slow
+def test_send_records_a_real_port_and_says_when_the_link_is_lost(tmp_path, emulate):
+    """send --help's own example records a real port; a link pulled mid-job is said in
+    words with how far the job got, not pyserial's message."""
+    from conform.capture.reader import open_capture
+
+    job = str(REPO / "captures" / "jobs" / "part.nc")
+    _, port = emulate("serve", "gve64-v19", "--baud", "115200")
+    rec = tmp_path / "session.mcap"
+    run = subprocess.run([sys.executable, "-m", "conform", "send", job, "--target", port,
+                          "--variant", "gve64-v19", "--allow-motion", "--record", str(rec),
+                          "-q"], capture_output=True, text=True, timeout=120, env=ENV)
+    assert run.returncode == 0, run.stderr
+    cap = open_capture(rec)
+    assert cap.clean and cap.metadata["conform.session"]["variant"] == "gve64-v19"
+    assert b"!0L" in cap.stream("host") or b"!0C" in cap.stream("host")
+    emu, port = emulate("serve", "gve64-v19", "--baud", "115200")
+    send = subprocess.Popen([sys.executable, "-m", "conform", "send", job, "--target", port,
+                             "--variant", "gve64-v19", "--allow-motion"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    while "job lines" not in send.stderr.readline():   # the first progress line: streaming
+        assert send.poll() is None
+    emu.kill()
+    _, err = send.communicate(timeout=60)
+    assert send.returncode == 1, err
+    assert "link lost after" in err and "multiple access" not in err, err

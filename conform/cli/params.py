@@ -150,8 +150,20 @@ TARGET = TargetType()
 BAUD = BaudType()
 FRACTIONAL_BAUD = BaudType(fractional=True)
 PROBABILITY = ProbabilityType()
-POSITIVE_INT = click.IntRange(min=1)
-NON_NEGATIVE_INT = click.IntRange(min=0)
+class WholeNumber(click.IntRange):
+    """An integer with a lower bound; anything else is said as what is expected."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        try:
+            int(str(value).strip())
+        except ValueError:
+            self.fail(f"{value!r} is not a whole number (e.g. {self.min or 0})", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+POSITIVE_INT = WholeNumber(min=1)
+NON_NEGATIVE_INT = WholeNumber(min=0)
 NON_NEGATIVE = click.FloatRange(min=0.0)
 POSITIVE = click.FloatRange(min=0.0, min_open=True)
 PORT_NUMBER = click.IntRange(0, 65535)

@@ -21,6 +21,7 @@ from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
 from conform.errors import UserError
 
 FORMAT = "conform-diagnosis/1"
+INCOMPLETE = "capture incomplete"   # the note that starts what a cut-short capture says
 
 __all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause"]
 
@@ -39,6 +40,9 @@ class Diagnosis:
         """The diagnosis in one sentence."""
         if not self.causes:
             n = len(self.facts.exchanges)
+            if any(note.startswith(INCOMPLETE) for note in self.facts.notes):
+                return (f"No stop, stall or anomaly found in the intact part ({n} lines sent); "
+                        "the capture is cut short, so how the session ended is not known.")
             return (f"No stop, stall or anomaly found: {n} lines sent and the session ran to "
                     "its end.")
         c = self.causes[0]
@@ -116,8 +120,7 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
     ends = [float(x.get("t", facts.t0)) - facts.t0 for x in raw.link_events]
     facts.duration = max([facts.duration, *ends])
     if not raw.status.complete:
-        facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
-                           "intact")
+        facts.notes.append(f"{INCOMPLETE}: {raw.status.problem}; diagnosed what is intact")
     d = Diagnosis(path, fam.name, facts, rank(facts))
     rec = getattr(fam, "reception", None)
     if rec is not None:

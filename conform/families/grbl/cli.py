@@ -15,8 +15,22 @@ def show(variant: str, what: str | None, console: Console) -> None:
     g = load_grbl()
     v = g.variant(variant)
     part = (what or "").lower()
-    if part and part not in PARTS:
-        raise UserError(f"{v.id}: nothing called {what!r} (one of: {', '.join(PARTS)})")
+    one = None if not part or part in PARTS else next(
+        (c for c in g.commands.values() if c.name.upper() == (what or "").upper()
+         or c.syntax.match((what or "").upper())), None)
+    if part and part not in PARTS and one is None:
+        raise UserError(f"{v.id}: nothing called {what!r}: a part ({', '.join(PARTS)}) or a "
+                        f"$ command (e.g. '$H'; `conform spec show {v.id} commands` lists them)")
+    if one is not None:   # one command, as `spec show gve124 V` shows one
+        table = Table(title=f"{v.id}: {one.name}", show_header=False)
+        table.add_column("field")
+        table.add_column("value", overflow="fold")
+        for name, value in (("command", one.name), ("states", one.states),
+                            ("prints", ", ".join(one.prints) or "-"), ("meaning", one.meaning),
+                            ("source", one.cite)):
+            table.add_row(name, value)
+        console.print(table)
+        return
     if not part:
         table = Table(title=f"{v.title} ({v.id})", show_header=False)
         table.add_column("field")

@@ -42,7 +42,14 @@ def rows(variant: str, part: str) -> tuple[str, tuple[str, ...], list[tuple[str,
             raise UserError(f"{v.id} is a base variant (no delta to show)")
         return (f"{v.base} → {v.id}", ("what", v.base, v.id, "source"),
                 list(diff(spec.variant(v.base), v)))
-    raise UserError(f"{v.id}: nothing called {part!r} (one of: {', '.join(PARTS)})")
+    cmd = spec.command(part.upper(), v)
+    if cmd is not None:   # one command, as `spec show gve124 V` shows one
+        return (f"{v.id}: {cmd.code}", ("command", "kind", "motion", "heat", "option", "source"),
+                [(cmd.code, cmd.kind, "yes" if cmd.motion else "", "yes" if cmd.heat else "",
+                  cmd.option or "always", cmd.cite)])
+    raise UserError(f"{v.id}: nothing called {part!r}: a part ({', '.join(PARTS)}) or a "
+                    f"command of {v.id} (e.g. M115; `conform spec show {v.id} commands` "
+                    "lists them)")
 
 
 def show(variant: str, what: str | None, console: Any, as_json: bool = False) -> None:
