@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import pty
+import re
 import signal
 import subprocess
 import sys
@@ -263,3 +264,31 @@ def test_send_records_a_real_port_and_says_when_the_link_is_lost(tmp_path, emula
     _, err = send.communicate(timeout=60)
     assert send.returncode == 1, err
     assert "link lost after" in err and "multiple access" not in err, err
+
+
+# -- the wheel user's tour -------------------------------------------------------------------
+
+def test_samples_writes_the_tours_files_as_in_a_clone(tmp_path, capsys):
+    from conform.families import default_family
+    from conform.families.peek import peek_family
+
+    out = tmp_path / "samples"
+    code, said, err = _code(["samples", str(out)], capsys)
+    assert code == 0 and "sample files" in said, err
+    repo = sorted(p.name for p in (REPO / "captures").glob("*.mcap"))
+    assert sorted(p.name for p in (out / "captures").glob("*.mcap")) == repo
+    for p in (REPO / "captures" / "jobs").iterdir():
+        assert (out / "captures" / "jobs" / p.name).read_bytes() == p.read_bytes()
+    assert (out / "tests" / "senders" / "careful.py").read_bytes() == \
+        (REPO / "tests" / "senders" / "careful.py").read_bytes()
+    linked = set(re.findall(r"docs/[\w-]+\.md", (REPO / "README.md").read_text()))
+    assert linked and all((out / d).is_file() for d in linked), "README's links work in DIR"
+
+    def families(folder: Path) -> set[str]:
+        found = (peek_family(str(p), None)[0] for p in folder.glob("*.mcap"))
+        return {default_family().name if d is None else d.family for d in found}
+
+    assert families(out / "captures") == families(REPO / "captures") >= {"gve", "grbl"}
+    code, _, err = _code(["samples", str(out)], capsys)
+    assert code == 2 and "--force" in err and err.count("\n") == 1, err
+    assert _code(["samples", str(out), "--force"], capsys)[0] == 0

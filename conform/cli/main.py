@@ -35,6 +35,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bundle",
     "check-sender",
     "ports",
+    "samples",
 )
 
 
