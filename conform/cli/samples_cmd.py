@@ -12,8 +12,8 @@ from conform.cli.outputs import force_option
 @force_option("sample files already in DIR")
 def cli(directory: str, force: bool) -> None:
     """Write the sample captures (every protocol family's), the jobs, the reference sender
-    scripts, a recorded transcript and the documents into DIR, laid out as in a clone of the
-    repository (captures/, captures/jobs/, tests/senders/, tests/data/marlin/, docs/): the
+    scripts, the recorded transcripts and the documents into DIR, laid out as in a clone of the
+    repository (captures/, captures/jobs/, tests/senders/, tests/data/, docs/): the
     README's tour then runs in DIR from an installed wheel, and its links work there.
 
     \b
