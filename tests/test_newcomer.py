@@ -292,3 +292,107 @@ def test_samples_writes_the_tours_files_as_in_a_clone(tmp_path, capsys):
     code, _, err = _code(["samples", str(out)], capsys)
     assert code == 2 and "--force" in err and err.count("\n") == 1, err
     assert _code(["samples", str(out), "--force"], capsys)[0] == 0
+
+
+# -- reports and output ----------------------------------------------------------------------
+
+def test_emulator_runs_with_fails_do_not_say_the_checks_and_the_model_agree(tmp_path, capsys):
+    code, out, _ = _code(["run", "--target", "emu:gve64-v10", "--variant", "gve64-v19",
+                          "--check", "*/13.5.1/?/valid", "--no-machine", "-q", "--report",
+                          str(tmp_path / "r")], capsys)
+    assert code == 1 and "FAIL" in out
+    assert "the checks and the model agree" not in out
+    assert "emu:gve64-v10 judged as gve64-v19" in out
+    assert "the checks and the model agree" not in (tmp_path / "r" / "index.html").read_text()
+    code, out, _ = _code(["run", "--check", "*/13.5.1/?/valid", "--no-machine", "-q",
+                          "--report", str(tmp_path / "ok")], capsys)
+    assert code == 0 and "the checks and the model agree" in out
+
+
+def test_the_open_question_legend_only_on_reports_of_a_family_that_has_them(tmp_path, capsys):
+    for target, pattern, legend in (("emu:grbl-1.1f", "*/guide/example/build-info", False),
+                                    ("emu:gve64-v19", "*/13.5.1/?/valid", True)):
+        out = tmp_path / target[4:]
+        assert _code(["run", "--target", target, "--check", pattern, "--no-machine", "-q",
+                      "--report", str(out)], capsys)[0] == 0
+        for page in ("index.html", "summary.md"):
+            assert ("A1–A29" in (out / page).read_text()) is legend, (target, page)
+
+
+def test_gve_send_progress_off_a_terminal_every_5_s_and_never_the_same_line_twice(
+        monkeypatch, capsys):
+    from conform.families.gve.sender.command import Progress
+
+    class Stats:
+        timeouts = garbled = queue_full = 0
+
+    class Sender:
+        progress = (330, 330)
+        stats = Stats()
+
+    monkeypatch.delenv("CONFORM_PROGRESS_SECONDS", raising=False)
+    shown = Progress(Sender())
+    assert shown.every == 5.0   # stderr is not a terminal here
+    shown.every = 0.0
+    for _ in range(5):   # motion still ending after the last line: nothing new to say
+        shown(0.0)
+    assert capsys.readouterr().err.count("330/330") == 1
+
+
+def test_a_stopped_gve_run_turns_checksums_back_off():
+    from conform.families.gve.conformance.safety import Guard
+    from conform.families.gve.conformance.target import open_target
+    from conform.families.gve.spec import load_spec
+
+    spec = load_spec()
+    target, _ = open_target("emu:gve64-v19", spec, baud=115200, guard=Guard.emulated())
+    assert target.exchange(target.frame("!0%+", checksum=False)).lines == [b"0,5C"]
+    said = target.safe_stop()
+    assert "%- → checksums off" in said and not target.checksum_on
+    assert target.exchange(target.frame("!0?", checksum=False)).lines[0].startswith(b"0,IP64")
+
+
+@pytest.mark.slow
+def test_proxy_stopped_by_sigint_always_finishes_within_its_bound(tmp_path, emulate):
+    """50 proxies stopped at random moments (idle, forwarding, at once): each exits 0 within
+    10 s with the capture complete. A stop handled inside the signal handler could wait on a
+    lock the interrupted main thread held, forever, leaving only the .part."""
+    import random
+
+    from conform.capture.reader import open_capture
+
+    _, unit = emulate("serve", "gve64-v19", "--baud", "115200")
+    rnd = random.Random(1)
+    for n in range(50):
+        out = tmp_path / f"s{n}.mcap"
+        proxy = subprocess.Popen([sys.executable, "-m", "conform", "proxy", "-q", "--unit", unit,
+                                  "-o", str(out)], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, env=ENV)
+        try:
+            sender = proxy.stdout.readline().strip()
+            assert sender, proxy.stderr.read()
+            if n % 2:
+                fd = os.open(sender, os.O_RDWR | os.O_NOCTTY)
+                os.write(fd, b"!0?\r" * rnd.randint(1, 20))
+                os.close(fd)
+            time.sleep(rnd.uniform(0.0, 0.3))
+            proxy.send_signal(signal.SIGINT)
+            code = proxy.wait(10)
+        finally:
+            if proxy.poll() is None:
+                proxy.kill()
+                proxy.wait()
+        assert code == 0, (n, proxy.stderr.read())
+        assert open_capture(out).clean, n
+
+
+def test_check_sender_failing_page_says_what_to_fix_first_in_words(tmp_path, capsys):
+    out = tmp_path / "r"
+    code, _, err = _code(["check-sender", "-q", "--scenario", "noisy", "--report", str(out),
+                          "--", sys.executable, str(REPO / "tests" / "senders" / "blind.py"),
+                          "{port}", "{job}"], capsys)
+    assert code == 1, err
+    page = (out / "index.html").read_text()
+    assert page.index("What to fix") < page.index("Rules × scenarios")
+    assert "&#39;accepted_index&#39;" not in page and "{&#39;" not in page
+    assert "accepted index" in page

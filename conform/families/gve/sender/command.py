@@ -66,13 +66,18 @@ class Progress:
         self.every = every if every is not None else 1.0 if sys.stderr.isatty() else _interval()
         self.next = time.monotonic()  # a first line at once, then one per ``every`` s
         self.shown = False
+        self.said: object = None   # what the last line said: the same is not said again
 
     def __call__(self, _t: float) -> None:
         now = time.monotonic()
         if now < self.next:
             return
         self.next = now + self.every
-        self.show()
+        st = self.sender.stats  # type: ignore[attr-defined]
+        now_said = (self.sender.progress, st.timeouts, st.garbled, st.queue_full)  # type: ignore[attr-defined]
+        if now_said != self.said:   # motion ending after the last line: no repeated lines
+            self.said = now_said
+            self.show()
 
     def show(self) -> None:
         done, total = self.sender.progress  # type: ignore[attr-defined]
