@@ -12,6 +12,6 @@ TABLES = {f"conform.families.{d.name}.spec.tables": f"specs/{d.name}"
           for d in sorted(SPECS.iterdir()) if d.is_dir()}
 
 setup(
-    packages=[*find_packages(include=["conform*"]), *TABLES],
+    packages=[*find_packages(include=["conform*"], exclude=["conform.samples.*"]), *TABLES],
     package_dir=TABLES,
 )

@@ -61,7 +61,7 @@ def test_run_2_when_a_check_could_not_be_run(tmp_path, emulate):
                          capture_output=True, text=True, timeout=120,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert run.returncode == 2, run.stderr
-    assert re.search(r"ERROR \S+/SR/interrupt: HarnessError: --inputs-control", run.stdout)
+    assert re.search(r"ERROR \S+/SR/interrupt: could not be run: --inputs-control", run.stdout)
     assert (tmp_path / "r" / "results.json").exists()
 
 

@@ -54,3 +54,19 @@ def test_wheel_install_finds_its_tables(tmp_path):
         ran = _run([str(conform), "run", "--target", target, "--report", str(tmp_path / target[4:])],
                    cwd=tmp_path)
         assert ran.returncode == 0, (target, ran.stdout[-2000:], ran.stderr[-2000:])
+
+    # the README's tour from the wheel: `conform samples` writes what it reads, as in a clone
+    samples = tmp_path / "samples"
+    made = _run([str(conform), "samples", str(samples)], cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    shipped = {p.name for p in (REPO / "captures").glob("*.mcap")}
+    assert {p.name for p in (samples / "captures").glob("*.mcap")} == shipped
+    for rel in ("captures/jobs/part.nc", "captures/jobs/grbl-arc.nc", "tests/senders/careful.py",
+                "tests/data/marlin/facts-2.1.2.4.transcript", "docs/check-sender.md"):
+        assert (samples / rel).is_file(), rel
+    for line in (["analyze", "captures/careless-noisy.mcap"],
+                 ["analyze", "captures/grbl-counting.mcap"],
+                 ["check-sender", "--scenario", "clean", "--report", str(tmp_path / "sender"),
+                  "--", str(py), "tests/senders/careful.py", "{port}", "{job}"]):
+        ran = _run([str(conform), *line], cwd=samples)
+        assert ran.returncode == 0, (line, ran.stdout[-2000:], ran.stderr[-2000:])

@@ -29,10 +29,16 @@ def force_option(what: str = "FILE") -> Callable[[FC], FC]:
 
 
 def fresh_output(path: str | os.PathLike[str] | None, force: bool, option: str) -> None:
-    """Refuse ``path`` when a file is already there, unless ``force``."""
-    if path is None or force:
+    """Refuse ``path`` when a file is already there, unless ``force``, and when its folder
+    cannot be made or written (a file in the way, no permission): before the work."""
+    if path is None:
         return
     p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{option} {p}: is a folder; name a file in it")
+    writable_folder(p.parent, f"{option} {p}: its folder")
+    if force:
+        return
     if p.exists() or p.is_symlink():
         raise UserError(f"{option} {p}: the file exists; choose another name or add --force "
                         "to replace it")

@@ -71,6 +71,9 @@ class TargetType(click.ParamType):
         if len(parts) > 3:
             self.fail(f"{text!r}: expected emu:VARIANT[:MUTANT]", param, ctx)
         known = _variant_ids()
+        if len(parts) > 1 and not parts[1]:
+            self.fail(f"{text!r} names no variant: emu:VARIANT (one of {', '.join(known)}), "
+                      "or emu alone for the default", param, ctx)
         if len(parts) > 1 and parts[1] and parts[1] not in known:
             self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
                       param, ctx)
@@ -152,8 +155,20 @@ TARGET = TargetType()
 BAUD = BaudType()
 FRACTIONAL_BAUD = BaudType(fractional=True)
 PROBABILITY = ProbabilityType()
-POSITIVE_INT = click.IntRange(min=1)
-NON_NEGATIVE_INT = click.IntRange(min=0)
+class WholeNumber(click.IntRange):
+    """An integer with a lower bound; anything else is said as what is expected."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        try:
+            int(str(value).strip())
+        except ValueError:
+            self.fail(f"{value!r} is not a whole number (e.g. {self.min or 0})", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+POSITIVE_INT = WholeNumber(min=1)
+NON_NEGATIVE_INT = WholeNumber(min=0)
 NON_NEGATIVE = click.FloatRange(min=0.0)
 POSITIVE = click.FloatRange(min=0.0, min_open=True)
 PORT_NUMBER = click.IntRange(0, 65535)

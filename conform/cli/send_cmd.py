@@ -65,9 +65,22 @@ def cli(job: str, target: str, variant: str | None, baud: int, timeout: float | 
 
     with held_open(target, baud):       # the probe and the stream share one open of the port
         fam, variant = _family_of(target, variant, baud)
+        _job_of(fam, job)
         mine = split("send", fam.name, family_values)
         fam.send_job(job, target, variant=variant, baud=baud, allow_motion=allow_motion,
                      record=record, timeout=timeout, quiet=quiet, **mine)
+
+
+def _job_of(fam: Family, job: str) -> None:
+    """A job in which the family finds no move its unit executes is another family's (a
+    vector file for a g-code unit): refused before anything is sent, as check-sender's
+    ``--job`` is (the family's ``check_sender.moves``, where it has one)."""
+    from conform.sendercheck.options import read_job
+
+    moves = getattr(fam.check_sender, "moves", None)
+    if moves is not None and not moves(read_job(job) or []):
+        raise UserError(f"{job}: no line of it is a move a {fam.name} unit executes; is it a "
+                        "job of another family? Nothing was sent")
 
 
 def _family_of(target: str, variant: str | None, baud: int) -> tuple[Family, str | None]:

@@ -87,6 +87,7 @@ def characterize_target(fam: Family, target_text: str, output: str, variant: str
     ends; then write the profile and print it. Stopped by a signal, it writes what was found
     so far as a partial profile (``items``: what is probed, in order; a name ending in ``*``
     stands for every item it begins) and exits 128 + N."""
+    from conform.conformance.target import HarnessError
     from conform.stops import halting
 
     target, implied = fam.open_target(target_text, baud=baud, permissions=None)
@@ -106,7 +107,12 @@ def characterize_target(fam: Family, target_text: str, output: str, variant: str
         if vid not in known:
             raise UserError(f"{vid!r} is not a {fam.name} variant (known: {', '.join(known)})")
         with halting(None if target.emulated else lambda: stop(target), partial):
-            probe(target, vid, obs)
+            try:
+                probe(target, vid, obs)
+            except HarnessError as exc:   # the unit fell silent: say so, never a profile of guesses
+                said = partial("the unit stopped answering") if obs else "Nothing was written"
+                raise UserError(f"{target_text}: the unit did not answer ({exc}): is it on, on "
+                                f"this port and at this baud rate (--baud)? {said}") from None
     finally:
         target.close()
     write_profile(obs, output, target=target_text, variant=vid, title=title)

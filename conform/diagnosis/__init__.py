@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from conform.analysis.rawread import RawCapture
     from conform.families import AnalysisResult, Family
 
+INCOMPLETE = "capture incomplete"   # the note that starts what a cut-short capture says
+
 FORMAT = "conform-diagnosis/1"
 RECEPTION_MAX = 200_000     # host lines up to which the unit's reception is replayed
 
@@ -163,8 +165,7 @@ def diagnose(path: str, *, variant: str | None = None, analysis: AnalysisResult 
     facts.duration = max([facts.duration, *ends])
     if not raw.status.complete:
         facts.damaged = str(raw.status.problem or "incomplete")
-        facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
-                           "intact")
+        facts.notes.append(f"{INCOMPLETE}: {raw.status.problem}; diagnosed what is intact")
     with _no_gc():
         d = judge(path, fam.name, facts)
     rec = getattr(fam, "reception", None)

@@ -28,6 +28,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from conform import __version__
+from conform.capture.scan import check_magic
 from conform.errors import UserError
 from conform.jsondoc import JsonObject
 
@@ -151,6 +152,7 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
     for c in captures:
         if Path(c).resolve() == out.resolve():
             raise UserError(f"{out}: is one of the captures; the bundle goes elsewhere")
+        check_magic(c)   # not a capture at all: one line now, not a bundle of errors
     from conform.capture.reader import open_capture
 
     for c in captures:      # a file that is not a capture is refused, not packed

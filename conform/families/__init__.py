@@ -587,6 +587,23 @@ def identify_port(device: str, *, baud: int, timeout: float
     return None, ProbeAnswer(None, heard, "; ".join(tried) or "no family can probe"), tried
 
 
+def unit_on_port(device: str, *, baud: int, timeout: float = 0.5) -> tuple[Family, str]:
+    """The family and variant of the unit on ``device``, found with ``identify_port``'s
+    harmless questions (``conform run`` and ``characterize`` given no ``--variant``); a port
+    that cannot be opened or where no unit answers is one ``UserError`` line, before any
+    check or probe is sent."""
+    from conform.link.ports import open_port
+
+    open_port(device, baud).close()   # a port that cannot be opened says so in its own words
+    found, answer, _ = identify_port(device, baud=baud, timeout=timeout)
+    if found is None or answer.variant is None:
+        heard = f" (it sent {answer.answer[:40]!r})" if answer.answer else ""
+        raise UserError(f"{device}: no unit answered at {baud} Bd{heard}: is the unit on, "
+                        "on this port and at this baud rate (--baud)? "
+                        "`conform ports --probe` asks every port; --variant names the unit")
+    return found, answer.variant
+
+
 def family_of_tables(root: str | Path) -> Family:
     """Whose tables the folder ``root`` holds: the family most of whose table files are there
     (the default family when none is)."""

@@ -28,7 +28,7 @@ from conform.families import family_for_variant
 from conform.sendercheck.family import ERROR, FAIL, MUST, Comparison, Family, Verdict
 from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
-from conform.stops import interrupted_by
+from conform.stops import current, interrupted_by
 
 if TYPE_CHECKING:
     from conform.families import Family as RegisteredFamily
@@ -173,8 +173,10 @@ def grade_session(family: Family, s: Session) -> list[Verdict]:
 
 @contextmanager
 def _interruptible() -> Iterator[None]:
-    """SIGTERM and SIGHUP end the run as Ctrl-C does (the finished scenarios are kept)."""
-    if threading.current_thread() is not threading.main_thread():
+    """SIGTERM and SIGHUP end the run as Ctrl-C does (the finished scenarios are kept).
+    Under ``conform`` (conform.stops.stop_signals installed) its handlers already do, and
+    record which signal came so the command exits 128 + N: they are left in place."""
+    if threading.current_thread() is not threading.main_thread() or current() is not None:
         yield
         return
 
