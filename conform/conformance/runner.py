@@ -53,8 +53,11 @@ CheckT = TypeVar("CheckT", bound=Check)
 
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
-# what an ERROR's detail starts with when the link, not the harness's logic, failed
-LINK_FAILURES = ("HarnessError", "LinkSilent", "LinkError", "PortGone", "OSError")
+# what an ERROR's detail starts with when the link, not the harness's logic, failed: the
+# exception's class, or the words a family puts in its place (``could not be run`` is a
+# harness exchange that failed, as HarnessError is)
+LINK_FAILURES = ("HarnessError", "LinkSilent", "LinkError", "PortGone", "OSError",
+                 "the unit stopped answering", "the link failed", "could not be run")
 
 
 @dataclass
