@@ -21,7 +21,8 @@ from collections.abc import Callable
 from copy import deepcopy
 from dataclasses import dataclass
 
-from conform.families.marlin.conformance.checks import MarlinCheck, Outcome, _ok_kind
+from conform.families.marlin.conformance.check import MarlinCheck, Outcome
+from conform.families.marlin.conformance.check import ok_kind as _ok_kind
 from conform.families.marlin.conformance.session import Session, Talk
 from conform.families.marlin.spec import MarlinSpec
 from conform.families.marlin.unit import settings as st
