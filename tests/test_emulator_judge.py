@@ -276,3 +276,38 @@ def test_a_grbl_recording_is_refused_by_another_family(tmp_path) -> None:
     with pytest.raises(UserError, match=r"^g: a grbl recording \(.*\), not marlin's: judge it "
                                         r"with a grbl variant \(grbl-1.1f.*\), not marlin-2.1$"):
         judge_recording(parse_text(text, "g"), family("marlin"), "marlin-2.1")
+
+
+def test_the_family_follows_the_recorded_lines_before_each_write() -> None:
+    """``judge_follow`` sees each recorded line before the host write it answered is played,
+    so a family can put the reference where the recorded unit was (for an artefact it
+    states); the lines are still compared."""
+    seen: list[tuple[str, int]] = []
+    unit = _Slow(0.0)
+    text = "0 > L0\n0.01 < ok L0\n0.2 > L1\n0.21 < ok L1\n0.22 < note\n"
+    v = judge(parse_text(text, "f"), unit, lambda x: x, "x",
+              follow=lambda u, line: seen.append((line, len(u.got))))
+    assert seen == [("ok L0", 0), ("ok L1", 1), ("note", 1)]
+    assert [d.recorded for d in v.differences] == [["note\n"]]
+
+
+class _Queue(_Slow):
+    """A unit that queues lines and answers each ``busy`` seconds after the one before."""
+
+    def receive(self, data: bytes, t: float) -> None:
+        self.now = max(self.now, t)
+        self.got.append((t, data))
+        for line in data.decode().splitlines():
+            self.free = max(self.free, t) + self.busy
+            self.due.append((self.free, f"ok {line}\n".encode()))
+
+
+def test_a_counting_senders_write_waits_for_room_as_recorded() -> None:
+    """Three lines in flight, the fourth written after the first answer (two still owed):
+    against a slower reference it goes after that reference's first answer, not before."""
+    text = ("0.00 > A\n0.00 > B\n0.00 > C\n0.10 < ok A\n0.11 > D\n0.20 < ok B\n0.30 < ok C\n"
+            "0.40 < ok D\n")
+    unit = _Queue(1.0)
+    v = judge(parse_text(text, "count"), unit, lambda x: x, "q")
+    assert v.agrees, v.differences
+    assert [round(t, 2) for t, _ in unit.got] == [0.0, 0.0, 0.0, 1.01]

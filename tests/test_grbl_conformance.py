@@ -174,5 +174,12 @@ def test_setting_edges_come_from_the_source():
     assert edges[110]["trailing-letter"] == ("500.000x", "error:3")
     assert "max" not in edges[110]             # no documented maximum for a float setting
     assert all({"min", "min-1", "fraction", "not-a-number"} <= set(e) for e in edges.values())
+    # 8-bit storage, as the recorded firmware shows it: $0=259 stores 3, $26 tops out at 255
+    # and $26=65535 reads back 255; floats in single precision ($11=99999.9 shows 99999.904)
+    assert edges[0]["wrap"] == ("259", "$0=3")
+    assert edges[26]["max"] == ("255", "$26=255") and edges[26]["max+1"] == ("256", "$26=0")
+    assert edges[26]["uint16-max"] == ("65535", "$26=255")
+    assert edges[11]["single-precision"] == ("99999.9", "$11=99999.904")
+    assert edges[30]["single-precision"] == ("99999.9", "$30=100000")
     checks = {c.id for c in generate(G, V.id)}
     assert f"{V.id}/setting_codes/setting/0/min-1" in checks

@@ -187,3 +187,36 @@ def test_the_halt_counts_only_answers_to_its_own_lines():
     dead.send(b"G4 P300\n")
     dead.send(b"M112\n")
     assert halt(dead, attempts=1).startswith("stop NOT acknowledged")
+
+
+def test_heating_checks_wait_for_a_sane_temperature():
+    """Right after a reset the firmware reads T:0.00 for a while (recorded on the native
+    build): the heating check asks M105 again until the reading is sane and only then heats;
+    a sensor that never reads sane gets no M109 at all."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.marlin.conformance.checks import run_checks
+    from conform.families.marlin.unit.unit import MarlinUnit
+
+    spec = family("marlin").load_tables()
+
+    class ColdSensor(MarlinUnit):
+        until = 2.0
+
+        def _temps_line(self) -> str:
+            line = super()._temps_line()
+            return line.replace("T:25.00", "T:0.00") if self.now < self.until else line
+
+    def grade(until):
+        ColdSensor.until = until
+        target = EmuTarget(lambda: ColdSensor(spec.variant("marlin-2.1"), spec), "emu:cold")
+        run = run_checks(target, "marlin-2.1", patterns=["*/heat/m109-residency"])
+        sent = b"".join(e.data for c in run.checks for e in c.log if e.dir == "tx")
+        return run.checks[0], sent
+
+    check, sent = grade(2.0)
+    assert check.grade is Grade.PASS and sent.count(b"M105") >= 3
+    assert sent.index(b"M109") > sent.rindex(b"M105\n", 0, sent.index(b"M109"))
+    check, sent = grade(1e9)
+    assert check.grade is Grade.FAIL and "no sane temperature" in check.actual
+    assert b"M109" not in sent

@@ -134,8 +134,10 @@ def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool)
 
     RECORDING is an MCAP capture of a session with real firmware (`conform proxy -o`) or a
     text transcript (`SECONDS > LINE` for the host, `SECONDS < LINE` for the unit; see
-    docs/architecture.md). Exit 0 when every recorded answer line is matched, 1 when they
-    differ: the differences are listed with the host line they followed.
+    docs/architecture.md). The host's writes are played as the recorded sender paced them
+    (after the answers it waited for); a transcript's lines get the family's line ending.
+    Exit 0 when every recorded answer line is matched, 1 when they differ: the differences
+    are listed with the host line they followed; 2 for a recording of another family.
 
     \b
     Examples:

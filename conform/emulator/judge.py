@@ -241,6 +241,32 @@ def pacing(transcript: Transcript, is_answer: Callable[[str], bool] = _every_lin
     return paces
 
 
+def _follower(transcript: Transcript, follow: Callable[[Any, str], None] | None, unit: Any
+              ) -> Callable[[Event], None]:
+    """A function that, given host write ``e``, shows ``follow`` the recorded answer lines
+    before the next host write (those not shown yet)."""
+    if follow is None:
+        return lambda e: None
+    reader = _Lines()
+    after: dict[int, list[str]] = {}
+    current = -1
+    for e in transcript.events:
+        if e.host:
+            current += 1
+        else:
+            after.setdefault(current, []).extend(x for _, x in reader.feed(e.t, e.data))
+    index = {id(e): i for i, e in enumerate(transcript.host_events)}
+    pending = after.get(-1, [])
+
+    def show(e: Event) -> None:
+        nonlocal pending
+        for line in pending + after.get(index[id(e)], []):
+            follow(unit, line.rstrip("\r\n"))
+        pending = []
+
+    return show
+
+
 class _Player:
     """The reference unit driven through a recording's host writes, its answer lines counted
     as they come."""
@@ -280,8 +306,8 @@ class _Player:
 
 
 def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
-         is_answer: Callable[[str], bool] = _every_line, played: list[float] | None = None
-         ) -> list[tuple[float, bytes]]:
+         is_answer: Callable[[str], bool] = _every_line, played: list[float] | None = None,
+         follow: Callable[[Any, str], None] | None = None) -> list[tuple[float, bytes]]:
     """Every host write played into ``unit`` as the recorded sender paced it; what the unit
     wrote, with times (``played``, when given, gets the time each host write was played).
 
@@ -291,17 +317,23 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
     ``WAIT_EXTRA``, and never sooner after the previous write than in the recording (a
     reference that answers faster than the recorded link does not move the host's writes
     earlier against what the unit is doing); a write that came before any answer keeps its
-    recorded delay after the previous write. A reference that answers a line the firmware did not, or not at all,
-    shifts the count once (a timeout resets it), so one difference stays one difference.
+    recorded delay after the previous write. A reference that answers a line the firmware
+    did not, or not at all, shifts the count once (a timeout resets it), so one difference
+    stays one difference.
 
     What the unit says before the first host event (its banner) is dropped when the recording
-    starts with the host: the recording joined a unit that was already running."""
+    starts with the host: the recording joined a unit that was already running.
+
+    ``follow`` (the family's ``judge_follow``) is shown the recorded answer lines up to the
+    next host write before each write is played."""
     hosts = transcript.host_events
+    shown = _follower(transcript, follow, unit)
     player = _Player(unit, is_answer)
     if transcript.events[0].host:       # the recording joined a running unit: no banner
         player.until(hosts[0].t)
         player.out.clear()
         player.reader = _Lines()
+        player.owed, player.answer_t = 0, 0.0
     t_prev, rec_prev = 0.0, 0.0
     slack = 0           # lines the reference owes beyond the recording, after a timeout
     for pace, e in zip(pacing(transcript, is_answer), hosts, strict=True):
@@ -319,6 +351,7 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
             t = t_prev + pace.since
         player.until(t)
         t = max(t, player.unit.now)
+        shown(e)
         player.write(e.data, t)
         if played is not None:
             played.append(t)
@@ -452,9 +485,10 @@ def compare(transcript: Transcript, reference_out: Iterable[tuple[float, bytes]]
 
 def judge(transcript: Transcript, unit: Any, mask: Callable[[str], str], variant: str,
           settle: float = SETTLE, *, is_answer: Callable[[str], bool] = _every_line,
-          near: Callable[[str, str], bool] | None = None) -> Verdict:
+          near: Callable[[str, str], bool] | None = None,
+          follow: Callable[[Any, str], None] | None = None) -> Verdict:
     played: list[float] = []
-    out = play(unit, transcript, settle, is_answer, played)
+    out = play(unit, transcript, settle, is_answer, played, follow)
     return compare(transcript, out, mask, variant, near, played)
 
 
@@ -487,8 +521,9 @@ def judge_recording(transcript: Transcript, fam: Any, variant: str,
     if why is not None:
         raise UserError(f"{transcript.source}: {why}, not {variant}")
     transcript = with_line_ending(transcript, fam.line_ending)
-    return judge(transcript, fam.make_unit(variant), fam.judge_mask(variant), variant, settle,
-                 is_answer=fam.judge_answers(variant), near=fam.judge_near(variant))
+    return judge(transcript, fam.judge_unit(variant), fam.judge_mask(variant), variant, settle,
+                 is_answer=fam.judge_answers(variant), near=fam.judge_near(variant),
+                 follow=fam.judge_follow(variant))
 
 
 def _shown(line: str, width: int = 100) -> str:

@@ -195,6 +195,20 @@ class Family:
         paces a recording's host writes by them. The default: every line does."""
         return _every_line
 
+    def judge_unit(self, variant: str) -> Any:
+        """The reference unit ``conform emulate judge`` plays a recording into: by default
+        ``make_unit(variant)``; a family whose recordings come from firmware in a stated
+        setting (a simulator with no switches wired, say) gives its unit that setting."""
+        return self.make_unit(variant)
+
+    def judge_follow(self, variant: str) -> Callable[[Any, str], None] | None:
+        """None (the default), or a function the judge calls with the reference unit and each
+        recorded answer line (without its ending), in order, before it plays the host write
+        the line answered: the family may then put the reference where the recorded unit was
+        after an artefact it states (a place reached by a simulator's own timing), so that
+        what follows is judged from the same place. Everything else stays judged."""
+        return None
+
     def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
         """Two answer lines (after ``judge_mask``) that differ but are the same within what
         the family states may differ between two runs (e.g. positions reported while the

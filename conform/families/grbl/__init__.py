@@ -42,10 +42,16 @@ class GrblFamily(Family):
 
         return is_answer
 
-    def judge_mask(self, variant: str) -> Callable[[str], str]:
-        from conform.families.grbl.emulate_judge import mask
+    def judge_unit(self, variant: str) -> Any:
+        """The recordings (shared/recordings/grbl-1.1f) come from grbl-sim, whose input pins
+        read high: no limit switch ever closes, so its ``$H`` seeks on and fails. The unit
+        judged is given the same setting (``switches=False``)."""
+        return self.make_unit(variant, switches=False)
 
-        return mask
+    def judge_follow(self, variant: str) -> Callable[[Any, str], None] | None:
+        from conform.families.grbl.emulate_judge import Follow
+
+        return Follow()
 
     def judge_near(self, variant: str) -> Callable[[str, str], bool] | None:
         from conform.families.grbl.emulate_judge import near

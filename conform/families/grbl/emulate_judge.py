@@ -2,9 +2,10 @@
 
 The engine (conform/emulator/judge.py) plays the recording's host writes into the reference
 unit and compares the answer lines; grbl tells it which lines close an answer (``ok`` and
-``error:N``, what a streaming sender counts), what may differ between two runs of the same
-build (:func:`mask`), and which lines are the same within the motion model's tolerance
-(:func:`near`: status reports while the machine moves).
+``error:N``, what a streaming sender counts), which lines are the same within the motion
+model's tolerance (:func:`near`: status reports while the machine moves) and where to place
+the reference after a moment-dependent stop (:class:`Follow`). grbl prints nothing that
+differs between two runs of one build at rest, so no line is masked.
 """
 
 from __future__ import annotations
@@ -25,15 +26,64 @@ def is_answer(line: str) -> bool:
     return _ANSWER.match(line) is not None
 
 
-def mask(line: str) -> str:
-    """grbl prints nothing that differs from one run of a build to the next at rest: the line
-    is compared whole."""
-    return line
+class Follow:
+    """Where the recording's state is given to the reference (``Family.judge_follow``): places
+    a machine reached by the moment something happened rather than by the model.
+
+    - A homing cycle cut by a reset (``ALARM:6``) leaves the machine wherever the cycle had
+      got to. In the recordings that is where grbl-sim's switchless seek travelled by the
+      simulator's own clock (its input pins read high: the recordings' README names this
+      artefact), which no model of a machine reproduces; the reference is put where the first
+      status report after the alarm shows the recorded machine.
+    - A reset during motion (``ALARM:3``) and a feed hold (``Hold:0``, ``Door:0``) stop a
+      moving machine where it was at that moment: positions while moving depend on the
+      timing (README), so the reference, when it stands within the motion model's stated
+      tolerance of the recorded machine (planner.TIMING_TOLERANCE at the fastest axis' rate),
+      is put exactly there; farther away, it is left where it is and the difference shows.
+
+    The status reports themselves, and everything after, are still compared."""
+
+    def __init__(self) -> None:
+        self.homing_cut = False
+        self.stopped = False
+
+    def __call__(self, unit: object, line: str) -> None:
+        if line == "ALARM:6":
+            self.homing_cut = True
+            return
+        if line == "ALARM:3":
+            self.stopped = True
+            return
+        got = _fields(line + "\r\n")
+        if got is None or "MPos" not in got[1]:
+            return
+        held = got[0] in ("Hold:0", "Door:0")
+        if not (self.homing_cut or self.stopped or held):
+            return
+        free = self.homing_cut
+        self.homing_cut = self.stopped = False
+        try:
+            where = [float(x) for x in got[1]["MPos"].split(",")]
+        except ValueError:
+            return
+        place = getattr(unit, "place", None)
+        if place is None:
+            return
+        if not free:
+            settings = getattr(unit, "settings", {})
+            rate = max((settings.get(110 + i, 0.0) for i in range(3)), default=0.0) / 60.0
+            now = getattr(unit, "position", where)
+            if len(now) != len(where) or any(
+                    abs(a - b) > rate * TIMING_TOLERANCE + 0.001 for a, b in zip(
+                        now, where, strict=True)):
+                return
+        place(where)
 
 
 def _fields(line: str) -> tuple[str, dict[str, str]] | None:
+    """A status report's state and its fields by name; None for any other line."""
     m = _STATUS.match(line)
-    if m is None or m[3] != _STATUS.match(line)[3]:
+    if m is None:
         return None
     fields = {}
     for part in m[2].split("|"):

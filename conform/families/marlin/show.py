@@ -22,7 +22,8 @@ def rows(variant: str, part: str) -> tuple[str, tuple[str, ...], list[tuple[str,
     v = spec.variant(variant)
     if part == "":
         fields = ("firmware", "baud", "bufsize", "max_cmd_size", "rx_buffer", "block_buffer",
-                  "keepalive", "extruders", "steps_per_mm", "max_feedrate")
+                  "keepalive", "extruders", "steps_per_mm", "max_feedrate", "first_home_ms",
+                  "motion_time_pct")
         return (f"{v.title} ({v.id})", ("field", "value", "source"),
                 [(f, str(getattr(v, f)), v.cite.get(f, "")) for f in fields])
     if part == "commands":

@@ -236,9 +236,10 @@ def _edge(number: int, send: str, want: str, setup: Sequence[bytes]) -> Callable
 def setting_edges(st: Setting) -> list[tuple[str, str, str]]:
     """(edge, value sent, what grbl answers) at every documented edge of one setting, from
     its table row: lo, lo - 1 (``below`` or 4 when negative), hi and hi + 1 for the integer
-    kinds (kept as a truncated uint8_t, settings.c), a fraction (truncated, or kept to
-    ``decimals`` places), a value with a stray letter after it (error:3, system.c) and no
-    number at all (error:2, read_float)."""
+    kinds (kept as a truncated uint8_t, settings.c), 259 and 65535 (wrapped to 8 bits), for a
+    float 99999.9 (stored in single precision: 99999.904 in ``$$``), a fraction (truncated,
+    or kept to ``decimals`` places), a value with a stray letter after it (error:3, system.c)
+    and no number at all (error:2, read_float)."""
     def expect(value: float) -> str:
         if value < 0:
             return "error:4"
@@ -252,6 +253,10 @@ def setting_edges(st: Setting) -> list[tuple[str, str, str]]:
     out = [("min", text(st.lo), expect(st.lo)), ("min-1", text(st.lo - 1), expect(st.lo - 1))]
     if st.type != "float":          # a float setting has no documented maximum
         out += [("max", text(st.hi), expect(st.hi)), ("max+1", text(st.hi + 1), expect(st.hi + 1))]
+        # past 8 bits the value wraps (recorded: $0=259 stores 3, $26=65535 stores 255)
+        out += [("wrap", "259", expect(259)), ("uint16-max", "65535", expect(65535))]
+    else:                           # kept in single precision, printed as printFloat rounds
+        out += [("single-precision", "99999.9", expect(99999.9))]
     frac = st.lo + 1.75
     out += [("fraction", f"{frac:.2f}", expect(frac)),
             ("trailing-letter", f"{text(st.default)}x", "error:3"),

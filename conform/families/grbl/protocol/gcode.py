@@ -75,8 +75,12 @@ class Modal:
         w[2] += self.tlo
         return w
 
-    def gc_line(self) -> str:
-        """The ``[GC:...]`` body (report.c report_gcode_modes)."""
+    def gc_line(self, inches: bool = False) -> str:
+        """The ``[GC:...]`` body (report.c report_gcode_modes). The feed is printed as stored
+        (mm/min after G20 G94, inverse time as given after G93) and converted only by $13
+        (printFloat_RateValue), so the recorded firmware shows ``F250`` for G20 G93 F250."""
+        from conform.families.grbl.spec.load import print_float
+
         parts = [f"G{self.motion}", f"G{54 + self.coord}", f"G{self.plane}", f"G{self.units}",
                  f"G{self.distance}", f"G{self.feed_mode}"]
         if self.program is not None:
@@ -86,8 +90,8 @@ class Modal:
             parts.extend(f"M{c}" for c in sorted(self.coolant))
         else:
             parts.append("M9")
-        feed = self.feed / MM_PER_INCH if self.units == "20" else self.feed
-        parts += [f"T{self.tool}", f"F{feed:.0f}", f"S{self.speed:.0f}"]
+        feed = print_float(self.feed / MM_PER_INCH, 1) if inches else print_float(self.feed, 0)
+        parts += [f"T{self.tool}", f"F{feed}", f"S{print_float(self.speed, 0)}"]
         return " ".join(parts)
 
 
@@ -109,6 +113,7 @@ class Block:
     program_end: bool = False
     pause: bool = False
     coord_write: bool = False
+    wco: bool = False      # G92, G92.1, G10 on the active system: the WCO: refresh is forced
 
 
 class GcodeError(Exception):
@@ -387,6 +392,7 @@ def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, f
                     position[k] - state.g92[k] - v - (state.tlo if k == 2 else 0.0))
         new.coords[idx] = row
         block.sync = block.coord_write = True
+        block.wco = idx == new.coord           # gcode.c [19]: only the active system
     elif nonmodal == "92":
         if not axis_words:
             raise _fail(26)
@@ -394,7 +400,7 @@ def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, f
             if a in axis_words:
                 new.g92[k] = position[k] - block_coords[k] - axis_words[a] * scale - (
                     state.tlo if k == 2 else 0.0)
-        block.sync = True
+        block.sync = block.wco = True
     else:
         if axis_command != "tlo" and axis_words:
             target = _target(axis_words, new, state, position, scale, nonmodal == "53")
@@ -412,7 +418,7 @@ def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, f
             block.sync = block.coord_write = True
         elif nonmodal == "92.1":
             new.g92 = [0.0] * 3
-            block.sync = True
+            block.sync = block.wco = True
         elif nonmodal == "53" and motion not in ("0", "1"):
             raise _fail(30)
     # [20] motion modes
@@ -464,6 +470,9 @@ def _check(groups: dict[str, str], m_groups: dict[str, int], values: dict[str, f
     if "coolant" in m_groups:
         c = m_groups["coolant"]
         new.coolant = frozenset() if c == 9 else new.coolant | {c}
+    if new.spindle != state.spindle or new.coolant != state.coolant or (
+            new.speed != state.speed and state.spindle != 5):
+        block.sync = True                      # spindle_sync / coolant_sync wait for motion
     prog = m_groups.get("program")
     if prog is not None and prog != 1:         # M1 (optional stop) is ignored
         block.sync = True

@@ -6,7 +6,9 @@ new grbl variant or a corrected code is a data change that either loads or says 
 
 from __future__ import annotations
 
+import math
 import re
+import struct
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -34,6 +36,41 @@ class Code:
     setup: tuple[bytes, ...] = ()
 
 
+def f32(x: float) -> float:
+    """``x`` rounded to a C ``float`` (grbl keeps settings and coordinates in single
+    precision)."""
+    try:
+        return float(struct.unpack("<f", struct.pack("<f", x))[0])
+    except OverflowError:
+        return math.copysign(math.inf, x)
+
+
+def print_float(x: float, decimals: int) -> str:
+    """print.c printFloat: the value scaled by 100 (then 10) in single precision, 0.5 added,
+    truncated to an integer and its digits printed with the point put back: so 99999.9
+    (stored as 99999.898) prints 99999.904 where a correct rounding gives 99999.900. The
+    integer is a 32-bit one: what does not fit keeps its low 32 bits (x86's conversion of a
+    float past a 64-bit long gives 0 there)."""
+    n = f32(x)
+    sign = "-" if n < 0 else ""
+    n = -n if n < 0 else n
+    d = decimals
+    while d >= 2:
+        n = f32(n * 100)
+        d -= 2
+    if d:
+        n = f32(n * 10)
+    n = f32(n + 0.5)
+    a = int(n) & 0xFFFFFFFF if math.isfinite(n) and n < 2.0 ** 63 else 0   # (long)n
+    digits = str(a) if a else ""
+    digits = digits.rjust(decimals, "0")
+    if len(digits) == decimals:
+        digits = "0" + digits
+    if not decimals:
+        return sign + digits
+    return f"{sign}{digits[:-decimals]}.{digits[-decimals:]}"
+
+
 @dataclass(frozen=True)
 class Setting:
     """One ``$x`` setting (per-axis settings are expanded: $100, $101, $102 ...)."""
@@ -50,17 +87,19 @@ class Setting:
     bits: int = 8
     below: int = 4      # the error for a value below ``lo`` (a negative one is always 4)
     needs: tuple[int, ...] = ()   # settings that must be 1 for a non-zero value ($20: $22)
+    clears: tuple[int, ...] = ()  # settings a zero value turns off too ($22=0: $20)
 
     def text(self, value: float) -> str:
-        """The value as ``$$`` prints it."""
+        """The value as ``$$`` prints it (a float as print.c printFloat rounds it)."""
         if self.type == "float":
-            return f"{value:.{self.decimals}f}"
+            return print_float(value, self.decimals)
         return str(int(value))
 
     def coerce(self, value: float) -> float:
-        """What grbl stores for ``value`` (integers truncated, booleans 0/1)."""
+        """What grbl stores for ``value`` (floats in single precision, integers truncated,
+        booleans 0/1)."""
         if self.type == "float":
-            return float(value)
+            return f32(value)
         n = int(value) & 0xFF if self.bits <= 8 else int(value)   # settings.c: uint8 int_value
         if self.type == "bool":
             return 1 if n else 0
@@ -195,7 +234,8 @@ def _setting(rows: Rows, row: str, number: int, d: dict[str, Any], prefix: str =
                    kind, float(lo), float(hi), float(default), rows.get(row, d, "cite", str),
                    int(rows.get(row, d, "decimals", int, 3)), int(rows.get(row, d, "bits", int, 8)),
                    int(rows.get(row, d, "below", int, 4)),
-                   tuple(int(x) for x in rows.get(row, d, "needs", list, [])))
+                   tuple(int(x) for x in rows.get(row, d, "needs", list, [])),
+                   tuple(int(x) for x in rows.get(row, d, "clears", list, [])))
 
 
 def _settings(rows: Rows, data: dict[str, Any], axes: tuple[str, ...]) -> dict[int, Setting]:

@@ -38,7 +38,8 @@ class GrblUnit:
 
     def __init__(self, variant: Variant, spec: GrblSpec | None = None, *, t0: float = 0.0,
                  line_time: float = 0.0005, report_delay: float = 0.002,
-                 settings: dict[int, float] | None = None, truth: bool = False) -> None:
+                 settings: dict[int, float] | None = None, truth: bool = False,
+                 switches: bool = True) -> None:
         self.v = variant
         self.spec = spec or load_grbl()
         self.line_time = line_time
@@ -56,6 +57,7 @@ class GrblUnit:
         self.lines_done = 0
         self.pins: set[str] = set()         # input pins triggered (:mod:`.inputs`): P X Y Z D
         self.door_open = False
+        self.switches = switches            # False: no limit switch ever closes ($H seeks on)
         # ground truth (``truth=True``, for check-sender): [line as the parser took it, answer]
         self.taken: list[list[Any]] | None = [] if truth else None
         self._n_coded = 0
@@ -139,8 +141,10 @@ class GrblUnit:
         return best
 
     def _ready_to_parse(self) -> bool:
+        # protocol_exec_rt_suspend: while held (feed hold, M0, door) the main loop reads no line
         return (bool(self.rx) and self._pending is None and self._busy is None
-                and self._busy_until is None and not self._critical and self.state != "Sleep")
+                and self._busy_until is None and not self._critical
+                and self.state not in ("Sleep", "Hold", "Door"))
 
     def _step(self, t: float) -> None:
         if self._report_at is not None and self._report_at <= t:
@@ -270,7 +274,7 @@ class GrblUnit:
             self._soft_limit(t)
             return
         if self.state == "Check":
-            self.modal = block.modal
+            self._take_modal(block)
             if block.target is not None:
                 self._check_pos = list(block.target)
             if block.program_end:
@@ -308,7 +312,7 @@ class GrblUnit:
                 return
             self._pending = None
             if not jog:
-                self.modal = block.modal
+                self._take_modal(block)
             self._plan(block, t, jog)
             self._finish(t, 0, startup)
             return
@@ -316,7 +320,7 @@ class GrblUnit:
         if pl.blocks or self.state in ("Hold", "Door"):
             return
         self._pending = None
-        self.modal = block.modal
+        self._take_modal(block)
         if block.kind == "dwell":
             self._busy_until = t + block.dwell
             self._busy = ("dwell", startup)
@@ -340,8 +344,48 @@ class GrblUnit:
         if block.program_end:
             self._program_end(t)
         if block.pause:
+            # gcode.c M0: a feed hold, then protocol_execute_realtime suspends the parser inside
+            # this line: its ok comes after the cycle start ('~')
             self.state, self.hold_sub = "Hold", 0
+            self._busy = ("pause", startup)
+            return
         self._finish(t, 0, startup)
+
+    def _take_modal(self, block: Block) -> None:
+        """The parser state after ``block`` (gcode.c STEP 4). An offset change forces WCO:
+        into the next status report (system_flag_wco_change: G92, G92.1, G10 on the active
+        system, a new coordinate system, a new tool length offset); a spindle or coolant
+        change (spindle_set_state, coolant_set_state) forces Ov:, except in check mode."""
+        old, new = self.modal, block.modal
+        self.modal = new
+        if block.wco or new.coord != old.coord or new.tlo != old.tlo:
+            self._wco_counter = 0
+        if self.state == "Check":
+            return
+        if new.spindle != old.spindle or (new.speed != old.speed and old.spindle != 5):
+            self._spindle_sync()
+        if new.coolant != old.coolant:
+            self._ovr_counter = 0
+
+    def _spindle_sync(self) -> None:
+        """spindle_set_state: the speed the status report shows (spindle_compute_pwm_value:
+        the programmed speed times the override, $30 at most, $31 at least unless 0), and Ov:
+        forced into the next report."""
+        self.spindle_rpm = self._spindle_speed()
+        self._ovr_counter = 0
+
+    def _spindle_speed(self) -> float:
+        m = self.modal
+        if m.spindle not in (3, 4) or self.spindle_stopped:
+            return 0.0
+        self._spindle_update = False
+        rpm = m.speed * self.ov_spindle / 100.0
+        top, bottom = self.settings[30], self.settings[31]
+        if bottom >= top or rpm >= top:
+            return top
+        if rpm <= bottom:
+            return 0.0 if rpm == 0 else bottom
+        return rpm
 
     def _finish(self, t: float, code: int, startup: str | None) -> None:
         if startup is not None:
@@ -352,7 +396,7 @@ class GrblUnit:
     def _finish_busy(self, t: float) -> None:
         what = self._busy
         self._busy = None
-        if what and what[0] == "dwell":
+        if what and what[0] in ("dwell", "pause"):
             self._finish(t, 0, what[1])
         elif what and what[0] == "home":
             self.planner.clear([-self.settings[27]] * 3)
@@ -400,10 +444,45 @@ class GrblUnit:
             return
         pl.start_head(t, self._carry_speed)
         self._carry_speed = 0.0
+        if self._spindle_update:
+            self.spindle_rpm = self._spindle_speed()
         self.state = "Jog" if pl.blocks[0].kind == "jog" else "Run"
+
+    def _homing_failed(self, t: float, code: int) -> None:
+        """limits.c: a homing cycle that finds no switch: ALARM:code, the ``$H`` line answered
+        ok (after the alarm's half second), then grbl resets into Alarm."""
+        self._hard_stop(t)
+        self.state = "Alarm"
+        self._alarm(t, code)
+        self._finish(max(t, self._quiet_until), 0, None)
+        self._reset(t)
+
+    def place(self, position: list[float]) -> None:
+        """Put a machine that stands still at ``position`` (mm): a judge following a recording
+        starts the unit from where the recorded one stood. In a hold, the machine keeps the
+        rest of its way: standing short of where it was going, that rest is one block still
+        queued (as grbl's is when its hold ends inside the block)."""
+        pl = self.planner
+        where = [float(x) for x in position]
+        if pl.running:
+            return
+        if pl.blocks:
+            head = pl.blocks[0]
+            along = sum((w - s) * u for w, s, u in zip(where, head.start, head.unit, strict=True))
+            head.s_done = min(max(along, 0.0), head.length)
+            return
+        end = list(pl.position)
+        rest = pl.make(where, end, None, "line") if self.state in ("Hold", "Door") else None
+        pl.clear(where)
+        if rest is not None:
+            pl.push(rest)
+        self._check_pos = list(pl.position)
 
     def _block_done(self, t: float) -> None:
         pl = self.planner
+        if pl.blocks and pl.blocks[0].kind == "homeseek":
+            self._homing_failed(pl.blocks[0].t0 + pl.blocks[0].duration, 9)
+            return
         if pl.holding:
             # the hold's deceleration ended: stand still (Hold:0) until '~'
             self.hold_sub = 0
@@ -459,6 +538,9 @@ class GrblUnit:
         m.spindle, m.coolant, m.program = 5, frozenset(), None
         if self.v.option("RESTORE_OVERRIDES_AFTER_PROGRAM_END"):
             self.ov_feed = self.ov_rapid = self.ov_spindle = 100
+        if self.state != "Check":   # the WCO: refresh "just in case", spindle and coolant off
+            self._wco_counter = 0
+            self._spindle_sync()
         self._say(t, rp.MSG["pgm_end"])
 
     # ============================================================ realtime bytes
@@ -477,7 +559,10 @@ class GrblUnit:
             self._feed_hold(t, "Door")
         elif effect == "resume":
             if self.state in ("Hold", "Door") and self.hold_sub == 0 and not self.door_open:
+                self._restore_spindle(t)
                 self.state = "Idle"
+                if self._busy and self._busy[0] == "pause":
+                    self._finish_busy(t)
                 if self.planner.blocks:
                     self.planner.resume(t)
                     self.state = "Jog" if self.planner.blocks[0].kind == "jog" else "Run"
@@ -485,14 +570,26 @@ class GrblUnit:
             if self.state == "Jog":
                 self._cancel_jog(t)
         elif effect == "spindle-stop":
-            if self.state == "Hold":
-                self.spindle_stopped = not self.spindle_stopped
+            # protocol.c: only in Hold; stops a running spindle (spindle_set_state, FS:...,0),
+            # a second one restores it
+            if self.state == "Hold" and self.spindle_stopped:
+                self._restore_spindle(t)
+            elif self.state == "Hold" and self.modal.spindle in (3, 4):
+                self.spindle_stopped = True
+                self._spindle_sync()
         elif effect.startswith(("feed", "rapid", "spindle=", "spindle+", "spindle-")):
             self._override(effect)
         elif effect == "flood" and self.state in ("Idle", "Run", "Hold"):
             m = self.modal
             m.coolant = m.coolant - {8} if 8 in m.coolant else m.coolant | {8}
             self._ovr_counter = 0
+
+    def _restore_spindle(self, t: float) -> None:
+        """protocol_exec_rt_suspend: a spindle stopped in the hold is restarted, said first."""
+        if self.spindle_stopped:
+            self.spindle_stopped = False
+            self._say(t, rp.MSG["spindle_restore"])
+            self._spindle_sync()
 
     def _feed_hold(self, t: float, to: str) -> None:
         if self.state == "Jog" and to == "Hold":
@@ -524,14 +621,21 @@ class GrblUnit:
         self._jog_cancel = True
 
     def _override(self, effect: str) -> None:
+        """protocol.c: Ov: is forced into the next report only when a value changes; a new
+        spindle override reaches the speed shown (FS:) when motion next runs (the stepper's
+        STEP_CONTROL_UPDATE_SPINDLE_PWM), not while idle."""
         lims = self.spec.overrides
+        before = (self.ov_feed, self.ov_rapid, self.ov_spindle)
         if effect.startswith("feed"):
             self.ov_feed = self._ov(self.ov_feed, effect[4:], lims["feed"])
         elif effect.startswith("rapid"):
             self.ov_rapid = int(effect.split("=")[1])
         else:
             self.ov_spindle = self._ov(self.ov_spindle, effect[7:], lims["spindle"])
-        self._ovr_counter = 0
+            if self.ov_spindle != before[2]:
+                self._spindle_update = True
+        if (self.ov_feed, self.ov_rapid, self.ov_spindle) != before:
+            self._ovr_counter = 0
 
     @staticmethod
     def _ov(value: int, op: str, lim: dict[str, int]) -> int:
@@ -557,7 +661,7 @@ class GrblUnit:
             # before protocol_main_loop exits to print the banner (protocol.c, main.c)
             busy = self._busy
             startup = (self._pending[3] if self._pending is not None else
-                       busy[1] if busy and busy[0] in ("dwell", "probe") else None)
+                       busy[1] if busy and busy[0] in ("dwell", "probe", "pause") else None)
             self._finish(max(t, self._quiet_until), 0, startup)
         self._owed = False
         self._reset(t)
@@ -600,6 +704,8 @@ class GrblUnit:
         self.prb_ok = getattr(self, "prb_ok", False)
         self.ov_feed = self.ov_rapid = self.ov_spindle = 100
         self.spindle_stopped = False
+        self.spindle_rpm = 0.0            # sys.spindle_speed: what FS: shows
+        self._spindle_update = False      # a spindle override not yet applied
         self._wco_counter = self._ovr_counter = 0
         if self.state in ("Alarm", "Sleep") or (power_up and self.settings[22]):
             self.state = "Alarm"
@@ -623,8 +729,22 @@ class GrblUnit:
                 self._execute(block, t, startup=text)
 
     # ============================================================ status report
+    def _in_steps(self, pos: list[float]) -> list[float]:
+        """The position as grbl knows it: whole steps of each axis ($100-$102 steps/mm; the
+        planner's targets are lround(mm x steps/mm), system_convert_axis_steps_to_mpos)."""
+        out = []
+        for i, p in enumerate(pos):
+            per_mm = self.settings.get(100 + i, 0.0)
+            if per_mm <= 0:
+                out.append(p)
+                continue
+            steps = math.floor(abs(p) * per_mm + 0.5)
+            out.append(math.copysign(steps, p) / per_mm if steps else 0.0)
+        return out
+
     def _status_report(self, t: float) -> bytes:
         pos, v = self.planner.where(t)   # the machine's position (check mode moves nothing)
+        pos = self._in_steps(pos)
         inches = bool(self.settings[13])
         name = self.state
         if self.state in ("Hold", "Door"):
@@ -642,8 +762,7 @@ class GrblUnit:
         if mask & 2:
             parts.append(f"Bf:{self.planner.free},{self.rx_free}")
         feed = v * 60.0 / (25.4 if inches else 1.0)
-        spindle = m.speed * self.ov_spindle / 100.0 if m.spindle in (3, 4) else 0.0
-        parts.append(f"FS:{feed:.0f},{spindle:.0f}")
+        parts.append(f"FS:{feed:.0f},{self.spindle_rpm:.0f}")
         if self.pins:
             from conform.families.grbl.unit.inputs import pin_field
 
@@ -662,7 +781,8 @@ class GrblUnit:
         else:
             self._ovr_counter = (refresh["ovr_busy"] if busy else refresh["ovr_idle"]) - 1
             parts.append(f"Ov:{self.ov_feed},{self.ov_rapid},{self.ov_spindle}")
-            acc = ("S" if m.spindle == 3 else "C" if m.spindle == 4 else "") + (
+            on = m.spindle if not self.spindle_stopped else 5
+            acc = ("S" if on == 3 else "C" if on == 4 else "") + (
                 "F" if 8 in m.coolant else "") + ("M" if 7 in m.coolant else "")
             if acc:
                 parts.append("A:" + acc)

@@ -15,7 +15,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-TIMING_TOLERANCE = 0.2
+TIMING_TOLERANCE = 0.1
 """Seconds by which this model's timeline of a move may lead or lag the firmware's (its
 trapezoids against grbl's segment generator, and the moment a status report is taken): a
 position reported while moving is right within the distance covered at the reported feed in

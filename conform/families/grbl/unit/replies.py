@@ -16,6 +16,7 @@ MSG = {
     "pgm_end": "[MSG:Pgm End]",
     "restore": "[MSG:Restoring defaults]",
     "sleep": "[MSG:Sleeping]",
+    "spindle_restore": "[MSG:Restoring spindle]",
 }
 
 

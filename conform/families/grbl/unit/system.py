@@ -50,7 +50,7 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
             u._say(t, *rp.settings_lines(u.spec, u.settings))
             return 0
         if head == "G":
-            u._say(t, f"[GC:{u.modal.gc_line()}]")
+            u._say(t, f"[GC:{u.modal.gc_line(bool(u.settings[13]))}]")
             return 0
         if head == "C":
             if u.state == "Check":
@@ -89,6 +89,8 @@ def _run(u: GrblUnit, text: str, t: float) -> int | None:
         u._answer(t, 0)
         u._hard_stop(t)
         u.state = "Sleep"
+        u.modal.spindle, u.modal.coolant = 5, frozenset()   # protocol.c sleep: both off,
+        u._spindle_sync()                                     # Ov: forced (spindle_set_state)
         u._say(t, rp.MSG["sleep"])
         return None
     if head == "I":
@@ -155,7 +157,7 @@ def _setting(u: GrblUnit, rest: str) -> int:
 def store_setting(u: GrblUnit, number: int, value: float) -> int:
     """settings.c settings_store_global_setting: negative 4; an axis setting (100 and up) is
     100 + 10 * kind + axis, anything else there 3; $0 below 3 is 6 (on the truncated uint8
-    value); $20 without homing 10; an unknown number 3."""
+    value); $20 without homing 10; an unknown number 3; $22=0 turns $20 off too."""
     if value < 0:
         return 4
     setting = u.spec.settings.get(number)
@@ -173,6 +175,11 @@ def store_setting(u: GrblUnit, number: int, value: float) -> int:
         if as_uint8 and any(not u.settings[k] for k in setting.needs):
             return 10                       # $20 without homing (settings.c case 20)
     u.settings[number] = setting.coerce(value)
+    if not u.settings[number]:
+        for other in setting.clears:        # settings.c case 22: homing off, soft limits off
+            u.settings[other] = 0
+    if number == 13:                        # settings.c case 13: system_flag_wco_change
+        u._wco_counter = 0
     _apply(u)
     return 0
 
@@ -204,6 +211,8 @@ def _home(u: GrblUnit, t: float) -> None:
     succeeds; the machine then stands at -pull-off on every axis (limits.c, positive homing
     direction by default).
     """
+    if not u.switches:
+        return _seek_without_switch(u, t)
     pos = u.planner.where(t)[0]
     seek = max(u.settings[25], 1e-6) / 60.0
     locate = max(u.settings[24], 1e-6) / 60.0
@@ -214,4 +223,32 @@ def _home(u: GrblUnit, t: float) -> None:
     u.state = "Home"
     u._busy_until = t + duration
     u._busy = ("home",)
+    return None
+
+
+HOMING_CYCLE_0 = (2,)   # config.h HOMING_CYCLE_0: Z first (then X and Y, cycle 1)
+SEARCH_SCALAR = 1.5     # config.h HOMING_AXIS_SEARCH_SCALAR
+
+
+def _seek_without_switch(u: GrblUnit, t: float) -> None:
+    """A unit whose limit switches never close (``switches=False``): limits.c limits_go_home
+    zeroes the first cycle's axes and seeks 1.5 times their travel toward the switch at the
+    seek rate; the switch is not found, so the seek's end is ALARM:9 (homing fail, approach).
+    A reset on the way is ALARM:6; either way the ``$H`` line is answered ok before the
+    banner, as a reset during homing is (protocol.c)."""
+    pos = list(u.planner.where(t)[0])
+    target = list(pos)
+    for axis in HOMING_CYCLE_0:
+        pos[axis] = 0.0
+        travel = SEARCH_SCALAR * u.settings[130 + axis]
+        target[axis] = -travel if int(u.settings[23]) & (1 << axis) else travel
+    u.planner.clear(pos)
+    move = u.planner.make(pos, target, max(u.settings[25], 1e-6) / 60.0, "homeseek")
+    u.state = "Home"
+    u._busy = ("home",)
+    if move is None:
+        u._homing_failed(t, 9)
+        return None
+    u.planner.push(move)
+    u.planner.start_head(t, 0.0)
     return None

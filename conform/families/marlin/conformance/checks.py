@@ -716,9 +716,9 @@ class MarlinRunner(Runner):
             return CheckResult(grade=Grade.SKIPPED, detail=f"heats: needs {HEATERS_ENV}=1",
                                **base)
         if check.kills and not self.target.emulated and check.id != self.killer:
-            return CheckResult(grade=Grade.SKIPPED, detail="halts the unit until a reset: on "
-                               f"a real unit only one such check runs, the last ({self.killer})",
-                               **base)
+            return CheckResult(grade=Grade.SKIPPED, detail="a reset after each M112 (it "
+                               "halts the unit; on a real unit only one such check runs, the "
+                               f"last: {self.killer})", **base)
         t0 = time.perf_counter()
         s = self.session
         try:

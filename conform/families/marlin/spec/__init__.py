@@ -22,7 +22,8 @@ KINDS = ("move", "dwell", "sync", "home", "report_temp", "report_pos", "firmware
          "autoreport_temp", "autoreport_pos", "line_no", "halt", "quickstop", "break_wait",
          "set_temp", "wait_temp", "set", "position", "eeprom", "host_prompt", "user_wait", "settings")
 _NUMBERS = ("baud", "bufsize", "max_cmd_size", "rx_buffer", "block_buffer", "keepalive",
-            "extruders", "temp_residency", "temp_bed_residency", "temp_window", "first_home_ms")
+            "extruders", "temp_residency", "temp_bed_residency", "temp_window", "first_home_ms",
+            "motion_time_pct")
 _TEXTS = ("title", "firmware", "machine_name", "uuid", "protocol_version", "source_url")
 
 
@@ -42,6 +43,7 @@ class Variant:
     temp_bed_residency: int
     temp_window: int
     first_home_ms: int
+    motion_time_pct: int
     steps_per_mm: tuple[float, ...]
     max_feedrate: tuple[float, ...]
     machine_name: str

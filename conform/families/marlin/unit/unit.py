@@ -47,8 +47,8 @@ BOOT = 0.1                    # s from reset to "start" (the simulator; a real A
 QUICKSTOP = 1.0               # planner.cpp Planner::quick_stop: cleaning_buffer_counter =
                               # TEMP_TIMER_FREQUENCY, and synchronize() waits it out: M410 takes
                               # 1 s (recorded: 1.01-1.03 s)
-FIRST_MOVE_DELAY = 0.125      # planner.h BLOCK_DELAY_FOR_1ST_MOVE (100 ms) before the stepper
-                              # takes the first block; recorded ~0.125 s on the native build
+FIRST_MOVE_DELAY = 0.1        # planner.h BLOCK_DELAY_FOR_1ST_MOVE (100 ms) before the stepper
+                              # takes the first block
 HOMING_BUMP = ((5.0, 2.0), (5.0, 2.0), (2.0, 4.0))   # Configuration_adv.h HOMING_BUMP_MM and
                               # HOMING_BUMP_DIVISOR: back off and approach again, slower
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d+)")
@@ -688,6 +688,7 @@ class MarlinUnit:
         accel = min([ACCEL] + [MAX_ACCEL[i] * dist / abs(delta[i]) for i in range(4) if delta[i]])
         ramp = speed * speed / accel
         duration = dist / speed + speed / accel if dist > ramp else 2 * math.sqrt(dist / accel)
+        duration *= self.v.motion_time_pct / 100.0     # the machine's own pace (the variant's)
         start = t
         if len(self.planner) >= self.v.planner_blocks:      # wait for a free block
             start = self.planner[0][0]
