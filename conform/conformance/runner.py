@@ -28,7 +28,9 @@ from conform.stops import interrupted_by
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
 # what an ERROR's detail starts with when the link, not the harness's logic, failed
-LINK_FAILURES = ("HarnessError", "LinkSilent", "LinkError", "PortGone", "OSError")
+LINK_FAILURES = ("HarnessError", "LinkSilent", "LinkError", "PortGone", "OSError",
+                 # the same said in words (a family that names no exception class)
+                 "could not be run: ", "the unit stopped answering: ", "the link failed: ")
 
 
 @dataclass
@@ -79,7 +81,7 @@ class Runner(ABC):
     @abstractmethod
     def run_check(self, check: Any) -> CheckResult:
         """Run and grade one check; failures of the link are ERRORs whose detail starts with
-        the exception's class name (``LINK_FAILURES``)."""
+        the exception's class name or its words (``LINK_FAILURES``)."""
 
     @abstractmethod
     def halt(self, after_silence: bool = False) -> str:
