@@ -236,7 +236,7 @@ def test_a_check_that_could_not_run_says_why_in_words():
     said = could_not(LinkSilent("/dev/ttyUSB0: no answer 5.0 s after J, the reset command"))
     assert said.startswith("the unit stopped answering: ") and "LinkSilent" not in said
     assert could_not(HarnessError("x")) == "could not be run: x"
-    from conform.conformance.runner import LINK_FAILURES   # still counted towards "link lost"
+    from conform.conformance.runner import LINK_FAILURES  # still counted towards "link lost"
 
     assert said.startswith(LINK_FAILURES) and could_not(HarnessError("x")).startswith(LINK_FAILURES)
 
