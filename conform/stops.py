@@ -73,6 +73,26 @@ class StopState:
 
 
 _state: StopState | None = None
+_early: list[int] = []   # stop signals that came before the handlers of stop_signals
+
+
+def keep_early_stops() -> None:
+    """Record, from the first import of the command line on, a stop signal the process would
+    otherwise lose: a background job (``conform proxy … &``) starts with SIGINT ignored, and a
+    ``kill -INT`` while the command is still loading would be dropped, leaving it running for
+    good. Only signals ignored at start are taken; :func:`early_stop` says what came."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig in STOP_SIGNALS:
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            signal.signal(sig, lambda signum, _frame: _early.append(signum))
+
+
+def early_stop() -> int | None:
+    """The first stop signal that came while the command was loading, if any (said once)."""
+    first = _early[0] if _early else None
+    _early.clear()
+    return first
 
 
 def current() -> StopState | None:

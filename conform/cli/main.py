@@ -107,11 +107,15 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> None:
-    from conform.stops import Stopped, exit_status, stop_signals
+    from conform.stops import Stopped, early_stop, exit_status, stop_signals
 
     args = sys.argv[1:] if argv is None else list(argv)
-    with stop_signals():   # SIGINT, SIGTERM, SIGHUP: the same safe stop in every command
+    with stop_signals() as state:   # SIGINT, SIGTERM, SIGHUP: the same safe stop everywhere
         try:  # obj["argv"]: the command line as given, for the reports' "how to run it again"
+            early = early_stop()
+            if early is not None:   # stopped while loading: nothing was started
+                state.signum = early
+                raise Stopped(early)
             cli.main(args=args, prog_name="conform", standalone_mode=False, obj={"argv": args})
             code = 0
         except click.exceptions.Abort as exc:   # click's wrapper of a KeyboardInterrupt

@@ -53,11 +53,10 @@ CheckT = TypeVar("CheckT", bound=Check)
 
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
-# what an ERROR's detail starts with when the link, not the harness's logic, failed: the
-# exception's class, or the words a family puts in its place (``could not be run`` is a
-# harness exchange that failed, as HarnessError is)
+# what an ERROR's detail starts with when the link, not the harness's logic, failed
 LINK_FAILURES = ("HarnessError", "LinkSilent", "LinkError", "PortGone", "OSError",
-                 "the unit stopped answering", "the link failed", "could not be run")
+                 # the same said in words (a family that names no exception class)
+                 "could not be run: ", "the unit stopped answering: ", "the link failed: ")
 
 
 @dataclass
@@ -108,7 +107,7 @@ class Runner(ABC, Generic[CheckT]):
     @abstractmethod
     def run_check(self, check: CheckT) -> CheckResult:
         """Run and grade one check; failures of the link are ERRORs whose detail starts with
-        the exception's class name (``LINK_FAILURES``)."""
+        the exception's class name or its words (``LINK_FAILURES``)."""
 
     @abstractmethod
     def halt(self, after_silence: bool = False) -> str:
