@@ -184,14 +184,37 @@ def _run(row: Row) -> Callable[[Session], Outcome]:
         try:
             r = Session(ref, s.spec, s.v)
             pair = Pair(s, r, lambda lines: lines)
-            if pair.linked:
-                pair.start()           # the reference where the target stands
-            else:
+            if not pair.linked:
                 r.fresh()              # both at power-up
-            return _compare(pair, row)
+                return _compare(pair, row)
+            pair.start()               # the reference where the target stands
+            try:
+                passed, expected, actual = _compare(pair, row)
+            finally:
+                left = _put_back(pair) if needs(row.steps)[1] else ""
+            return passed, expected, actual + left
         finally:
             ref.close()
     return run
+
+
+def _put_back(pair: Pair) -> str:
+    """A unit behind a link keeps what a row wrote to its EEPROM: the settings, the G54-G59
+    offsets (:meth:`.machine.Pair.put_back`), the startup lines and the build info go back
+    to what they were; a changed G28/G30 is said (storing it again would move the machine)."""
+    from conform.families.grbl.conformance.readback import read_eeprom
+
+    note = pair.put_back()
+    was, t = pair.known, pair.t
+    if was is None:
+        return note
+    now = read_eeprom(t)
+    for i, line in enumerate(was.startup):
+        if i < len(now.startup) and now.startup[i] != line:
+            t.talk(f"$N{i}={line}\n".encode())
+    if now.build_info != was.build_info:
+        t.talk(f"$I={was.build_info}\n".encode())
+    return note
 
 
 def _compare(pair: Pair, row: Row) -> Outcome:
