@@ -75,3 +75,52 @@ def test_flags_follow_what_the_lines_do():
                        "g91.1", "modal-words", "program-end-m2", "program-end-m30",
                        "soft-reset", "override-resets", "check-mode"}
     assert checks["g28.1"].motion and checks["g28.1"].eeprom
+
+
+@pytest.mark.slow
+def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_path):
+    """Against `conform emulate serve grbl-1.1f` standing off 0 with a G55 offset: a default
+    run does the 14 rows that write nothing and skips the rest; with the opt-ins every row
+    passes from where the machine stands, and the EEPROM a row wrote is put back."""
+    import json
+    import subprocess
+    import sys
+    import time
+
+    import serial
+
+    from tests import emulated
+
+    def run(name, *opts):
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path,
+                            "--variant", "grbl-1.1f", "--check", "*/from_state/*", *opts,
+                            "--report", str(tmp_path / name), "-q"],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+        doc = json.loads((tmp_path / name / "results.json").read_text())
+        return {c["id"].rsplit("/", 1)[1]: c["grade"] for c in doc["checks"]}
+
+    def eeprom(port):
+        port.write(b"$N\n$#\n")
+        time.sleep(0.5)
+        return [x for x in port.read(4000).decode().split("\r\n") if x.startswith(("$N", "[G5"))]
+
+    proc, path, _control = emulated.serve("serve", "grbl-1.1f", "--baud", "115200", "-q")
+    try:
+        with serial.Serial(path, 115200, timeout=0.2) as port:
+            port.write(b"G91G0X-1.5Y-0.5\nG10L2P2X-2\n$N1=G20\n")
+            said = [x.strip() for x in emulated.read_lines(port, 6)]
+            assert said.count("ok") == 3, said
+            time.sleep(1.0)
+            before = eeprom(port)
+        default = run("default")
+        assert sorted(g for g in default.values()) == ["PASS"] * 14 + ["SKIPPED"] * 13
+        opted = run("opt-in", "--allow-motion", "--max-steps", "100000", "--allow-eeprom")
+        assert set(opted.values()) == {"PASS"}, opted
+        with serial.Serial(path, 115200, timeout=0.2) as port:
+            port.write(b"\x18")
+            time.sleep(0.3)
+            port.read(1000)
+            assert eeprom(port) == before
+    finally:
+        emulated.stop(proc)
