@@ -1,4 +1,4 @@
-"""grbl mutants: the reference unit with one firmware bug each (issue: 15 bug classes, one per
+"""grbl mutants: the reference unit with one firmware bug each (15 bug classes, one per
 fact the real firmware showed, plus a setting range widened at its documented minimum).
 Every one must be killed by the check meant for it, not merely by some check."""
 
