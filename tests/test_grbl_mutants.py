@@ -1,5 +1,6 @@
 """grbl mutants: the reference unit with one firmware bug each (15 bug classes, one per
-fact the real firmware showed, plus a setting range widened at its documented minimum).
+fact the real firmware showed, a setting range widened at its documented minimum, and the
+bugs seen only from a non-default state: a neighbouring command's effect, a reset that keeps).
 Every one must be killed by the check meant for it, not merely by some check."""
 
 from __future__ import annotations

@@ -172,6 +172,15 @@ ROWS: tuple[Row, ...] = (
         "coolant_init); gcode.c gc_init",
         "a soft reset with the spindle and flood on: both off, M5 M9", (b"\x18",),
         setup=(*MODES, *OUTPUTS, b"?")),
+    Row("sleep-outputs", "src:system.c system_execute_line case 'S' (SLP); protocol.c "
+        "protocol_exec_rt_system (EXEC_SLEEP: spindle_set_state off, coolant_set_state off)",
+        "$SLP with the spindle and flood on: both off in $G and A:, Sleep; a reset wakes into "
+        "Alarm with the modes reset", (b"$SLP\n", b"$G\n", b"?", b"?", b"\x18"),
+        setup=(*MODES, *OUTPUTS, b"?")),
+    Row("flood-toggle", "src:protocol.c protocol_exec_rt_system (EXEC_COOLANT_FLOOD_OVR_TOGGLE: "
+        "coolant_set_state, report_ovr_counter = 0); report.c report_realtime_status",
+        "0xA0 toggles M8 alone (M3 stays), A: in the next report", (b"\xa0", b"?", b"\xa0"),
+        setup=(*MODES, *OUTPUTS, b"?", b"?")),
 )
 
 

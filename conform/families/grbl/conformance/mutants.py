@@ -325,6 +325,26 @@ class ResetKeepsSpindle(_ResetKeeps):
         self.modal.spindle, self.modal.coolant = before.spindle, before.coolant
 
 
+class SleepKeepsCoolant(GrblUnit):
+    """$SLP turns the spindle off and leaves the coolant on."""
+
+    def _process(self, text: str, overflow: bool, t: float) -> None:
+        kept = self.modal.coolant if text == "$SLP" else None
+        super()._process(text, overflow, t)
+        if kept is not None and self.state == "Sleep":
+            self.modal.coolant = kept
+
+
+class FloodToggleNoRefresh(GrblUnit):
+    """0xA0 toggles the flood coolant without forcing Ov:/A: into the next report."""
+
+    def _realtime(self, b: int, t: float) -> None:
+        counter = self._ovr_counter
+        super()._realtime(b, t)
+        if self.spec.realtime[b].effect == "flood":
+            self._ovr_counter = counter
+
+
 class CheckExitKeepsModes(GrblUnit):
     """Leaving check mode keeps the modes the checked lines set (grbl resets)."""
 
@@ -521,6 +541,10 @@ MUTANTS: dict[str, Mutant] = {m.name: m for m in (
            ("from_state/effect/soft-reset",), ResetKeepsOverrides),
     Mutant("reset-keeps-spindle", "a soft reset keeps M3/M8 in the parser state",
            ("from_state/effect/soft-reset-outputs",), ResetKeepsSpindle),
+    Mutant("sleep-keeps-coolant", "$SLP leaves the flood coolant on",
+           ("from_state/effect/sleep-outputs",), SleepKeepsCoolant),
+    Mutant("flood-toggle-no-refresh", "0xA0 does not force Ov:/A: into the next report",
+           ("from_state/effect/flood-toggle",), FloodToggleNoRefresh),
     Mutant("check-exit-keeps-modes", "leaving check mode keeps the modes set in it",
            ("from_state/effect/check-mode",), CheckExitKeepsModes),
     Mutant("feed-reset-resets-all", "0x90 puts the rapid and spindle overrides back too",
