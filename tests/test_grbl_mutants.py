@@ -1,5 +1,6 @@
-"""grbl mutants: the reference unit with one firmware bug each (issue: 15 bug classes, one per
-fact the real firmware showed, plus a setting range widened at its documented minimum).
+"""grbl mutants: the reference unit with one firmware bug each (15 bug classes, one per
+fact the real firmware showed, a setting range widened at its documented minimum, and the
+bugs seen only from a non-default state: a neighbouring command's effect, a reset that keeps).
 Every one must be killed by the check meant for it, not merely by some check."""
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ from conform.families.grbl.spec.load import load_grbl
 G = load_grbl()
 
 
-def test_there_are_at_least_fifteen_bug_classes():
-    assert len(MUTANTS) >= 15
+def test_there_are_at_least_thirty_bug_classes():
+    assert len(MUTANTS) >= 30
     assert "setting-0-widened" in MUTANTS
 
 
@@ -82,3 +83,27 @@ def test_random_sequences_agree_on_the_reference():
     finally:
         target.close()
     assert c.grade.name == "PASS" and "random sequences agreed" in c.actual
+
+
+# the mutants that show only from a non-default state (from_state.py): none of the checks
+# that came before those rows catches them; each is caught by its row, and those whose row
+# needs no motion and no EEPROM write are caught in a default run on a real unit too
+FROM_STATE = [n for n, m in MUTANTS.items() if all(p.startswith("from_state/") for p in m.catches)]
+DEFAULT_RUN = {"g92-ignores-tlo", "g92-zeroes-other-axes", "g92.1-no-wco-refresh", "g43.1-adds",
+               "g43.1-ignores-inches", "g90.1-accepted", "m30-keeps-coord", "reset-keeps-g92",
+               "reset-keeps-overrides", "check-exit-keeps-modes", "feed-reset-resets-all"}
+
+
+def test_the_from_state_mutants_are_new_bug_classes(report):
+    assert len(FROM_STATE) >= 14
+    for name in FROM_STATE:
+        old = [c for c in report[name]["caught_by"] if "/from_state/" not in c]
+        assert not old, (name, old)     # the checks before the rows did not see it
+
+
+@pytest.mark.parametrize("name", sorted(DEFAULT_RUN))
+def test_a_default_run_on_a_real_unit_catches_it(report, name):
+    from conform.families.grbl.conformance.checks import generate
+
+    unflagged = {c.id for c in generate(G, "grbl-1.1f") if not c.motion and not c.eeprom}
+    assert set(report[name]["expected_hit"]) & unflagged, report[name]["expected_hit"]

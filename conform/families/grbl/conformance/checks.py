@@ -516,6 +516,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
                   "random lines, $ commands, settings and realtime bytes agree with the "
                   "reference unit", _sequences, motion=True, eeprom=True),
     ]
+    from conform.families.grbl.conformance import from_state
+
+    out += from_state.generate(spec, vid)
     return out
 
 

@@ -152,7 +152,8 @@ class Pair:
         for i, (was, got) in enumerate(zip(self.first.coords, now.coords, strict=True)):
             if was != got:
                 words = "".join(f"{a}{x:.4f}" for a, x in zip("XYZ", was, strict=True))
-                t.talk(f"G10L2P{i + 1}{words}\n".encode())
+                # G21: in mm, whatever units the unit's startup lines left it in
+                t.talk(f"G21G10L2P{i + 1}{words}\n".encode())
         moved = [f"{name} {', '.join(f'{x:.3f}' for x in getattr(now, name.lower()))} (was "
                  f"{', '.join(f'{x:.3f}' for x in getattr(self.first, name.lower()))})"
                  for name in ("G28", "G30")
