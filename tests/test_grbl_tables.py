@@ -105,6 +105,15 @@ def test_spec_commands_show_grbl():
     shown = r.invoke(cli, ["spec", "show", "grbl-1.1f", "settings"], terminal_width=200)
     assert shown.exit_code == 0 and "$130" in shown.output and "step pulse time" in shown.output
     assert r.invoke(cli, ["spec", "show", "grbl-1.1f", "bogus"]).exit_code != 0
+    homing = r.invoke(cli, ["spec", "show", "grbl-1.1f", "$H"], terminal_width=200)
+    assert homing.exit_code == 0 and "homing cycle" in homing.output and "Idle, Alarm" in \
+        homing.output
+    rate = r.invoke(cli, ["spec", "show", "grbl-1.1f", "$110"], terminal_width=200)
+    assert rate.exit_code == 0 and "X-axis maximum rate" in rate.output
+    lock = r.invoke(cli, ["spec", "show", "grbl-1.1f", "error:9"], terminal_width=200)
+    assert lock.exit_code == 0 and "g-code lock" in lock.output
+    status = r.invoke(cli, ["spec", "show", "grbl-1.1f", "?"], terminal_width=200)
+    assert status.exit_code == 0 and "status report query" in status.output
     checked = r.invoke(cli, ["spec", "check"])
     assert checked.exit_code == 0 and "grbl: 1 variant, 36 error codes" in checked.output
 

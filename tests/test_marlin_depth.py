@@ -146,7 +146,7 @@ INTENDED = {
     "report/m31", "m206-no-logical": "settings/m206-y", "m221-any-extruder":
     "settings/m221-t1", "g20-accepted": "reply/unknown-g20", "dwell-adds": "dwell/g4-s-wins",
     "extrudes-cold": "modes/m83-e-relative", "g91-leaves-e": "modes/g91-e-relative",
-    "m220-no-speed": "motion/m220-speeds-up", "m104-sets-bed": "heat/m104-target",
+    "m220-no-speed": "motion/m220-speeds-up", "no-arcs": "motion/g2", "m104-sets-bed": "heat/m104-target",
 }
 
 

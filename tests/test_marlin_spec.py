@@ -3,6 +3,7 @@ is one line naming file, row and field, and `conform spec list|show|check` show 
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -71,3 +72,22 @@ def test_spec_cli_shows_marlin():
     assert "ok: marlin: 2 variants" in check.stdout
     bad = _conform("spec", "show", "marlin-2.1", "nonsense")
     assert bad.returncode == 2 and "nothing called 'nonsense'" in bad.stderr
+
+
+def test_spec_show_names_one_command():
+    m115 = _conform("spec", "show", "marlin-2.1", "M115", "--json")
+    assert m115.returncode == 0, m115.stderr
+    rows = {r["field"]: r["value"] for r in json.loads(m115.stdout)["rows"]}
+    assert rows["in this build"] == "yes" and "M115.cpp" in rows["source"]
+    assert "Cap:REPEAT:0" in rows["capabilities"] and "PROTOCOL_VERSION:1.0" in rows["first line"]
+    m92 = {r["field"]: r["value"] for r in json.loads(_conform(
+        "spec", "show", "marlin-2.1", "m92", "--json").stdout)["rows"]}
+    assert m92["power-up"] == "M92 X80.00 Y80.00 Z400.00 E500.00"
+    t7 = {r["field"]: r["value"] for r in json.loads(_conform(
+        "spec", "show", "marlin-2.1", "T7", "--json").stdout)["rows"]}
+    assert "echo:T<n> Invalid extruder" in t7["tools"]
+    g20 = {r["field"]: r["value"] for r in json.loads(_conform(
+        "spec", "show", "marlin-2.1", "G20", "--json").stdout)["rows"]}
+    assert g20["in this build"].startswith('no: the unit answers echo:Unknown command: "G20"')
+    # printed as written: ':REPEAT:' is not an emoji code for the terminal table
+    assert "Cap:REPEAT:0" in _conform("spec", "show", "marlin-2.1", "M115").stdout

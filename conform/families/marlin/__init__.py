@@ -86,8 +86,26 @@ class MarlinFamily(Family):
         motion = bool(permissions.allow_motion) if permissions is not None else \
             bool(family_values.pop("allow_motion", False))
         eeprom = bool(permissions.allow_eeprom) if permissions is not None else False
+        if options is not None and target.emulated:
+            options.notes.append(self.real_board_note(variant, options.profile))
         return MarlinRunner(target, variant, allow_motion=motion, allow_eeprom=eeprom,
                             options=options)
+
+    def real_board_note(self, variant: str, profile: str = "quick") -> str:
+        """What the same run on a real board would leave out or change (an emulator run
+        does everything)."""
+        from conform.families.marlin.conformance.checks import HEATERS_ENV, generate
+
+        checks = generate(self.load_tables(), variant, profile)
+        moves = sum(c.motion for c in checks)
+        eeprom = sum(c.eeprom for c in checks)
+        heats = sum(c.heat for c in checks)
+        settings = sum("/settings/" in c.id for c in checks)
+        return (f"a real board: {moves} checks that move or halt it SKIPPED without "
+                f"--allow-motion (with it, one halt check runs, last, and leaves it halted "
+                f"until reset), {eeprom} EEPROM checks without --allow-eeprom, {heats} heating "
+                f"checks without {HEATERS_ENV}=1; {settings} settings checks put back what "
+                "M503, M220 and M221 read before each")
 
     def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_values: Any

@@ -10,9 +10,13 @@ from conform.errors import UserError
 
 
 def _summary(a: Any) -> str:
+    from conform.families.marlin.analysis.htmlreport import figures, verdict
+
+    word, sentence = verdict(a)
     return a.summary_markdown(
         [f"# Marlin capture analysis: {a.path}", "",
-         f"family: marlin, variant {a.variant} ({a.detected})"],
+         f"family: marlin, variant {a.variant} ({a.detected})", "", f"**{word}:** {sentence}",
+         "", *(f"- {what}: {value}" for what, value in figures(a)), "", "## Metrics"],
         ["", *(f"note: {n}" for n in a.notes)])
 
 

@@ -20,45 +20,20 @@ import os
 import re
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from itertools import pairwise
 from typing import Any
 
-from conform.conformance.results import INFO, MUST, CheckResult, Grade, TargetRun
+from conform.conformance.results import INFO, CheckResult, Grade, TargetRun
 from conform.conformance.runner import RunAborted, Runner, RunOptions
 from conform.conformance.target import HarnessError
 from conform.errors import UserError
+from conform.families.marlin.conformance.check import MarlinCheck, Outcome, ok_kind
 from conform.families.marlin.conformance.session import Session, Talk
 from conform.families.marlin.spec import MarlinSpec, load_marlin
 
-Outcome = tuple[bool | None, str, str]      # passed (None: not applicable), expected, actual
 HEATERS_ENV = "CONFORM_MARLIN_ALLOW_HEATERS"
 Q = "queue.cpp"
-
-
-@dataclass
-class MarlinCheck:
-    id: str
-    clause: str
-    title: str
-    run: Callable[[Session], Outcome]
-    level: str = MUST
-    motion: bool = False      # moves axes, or leaves the unit dead (M112)
-    heat: bool = False
-    emulator_only: bool = False
-    kills: bool = False       # leaves the unit halted until a reset (M112): on a real unit
-                              # only the last of these runs, once
-    eeprom: bool = False      # writes the EEPROM (M500)
-
-    @property
-    def subject(self) -> str:
-        """What is checked: ``line``, ``checksum``, ``report``, ``halt`` …"""
-        parts = self.id.split("/")
-        return parts[2] if len(parts) > 2 else self.id
-
-
-def _ok_kind(s: Session, line: str) -> bool:
-    return s.spec.classify(line)[0].startswith("ok")
+_ok_kind = ok_kind
 
 
 def _error_then_resend(s: Session, got: Talk, error: str, last: int) -> Outcome:

@@ -21,7 +21,8 @@ from collections.abc import Callable
 from copy import deepcopy
 from dataclasses import dataclass
 
-from conform.families.marlin.conformance.checks import MarlinCheck, Outcome, _ok_kind
+from conform.families.marlin.conformance.check import MarlinCheck, Outcome
+from conform.families.marlin.conformance.check import ok_kind as _ok_kind
 from conform.families.marlin.conformance.session import Session, Talk
 from conform.families.marlin.spec import MarlinSpec
 from conform.families.marlin.unit import settings as st
@@ -502,6 +503,12 @@ def report_checks(spec: MarlinSpec, vid: str, profile: str) -> list[MarlinCheck]
         add("M118", "message", f"m118-{name}", f"M118 {args}: {want}",
             _exact(f"M118 {args}", [want]))
     add("G21", "units", "g21", "G21 (mm): a plain ok", _exact("G21", []))
+    for text in ("M106 S0", "M107"):
+        add(text.split()[0], "reply", f"{text.split()[0].lower()}-ok", f"{text}: the fan, a "
+            "plain ok", _exact(text, []))
+    for text in ("M17", "M18", "M84"):
+        add(text, "reply", f"{text.lower()}-ok", f"{text}: the steppers on / off, a plain ok",
+            _exact(text, []), motion=True)
     unknown = ["G20", "M149 C", "M149 F", "G999", "X10"] + (["M9999 S1 P2", "G29"]
                                                            if profile == "full" else [])
     for text in unknown:
@@ -569,6 +576,11 @@ def motion_checks(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
           cmd["G90"] + "; motion.h set_relative_mode", cold_lines=1)
     moves(["G0 X3 Y4 F3000"], "X:3.00 Y:4.00 Z:0.00", "G0 moves like G1",
           "G0_G1.cpp/motion/g0", cmd["G0"])
+    if spec.command("G2", spec.variant(vid)) is not None:
+        moves(["G1 X10 Y10 F3000", "G2 X20 Y10 I5 J0"], "X:20.00 Y:10.00 Z:0.00",
+              "G2: a clockwise arc ends at its X Y", "G2_G3.cpp/motion/g2", cmd["G2"])
+        moves(["G1 X10 Y10 F3000", "G3 X10 Y20 I0 J5"], "X:10.00 Y:20.00 Z:0.00",
+              "G3: a counter-clockwise arc ends at its X Y", "G2_G3.cpp/motion/g3", cmd["G3"])
     moves(["G92 X7 Y8"], "X:7.00 Y:8.00 Z:0.00 E:0.00",
           "G92 sets the position", "G92.cpp/motion/g92", cmd["G92"])
 

@@ -177,6 +177,14 @@ class InchMode(MarlinUnit):
         return super()._command("G21" if code == "G20" else code)
 
 
+class NoArcs(MarlinUnit):
+    """Answers G2/G3 Unknown command (as a build without ARC_SUPPORT) although this one has
+    it."""
+
+    def _command(self, code: str) -> Any:
+        return None if code in ("G2", "G3") else super()._command(code)
+
+
 class DwellAdds(MarlinUnit):
     """G4 P<ms> S<s>: waits for both added up (the source: S wins)."""
 
@@ -253,6 +261,7 @@ DEVIANTS: dict[str, type[MarlinUnit]] = {
     "m206-no-logical": _unit(_NoLogicalOffset, "M206 is stored but the position ignores it."),
     "m221-any-extruder": _unit(_M221AnyExtruder, "M221 T1 accepted with one extruder."),
     "g20-accepted": InchMode,
+    "no-arcs": NoArcs,
     "dwell-adds": DwellAdds,
     "extrudes-cold": ExtrudesCold,
     "g91-leaves-e": G91LeavesE,
