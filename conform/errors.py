@@ -4,7 +4,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TypeVar
 
 
 class UserError(Exception):
@@ -40,8 +40,11 @@ def _value_error(exc: ValueError) -> str:
     return str(exc).split("; use sys")[0]  # the int-digits limit names an interpreter knob
 
 
-def load_user_file(path: str | Path, parse: Callable[[str], Any], *, max_bytes: int, what: str,
-                   describe: Callable[[ValueError], str] = _value_error) -> Any:
+_Parsed = TypeVar("_Parsed")
+
+
+def load_user_file(path: str | Path, parse: Callable[[str], _Parsed], *, max_bytes: int, what: str,
+                   describe: Callable[[ValueError], str] = _value_error) -> _Parsed:
     """``parse`` the text of a file the user named; a file larger than ``max_bytes`` (refused
     before it is read), nested past the interpreter's depth or that ``parse`` rejects with a
     ``ValueError`` (JSON and TOML decode errors are ones; so is an integer of more than

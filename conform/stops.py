@@ -21,7 +21,7 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from types import FrameType
 
 from conform.errors import UserError
 
@@ -101,7 +101,7 @@ def stop_signals() -> Iterator[StopState]:
         yield state
         return
 
-    def on_signal(signum: int, _frame: Any) -> None:
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         if state.signum is not None:
             state.later += 1
             return

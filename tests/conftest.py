@@ -61,3 +61,29 @@ def pytest_runtest_makereport(item, call):
     if report.skipped and os.environ.get("CI") == "true" and any(
             word in str(report.longrepr) for word in REAL_SENDERS):
         report.outcome = "failed"
+
+
+# -- running side by side (pytest-xdist, pyproject.toml's addopts) -----------------------------
+
+def pytest_configure(config):
+    """Started as `python -m pytest &` from a script, the suite (and each worker) inherits
+    SIGINT ignored, and Python then leaves Ctrl-C without its KeyboardInterrupt: the tests
+    that interrupt a run in-process need it back."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Tests of a module that builds something once for the module (a fixture of module
+    scope: a mutant report, a browser, a recorded storm) run in one worker, so that it is
+    built once; and the slow tests (ptys, subprocesses, real clocks) start first, so that
+    the run does not end waiting on one of them."""
+    for item in items:
+        info = getattr(item, "_fixtureinfo", None)
+        defs = info.name2fixturedefs.values() if info is not None else ()
+        if any(d[-1].scope == "module" for d in defs if d):
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -33,6 +33,10 @@ class Faults:
     # the n-th line written (counting resends)
     pause: dict[int, float] = field(default_factory=dict)   # the n-th line written in two
     # halves this many seconds apart (a converter that holds bytes back)
+    drop_answer: set[int] = field(default_factory=set)   # the k-th `ok` the unit sends (from
+    # 0) is lost on the way back
+    unit_calls: dict[float, Callable] = field(default_factory=dict)   # at t: call(unit, t),
+    # a fault inside the unit (its own kill, a command that never ends)
     seed: int = 1
 
 
@@ -81,10 +85,12 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
     next_send = t + s.gap
     next_poll = START + s.poll[0] if s.poll else None
     pending_rt = sorted(f.realtime.items())
+    pending_calls = sorted(f.unit_calls.items(), key=lambda kv: kv[0])
     dead = False
     stopped = False
     done_at: float | None = None
     cut_state = False
+    oks = 0
 
     def down(at: float) -> bool:
         return f.cut is not None and f.cut[0] <= at < f.cut[1]
@@ -114,6 +120,10 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
         for due, data in unit.poll(t):
             if (f.mute_unit_at is not None and due >= f.mute_unit_at) or down(due):
                 continue
+            if data.startswith(b"ok"):
+                oks += 1
+                if oks - 1 in f.drop_answer:
+                    continue
             on_wire.append((max(due, unit_wire) + len(data) * byte_t, data))
             unit_wire = on_wire[-1][0]
         while on_wire and on_wire[0][0] <= t:      # what has reached the sender by now
@@ -136,6 +146,8 @@ def drive(unit, lines: list[bytes], s: Sender, faults: Faults | None = None, *,
                 next_send = t + s.gap
         while pending_rt and pending_rt[0][0] <= t:
             write(pending_rt.pop(0)[1], t)
+        while pending_calls and pending_calls[0][0] <= t:
+            pending_calls.pop(0)[1](unit, t)
         if dead or stopped:
             pass
         elif s.timeout is not None and waiting_since is not None and \
@@ -226,8 +238,9 @@ def gve_sender(**kw) -> Sender:
 
 
 def grbl_job(n: int = 60) -> list[bytes]:
+    """``n`` short moves, then the program end a job file ends with."""
     return [b"G21G90G54F3000\n"] + [b"G1X%.3fY%.3f\n" % ((i % 10) * 0.5, (i % 7) * 0.3)
-                                    for i in range(n)]
+                                    for i in range(n)] + [b"M2\n"]
 
 
 def gve_job(n: int = 60, size: int = 400, checksums: bool = False) -> list[bytes]:
@@ -238,3 +251,30 @@ def gve_job(n: int = 60, size: int = 400, checksums: bool = False) -> list[bytes
     if checksums:
         return [b"!0%+\r"] + [append_checksum(b) + b"\r" for b in body]
     return [b + b"\r" for b in body]
+
+
+def marlin_unit():
+    return family("marlin").make_unit("marlin-2.1")
+
+
+def marlin_sender(**kw) -> Sender:
+    """Ok-paced, as printcore and ``conform send`` stream: the answer is the ``ok``; a
+    ``Resend:`` asks for the line again (its ``ok`` that follows is then not the answer)."""
+    return Sender(b"\n", lambda a: a.startswith(b"ok") or a.startswith(b"Resend:"),
+                  retry=lambda a: a.startswith(b"Resend:"), **kw)
+
+
+def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
+    """``n`` moves ending with M400 (wait for the moves to end), numbered with checksums
+    after an M110 as printcore numbers them, or plain."""
+    body = [b"G90"] + [b"G1 X%d Y%d F6000" % (i % 30, i % 7) for i in range(n)] + [b"M400"]
+    if not numbered:
+        return [b + b"\n" for b in body]
+    from functools import reduce
+    from operator import xor
+
+    out = []
+    for k, b in enumerate([b"M110 N0", *body]):
+        line = b"N%d %s" % (k, b)
+        out.append(line + b"*%d\n" % reduce(xor, line, 0))
+    return out

@@ -302,9 +302,10 @@ for line in sys.stdin:
 """
 
 
-def run_commands(commands: list[list[str]], env: dict[str, str], timeout: float = 600
-                 ) -> list[dict]:
-    """Run ``conform`` command lines in one worker process; a result dict per command.
+def run_commands(commands: list[list[str]], env: dict[str, str], timeout: float = 600,
+                 cwd: Path | None = None) -> list[dict]:
+    """Run ``conform`` command lines in one worker process (in ``cwd``); a result dict per
+    command.
 
     A worker killed by a signal (a segfault) is restarted after the command that killed it,
     which gets ``{"signal": n}``.
@@ -316,7 +317,7 @@ def run_commands(commands: list[list[str]], env: dict[str, str], timeout: float 
     todo = list(commands)
     while todo:
         proc = subprocess.Popen([sys.executable, "-c", WORKER], stdin=subprocess.PIPE,
-                                stdout=subprocess.PIPE, text=True, env=env)
+                                stdout=subprocess.PIPE, text=True, env=env, cwd=cwd)
         out, _ = proc.communicate("\n".join(json.dumps(c) for c in todo) + "\n", timeout=timeout)
         started = None
         for line in out.splitlines():

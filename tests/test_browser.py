@@ -197,7 +197,7 @@ def test_analysis_report_first_screen(browser, tmp_path, capsys):
     assert errors == []
     # the diagnosis opens the report: its one sentence, then the session's figures
     diagnosis = _on_first_screen(browser, ".diagnosis")
-    assert diagnosis.startswith("Diagnosis: Most likely "), diagnosis[:200]
+    assert diagnosis.startswith("Diagnosis: Completed"), diagnosis[:200]   # the outcome first
     summary = _on_first_screen(browser, "table.session")
     assert "variant" in summary and "exchanges" in summary
     first = _on_first_screen(browser, ".sev-hazard, .sev-error")

@@ -18,8 +18,8 @@ from conform.cli.main import main
 from conform.errors import UserError
 
 
-def record(path, *, variant="gve64-v19", **kw) -> Recorder:
-    rec = Recorder(path, {"capture_method": "test", "baud": 115200, "variant": variant,
+def record(path, *, variant="gve64-v19", recorder=Recorder, **kw) -> Recorder:
+    rec = recorder(path, {"capture_method": "test", "baud": 115200, "variant": variant,
                           "unit_port": "/dev/null"}, **kw)
     t = rec.now()
     rec.chunk("host", b"!0L1000,0,0\r", t)
@@ -86,9 +86,24 @@ def test_reader_gives_chunks_frames_exchanges_events(tmp_path):
     assert len(cap.table("host")) == 2
 
 
+class _HeldRecorder(Recorder):
+    """A recorder whose writer thread starts work only when ``release`` is set: what was
+    queued before then is one moment, however the machine schedules the two threads."""
+
+    def __init__(self, *args, **kw):
+        self.release = threading.Event()
+        super().__init__(*args, **kw)
+
+    def _run(self):
+        self.release.wait()
+        super()._run()
+
+
 def test_without_a_variant_only_raw_is_recorded(tmp_path):
     path = tmp_path / "raw.mcap"
-    record(path, variant="").close()
+    rec = record(path, variant="", recorder=_HeldRecorder)
+    rec.release.set()
+    rec.close()
     info = capture_info(path)
     assert info.reads["host"] == 2 and info.messages["/frames"] == 0
     assert info.messages["/serial/host"] == 1  # format 2: the reads of a moment in one batch

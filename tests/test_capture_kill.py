@@ -46,7 +46,6 @@ def expected_host(n: int) -> bytes:
 def test_sigkill_at_random_moments_loses_at_most_the_last_second(tmp_path):
     rng = random.Random(20240611)
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    started = time.monotonic()
     for k in range(KILLS):
         path = tmp_path / f"k{k}.mcap"
         proc = subprocess.Popen([sys.executable, "-c", CHILD, str(path)], env=env,
@@ -75,4 +74,3 @@ def test_sigkill_at_random_moments_loses_at_most_the_last_second(tmp_path):
             lost = t_kill - chunks[-1]["t_read"]
             assert lost <= MAX_LOSS, f"kill {k}: lost {lost:.3f} s"
         assert cap.metadata["conform.session"]["capture_method"] == "kill-test"
-    assert time.monotonic() - started < 60

@@ -61,7 +61,7 @@ def test_run_2_when_a_check_could_not_be_run(tmp_path, emulate):
                          capture_output=True, text=True, timeout=120,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert run.returncode == 2, run.stderr
-    assert re.search(r"ERROR \S+/SR/interrupt: HarnessError: --inputs-control", run.stdout)
+    assert re.search(r"ERROR \S+/SR/interrupt: could not be run: --inputs-control", run.stdout)
     assert (tmp_path / "r" / "results.json").exists()
 
 
@@ -165,7 +165,7 @@ def test_emulate_control_0_ok_1_refused(tmp_path, capsys, emulate):
 
 
 def test_spec_check_0_valid_2_for_a_bad_row(tmp_path, capsys):
-    tables = REPO / "conform" / "families" / "gve" / "spec" / "tables"
+    tables = REPO / "specs" / "gve"
     assert _code(["spec", "check", "--specs", str(tables)], capsys)[0] == 0
     bad = tmp_path / "tables"
     shutil.copytree(tables, bad)

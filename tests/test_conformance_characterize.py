@@ -106,3 +106,20 @@ def test_a_partial_profile_is_refused_as_a_dialect(spec, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "a partial profile (Ctrl-C after 2 of 29 questions) leaves " \
             "A3, A4" in err[0], err
+
+
+def test_characterize_help_says_what_each_family_asks(capsys):
+    """The command's own text names no family's questions; each family describes its probes
+    (Family.characterize_about) under the help."""
+    from conform.cli.main import cli
+    from conform.families import families
+
+    with pytest.raises(SystemExit):
+        cli.main(["characterize", "--help"], prog_name="conform")
+    text = capsys.readouterr().out
+    own, listed = text.split("What each family asks:")
+    assert "A1" not in own and "A18" not in own and "open question" not in own
+    for fam in families():
+        if fam.characterize_about:
+            assert f"\n  {fam.name} " in listed
+    assert "A1-A29" in listed.split("\n  grbl")[0]          # GVE's questions, under GVE

@@ -183,3 +183,86 @@ def test_setting_edges_come_from_the_source():
     assert edges[30]["single-precision"] == ("99999.9", "$30=100000")
     checks = {c.id for c in generate(G, V.id)}
     assert f"{V.id}/setting_codes/setting/0/min-1" in checks
+
+
+class KeepsPosition(GrblUnit):
+    """grbl after earlier checks: it stands at X-1 Y-0.5 after every reset (grbl keeps its
+    position across a soft reset), with a G28 position and a G55 offset in its EEPROM."""
+
+    def __init__(self, *a, **k):
+        from conform.families.grbl.unit.adopt import UnitState, start_from
+
+        super().__init__(V, G, **k)
+        coords = [[0.0] * 3 for _ in range(6)]
+        coords[1] = [-2.0, 0.0, -1.0]
+        start_from(self, UnitState(position=[-1.0, -0.5, 0.0], coords=coords,
+                                   g28=[-3.0, -3.0, 0.0]))
+
+
+def _sequences(factory, seed=0):
+    from conform.conformance.runner import RunOptions
+    from conform.families.grbl.conformance.checks import GrblRunner, generate, select
+
+    runner = GrblRunner(EmuTarget(factory, "emu:deviant"), V.id, spec=G,
+                        options=RunOptions(seed=seed))
+    (check,) = select(generate(G, V.id), ["*/sequences/random"])
+    return runner.run_check(check)
+
+
+def test_random_sequences_start_from_where_the_unit_really_is():
+    """The reference starts every example from the state the target reads back (position,
+    EEPROM offsets), so a unit that does not stand at 0 after a reset agrees with it."""
+    from conform.families.grbl.conformance.checks import Session
+    from conform.families.grbl.conformance.machine import Pair
+
+    r = _sequences(lambda: KeepsPosition(), seed=5)
+    assert r.grade is Grade.PASS, r.actual
+    assert r.seed == 5 and r.replay.endswith("/sequences/random@5")
+    target = Session(EmuTarget(lambda: KeepsPosition(), "emu:deviant"), G, V)
+    reference = Session(EmuTarget(lambda: GrblUnit(V, G), "emu:reference"), G, V)
+    pair = Pair(target, reference, lambda lines: lines)
+    pair.start()
+    assert reference.target.unit.position == [-1.0, -0.5, 0.0]
+    assert pair.run([b"$J=G91X-1F100\n", b"?", b"$#\n", b"G28\n"]) == ("", -1)
+
+
+def test_random_sequences_still_catch_a_deviant_unit():
+    """A unit whose '$' help leaves out $SLP: an example with '$' shows it, shrunk to it."""
+    r = _sequences(lambda: WrongHelp(V, G))
+    assert r.grade is Grade.FAIL
+    assert "replay: '$\\n'" in r.actual and "$SLP" in r.actual
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [3, 17])
+def test_random_sequences_agree_over_a_pty_from_where_the_machine_stands(tmp_path, seed):
+    """The opt-in sequences against `conform emulate serve grbl-1.1f` on a pty: nothing the
+    target answers changes what is drawn (no hypothesis abort), and the machine moved off 0
+    before the run (and by every example) is where the reference starts."""
+    import time
+
+    import serial
+
+    from tests import emulated
+
+    proc, path, _control = emulated.serve("serve", "grbl-1.1f", "--baud", "115200", "-q")
+    try:
+        with serial.Serial(path, 115200, timeout=0.2) as port:
+            port.write(b"G91G0X-1.5Y-0.5\nG10L2P2X-2\nG28.1\n")
+            said = [x.strip() for x in emulated.read_lines(port, 6)]
+            assert said.count("ok") == 3, said
+            time.sleep(1.0)
+        t0 = time.monotonic()
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path,
+                            "--variant", "grbl-1.1f", "--allow-motion", "--max-steps", "100000",
+                            "--allow-eeprom", "--check", "*/sequences/random", "--seed",
+                            str(seed), "--report", str(tmp_path / "rep"), "-q"],
+                           capture_output=True, text=True, timeout=300)
+        took = time.monotonic() - t0
+    finally:
+        emulated.stop(proc)
+    results = json.loads((tmp_path / "rep" / "results.json").read_text())
+    (check,) = results["checks"]
+    assert p.returncode == 0 and check["grade"] == "PASS", (p.stderr[-2000:], check["actual"])
+    assert f"(seed {seed})" in check["actual"] and "not seen again" not in check["actual"]
+    assert took < 180

@@ -1,7 +1,7 @@
 """The grbl emulator's control socket over a real pty at 115200 baud: a hard-limit switch
 raises ALARM:1, the door holds and blocks resume until it closes, the probe ends a G38.2 with
 [PRB:…:1], lost answers never arrive, and an unplugged cable closes the pty and restarts the
-board. Expected texts come from the tables (conform/families/grbl/spec/tables) and interface.md, not the emulator."""
+board. Expected texts come from the tables (specs/grbl) and interface.md, not the emulator."""
 
 from __future__ import annotations
 

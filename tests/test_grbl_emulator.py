@@ -4,6 +4,7 @@ by `conform analyze`."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -66,14 +67,37 @@ def test_conform_run_over_the_pty(emulator, tmp_path):
     assert (tmp_path / "results.json").exists()
 
 
+# every check over the pty, in PARTS runs side by side (each on its own emulator): over a link a
+# check waits for grbl's answers, its reset banner and the settings it restores (~300 checks)
+PARTS = 4
+
+
+def _every_check() -> list[str]:
+    from conform.families.grbl.conformance.checks import generate
+
+    return [c.id for c in generate(G, "grbl-1.1f")]
+
+
+def test_the_parts_hold_every_check_once():
+    ids = _every_check()
+    parts = [ids[k::PARTS] for k in range(PARTS)]
+    assert sorted(x for part in parts for x in part) == sorted(ids) and len(set(ids)) == len(ids)
+    assert all(not set(x) & set("*?[") for x in ids)   # each id is a glob matching only itself
+
+
 @pytest.mark.slow
-def test_every_check_over_the_pty(emulator, tmp_path):
+@pytest.mark.parametrize("part", range(PARTS))
+def test_every_check_over_the_pty(emulator, tmp_path, part):
+    chosen = _every_check()[part::PARTS]
     p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", emulator,
                         "--variant", "grbl-1.1f", "--allow-motion", "--allow-eeprom",
-                        "--report", str(tmp_path), "-q"], capture_output=True, text=True,
-                       timeout=300)
+                        "--report", str(tmp_path), "-q",
+                        *(arg for x in chosen for arg in ("--check", x))],
+                       capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "FAIL" not in p.stdout and "SKIPPED" not in p.stdout
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert sorted(c["id"] for c in results["checks"]) == sorted(chosen)
 
 
 SENDER = r"""

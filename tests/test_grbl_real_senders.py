@@ -34,10 +34,11 @@ REPO = SENDERS.parent.parent
 MUSTS = ("within-buffer", "realtime-out-of-band", "job-in-order", "nothing-lost", "honest-exit")
 
 
-def judge(tmp_path, script, mode, scenarios=("stream",), moves=60, python=sys.executable):
+def judge(tmp_path, script, mode, scenarios=("stream",), moves=60, python=sys.executable,
+          timeout=90):
     run, sessions = run_scenarios([python, str(SENDERS / script), "{port}", "{job}",
                                    *([mode] if mode else [])], scenarios=list(scenarios),
-                                  timeout=90, directory=tmp_path / f"{script}-{mode}",
+                                  timeout=timeout, directory=tmp_path / f"{script}-{mode}",
                                   job=default_job(moves))
     return {c.id.split("/", 2)[2]: c.grade for c in run.checks}, sessions
 
@@ -87,6 +88,21 @@ def test_stream_py_counting_mode_streams_on_after_an_alarm(tmp_path):
     g, _ = judge(tmp_path, "stream_like.py", "counting", ("stream", "alarm"))
     assert {k: g[f"stream/{k}"] for k in MUSTS} == dict.fromkeys(MUSTS, Grade.PASS)
     assert g["alarm/alarm-stops"] is Grade.FAIL
+
+
+def test_stream_py_counting_mode_fails_only_where_stream_py_really_does(tmp_path):
+    """Every scenario, at 115 200 Bd and on the slow link: stream.py's counting mode keeps
+    within the buffer and loses nothing (its wake-up's answers are its own, however late the
+    banner arrives); it FAILs only where stream.py itself goes wrong: it streams on after an
+    ALARM, and an answer lost or damaged on the way leaves it waiting for ever."""
+    from conform.families.grbl.sendercheck.scenarios import SCENARIOS
+
+    g, _ = judge(tmp_path, "stream_like.py", "counting", tuple(SCENARIOS), timeout=25)
+    failed = {k for k, v in g.items() if v is Grade.FAIL}
+    assert failed == {"alarm/alarm-stops", "lost-answers/terminates",
+                      "garbled-answers/terminates"}, {k: g[k] for k in failed}
+    for scenario in ("stream", "slow-link"):
+        assert {k: g[f"{scenario}/{k}"] for k in MUSTS} == dict.fromkeys(MUSTS, Grade.PASS)
 
 
 def _conform(*args: str, **kw):

@@ -174,3 +174,95 @@ def test_realtime_rule_counts_realtime_bytes_sent_as_lines_not_empty_lines():
 
     assert grade(b"\r\n\r\nG90\n?") == "PASS"
     assert grade(b"\r\n\r\nG90\n?\n?\n?") == "FAIL"          # its polls, as lines
+
+
+def _in_order_said(sent, job=("G90", "G1X-1F100", "G0X0"), scenario="stream"):
+    from conform.families.grbl.analysis.analyze import Exchange, GrblAnalysis
+    from conform.families.grbl.sendercheck.rules import in_order
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    a = GrblAnalysis("", "grbl", "grbl-1.1f", "",
+                     [Exchange(i, t, len(t) + 1, 0.0) for i, t in enumerate(sent)], [], {})
+    return in_order(SenderRun(SCENARIOS[scenario], list(job), a, 0, 0, False, ""))
+
+
+@pytest.mark.parametrize("sent,named", [
+    # a line left out (grbl-streamer's preprocessor drops G5): the line and what came instead
+    (["\n", "G90", "G0X0"], "job line 2 'G1X-1F100' was skipped: in its place the wire had "
+                            "wire line 3 'G0X0' (job line 3 'G0X0')"),
+    (["G90", "G1X-1F100", "G1X-1F100", "G0X0"],
+     "job line 3 'G0X0' was due, but the wire had wire line 3 'G1X-1F100' (job line 2 "
+     "'G1X-1F100') again (a line sent again)"),
+    (["G90"], "job line 2 'G1X-1F100' never went on the wire, nor the 1 after it"),
+    (["G90", "G1X-1F100", "G0X0", "G0 X0"], "after the job's last line wire line 4 'G0 X0' "
+                                            "(job line 3 'G0X0') was sent again"),
+])
+def test_job_in_order_names_the_job_line_and_what_the_wire_had_instead(sent, named):
+    grade, _want, said = _in_order_said(sent)
+    assert grade == "FAIL" and named in said, said
+
+
+def test_every_verdict_on_a_line_names_the_job_line():
+    """executed-once, honest-exit and restart-stops name the job line (number and text), not
+    only a canonical block."""
+    from conform.families.grbl.analysis.analyze import GrblAnalysis
+    from conform.families.grbl.sendercheck.rules import executed_once, honest_exit, restart_stops
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    job = ["G21 G90", "G1 X-1 F100 (cut)", "G0X0", "M2"]
+    a = GrblAnalysis("", "grbl", "grbl-1.1f", "", [], [], {})
+    twice = SenderRun(SCENARIOS["stream"], job, a, 0, 0, False, "",
+                      taken=[["G21G90", 0], ["G1X-1F100", 0], ["G1X-1F100", 0], ["G0X0", 0],
+                             ["M2", 0]])
+    assert "job line 2 'G1 X-1 F100 (cut)' ran twice" in executed_once(twice)[2]
+    short = SenderRun(SCENARIOS["stream"], job, a, 0, 0, False, "",
+                      taken=[["G21G90", 0], ["G1X-1F100", 0]])
+    grade, _w, said = honest_exit(short)
+    assert grade == "FAIL" and "the first never executed: job line 3 'G0X0'" in said
+    on = SenderRun(SCENARIOS["link-loss"], job, a, 0, 1, False, "",
+                   taken=[["G21G90", 0], ["G1X-1F100", 0], ["G0X0", 0]], restarts=[2])
+    assert "the first job line 3 'G0X0'" in restart_stops(on)[2]
+
+
+def test_a_banner_delayed_by_a_slow_link_is_not_a_reset():
+    """stream.py wakes grbl with "\\r\\n\\r\\n" at once; on a slow link the power-up banner is
+    still on its way, so it arrives after those lines went out. grbl answered them after it
+    started: their oks are theirs, not unsolicited, and nothing is lost."""
+    from conform.families.grbl.analysis.analyze import analyze_streams
+    from conform.families.grbl.sendercheck.rules import nothing_lost
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    banner = b"\r\nGrbl 1.1f ['$' for help]\r\n"
+    host = [(0.0, b"\r\n\r\n"), (2.0, b"G21G90\n"), (2.01, b"G1X-1F100\n")]
+    unit = [(0.06, banner), (0.14, b"ok\r\nok\r\nok\r\nok\r\n"), (2.1, b"ok\r\n"),
+            (2.11, b"ok\r\n")]
+    a = analyze_streams(host, unit)
+    assert a.metrics["answered"] == a.metrics["lines"] == 6
+    assert not [f for f in a.findings if f.kind == "unsolicited-answer"]
+    grade, _w, said = nothing_lost(SenderRun(SCENARIOS["slow-link"], ["G21G90", "G1X-1F100"],
+                                             a, 0, 0, False, ""))
+    assert grade == "PASS", said
+    # a real reset still empties grbl's buffer: the line sent before it is never answered and
+    # the next ok belongs to the line sent after it
+    host = [(0.0, b"G21G90\n"), (0.5, b"\x18"), (1.0, b"G1X-1F100\n")]
+    unit = [(0.6, banner), (1.1, b"ok\r\n")]
+    a = analyze_streams(host, unit)
+    first, second = a.exchanges
+    assert first.answer is None and first.t_gone is not None and second.answer == "ok"
+    grade, _w, said = nothing_lost(SenderRun(SCENARIOS["stream"], ["G21G90", "G1X-1F100"],
+                                             a, 0, 0, False, ""))
+    assert grade == "FAIL" and "the first without an answer: wire line 1 'G21G90' (job line 1" \
+        in said, said
+
+
+def test_within_buffer_names_the_line_that_overfilled_it():
+    from conform.families.grbl.analysis.analyze import analyze_streams
+    from conform.families.grbl.sendercheck.rules import within_buffer
+    from conform.families.grbl.sendercheck.session import SenderRun
+
+    job = [f"G1X-{i}.5Y-1.25F3000 (a comment)" for i in range(1, 9)]
+    host = [(0.0, b"".join(f"G1X-{i}.5Y-1.25F3000\n".encode() for i in range(1, 9)))]
+    a = analyze_streams(host, [(1.0, b"ok\r\n" * 8)])
+    grade, _w, said = within_buffer(SenderRun(SCENARIOS["stream"], job, a, 0, 0, False, ""))
+    assert grade == "FAIL" and "the most when wire line 8 'G1X-8.5Y-1.25F3000' (job line 8 " \
+        "'G1X-8.5Y-1.25F3000 (a comment)') went out" in said, said

@@ -1,4 +1,4 @@
-"""conform/families/grbl/spec/tables: the tables load, cover what the protocol has, cite a source on every row, and a
+"""specs/grbl: the tables load, cover what the protocol has, cite a source on every row, and a
 broken row is one clear line naming file, row and field."""
 
 from __future__ import annotations

@@ -14,7 +14,9 @@ import pytest
 import serial
 
 from conform.conformance.results import Grade
-from conform.families.marlin.conformance.checks import mutant_report, run_targets
+from conform.conformance.target import EmuTarget
+from conform.families.marlin import FAMILY
+from conform.families.marlin.conformance.checks import run_checks
 from conform.families.marlin.conformance.mutants import MUTANTS
 from conform.families.marlin.protocol.codec import frame
 from tests import emulated
@@ -23,14 +25,14 @@ from tests.emulated import stop
 
 @pytest.mark.parametrize("vid", ["marlin-2.1", "marlin-2.1-adv"])
 def test_reference_units_pass_every_check(vid):
-    runs, _ = run_targets([f"emu:{vid}"], None)
-    bad = [(c.id, c.expected, c.actual, c.detail) for c in runs[0].checks if c.grade is not Grade.PASS]
+    run = run_checks(EmuTarget(lambda: FAMILY.make_unit(vid), f"emu:{vid}"), vid)
+    bad = [(c.id, c.expected, c.actual, c.detail) for c in run.checks if c.grade is not Grade.PASS]
     assert not bad
-    assert len(runs[0].checks) >= 23
+    assert len(run.checks) >= 23
 
 
 def test_every_mutant_is_caught():
-    report = mutant_report("marlin-2.1-adv")
+    report = FAMILY.run_mutants(["marlin-2.1-adv"])   # what `conform run --mutants` runs
     assert {m["name"] for m in report} == set(MUTANTS)
     assert [m["name"] for m in report if not m["killed"]] == []
     by = {m["name"]: m["caught_by"] for m in report}
@@ -154,7 +156,6 @@ def test_the_emergency_parser_checks_fail_on_a_unit_without_it():
     firmware does (recordings/marlin-2.1.2.4/blocking-reads.transcript)."""
     from conform.conformance.target import EmuTarget
     from conform.families import family
-    from conform.families.marlin.conformance.checks import run_checks
 
     target = EmuTarget(lambda: family("marlin").make_unit("marlin-2.1"), "emu:plain")
     run = run_checks(target, "marlin-2.1-adv", patterns=["*/halt/*"])

@@ -23,8 +23,8 @@ def test_mutant_is_caught_by_its_check(mutant_report, name):
 
 
 def test_kill_rate_is_complete(mutant_report):
-    assert len(mutant_report) == len(MUTANTS) == 13
-    assert sum(m["killed"] for m in mutant_report.values()) == 13
+    assert len(mutant_report) == len(MUTANTS) >= 14
+    assert sum(m["killed"] for m in mutant_report.values()) == len(MUTANTS)
 
 
 def test_v10_mutant_runs_on_a_v10(spec):

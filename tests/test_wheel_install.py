@@ -29,8 +29,10 @@ def test_wheel_install_finds_its_tables(tmp_path):
     (wheel,) = wheels.glob("conform-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     tables = sorted(n for n in names if n.endswith(".toml"))
-    assert "conform/families/gve/spec/tables/commands.toml" in tables
-    assert "conform/families/grbl/spec/tables/codes.toml" in tables
+    # the top-level specs/<family>/ land in the family's package (setup.py), nowhere else
+    for family, table in (("gve", "commands"), ("grbl", "codes"), ("marlin", "messages")):
+        assert f"conform/families/{family}/spec/tables/{table}.toml" in tables
+    assert not [n for n in names if n.startswith("specs/")]
 
     venv = tmp_path / "venv"
     # the machine's packages stand in for the registry; conform itself only from the wheel
@@ -45,9 +47,26 @@ def test_wheel_install_finds_its_tables(tmp_path):
     conform = venv / "bin" / "conform"
     listed = _run([str(conform), "spec", "list", "--json"], cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
-    for variant in ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124", "grbl-1.1f"):
+    for variant in ("gve64-v10", "gve64-v19", "gve64-phantom", "gve124", "grbl-1.1f", "marlin-2.1",
+                    "marlin-2.1-adv"):
         assert variant in listed.stdout
     for target in ("emu:gve64-v19", "emu:grbl-1.1f"):
         ran = _run([str(conform), "run", "--target", target, "--report", str(tmp_path / target[4:])],
                    cwd=tmp_path)
         assert ran.returncode == 0, (target, ran.stdout[-2000:], ran.stderr[-2000:])
+
+    # the README's tour from the wheel: `conform samples` writes what it reads, as in a clone
+    samples = tmp_path / "samples"
+    made = _run([str(conform), "samples", str(samples)], cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    shipped = {p.name for p in (REPO / "captures").glob("*.mcap")}
+    assert {p.name for p in (samples / "captures").glob("*.mcap")} == shipped
+    for rel in ("captures/jobs/part.nc", "captures/jobs/grbl-arc.nc", "tests/senders/careful.py",
+                "tests/data/marlin/facts-2.1.2.4.transcript", "docs/check-sender.md"):
+        assert (samples / rel).is_file(), rel
+    for line in (["analyze", "captures/careless-noisy.mcap"],
+                 ["analyze", "captures/grbl-counting.mcap"],
+                 ["check-sender", "--scenario", "clean", "--report", str(tmp_path / "sender"),
+                  "--", str(py), "tests/senders/careful.py", "{port}", "{job}"]):
+        ran = _run([str(conform), *line], cwd=samples)
+        assert ran.returncode == 0, (line, ran.stdout[-2000:], ran.stderr[-2000:])

@@ -26,10 +26,14 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypeVar
 
 from conform.errors import UserError
 from conform.families import FleetColumn, default_family, families, family
+from conform.jsondoc import JsonObject
+
+if TYPE_CHECKING:
+    from conform.families import AnalysisResult
 
 SUMMARY_KEYS = ("machine", "session", "family", "path", "state", "error", "started",
                 "duration_s", "exchanges", "exchanges_per_s", "findings", "severities",
@@ -74,14 +78,14 @@ def machine_of(path: Path, metadata: dict[str, dict[str, str]]) -> str:
     return str(session.get("machine") or path.parent.name or session.get("hostname") or "-")
 
 
-def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any],
-                report_dir: str | None = None) -> dict[str, Any]:
+def analyze_one(path: str, parquet_dir: str | None, options: JsonObject,
+                report_dir: str | None = None) -> JsonObject:
     """One fleet task: analyse ``path``, write its Parquet parts (and, with ``report_dir``,
     its own report under ``report_dir/sessions/``), return its summary row."""
     from conform.analysis import analyze
 
     p = Path(path)
-    row: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS) | dict.fromkeys(
+    row: JsonObject = dict.fromkeys(SUMMARY_KEYS) | dict.fromkeys(
         c.key for c in fleet_columns())
     row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error",
                started=_mtime(p))
@@ -101,15 +105,15 @@ def analyze_one(path: str, parquet_dir: str | None, options: dict[str, Any],
         return row
     _fill(row, a, machine_of(p, a.raw.metadata), a.raw.metadata.get("conform.session", {}))
     if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
-        for name, path in a.tables.items():
-            d = Path(parquet_dir) / name / f"machine={_safe(row['machine'])}"
+        for name, written in a.tables.items():
+            d = sink.dir / name / f"machine={_safe(row['machine'])}"
             d.mkdir(parents=True, exist_ok=True)
-            path.replace(d / path.name)
+            written.replace(d / written.name)
     _session_report(row, a, report_dir, default_family().name)
     return row
 
 
-def _fill(row: dict[str, Any], a: Any, machine: str, meta: dict[str, Any]) -> None:
+def _fill(row: JsonObject, a: AnalysisResult, machine: str, meta: JsonObject) -> None:
     """A row from an analysis: its ``fleet_row()``, the machine, the findings per severity
     and the session's start (its metadata's ``started``, else the file's time)."""
     row.update(a.fleet_row())
@@ -130,7 +134,7 @@ def _mtime(p: Path) -> float | None:
         return None
 
 
-def _iso_seconds(text: Any) -> float | None:
+def _iso_seconds(text: object) -> float | None:
     """An ISO time (``2026-11-25T10:00:00+00:00``) as Unix seconds; None if it is not one."""
     from datetime import datetime
 
@@ -140,12 +144,12 @@ def _iso_seconds(text: Any) -> float | None:
         return None
 
 
-def session_folder(row: dict[str, Any]) -> Path:
+def session_folder(row: JsonObject) -> Path:
     """Where a session's own report goes in a fleet's report folder (relative)."""
     return Path("sessions", _safe(str(row["machine"])), _safe(str(row["session"])))
 
 
-def _session_report(row: dict[str, Any], a: Any, report_dir: str | None, family: str) -> None:
+def _session_report(row: JsonObject, a: AnalysisResult, report_dir: str | None, family: str) -> None:
     """The session's own report (with its diagnosis at the top, as ``conform analyze FILE``
     writes it) under the fleet's report folder; the row's ``report``: its relative path. One
     that cannot be written is said in the row's error, the analysis stands."""
@@ -163,8 +167,8 @@ def _session_report(row: dict[str, Any], a: Any, report_dir: str | None, family:
     row["report"] = (rel / "index.html").as_posix()
 
 
-def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
-                  row: dict[str, Any], report_dir: str | None = None) -> dict[str, Any] | None:
+def _other_family(p: Path, parquet_dir: str | None, options: JsonObject,
+                  row: JsonObject, report_dir: str | None = None) -> JsonObject | None:
     """A capture of another family's traffic (conform.families.capture_hook decides, as for
     one file), analysed by that family: its ``fleet_row()`` fills the row and its tables go
     to ``DIR/<family>/<table>/machine=M/<session>.parquet``. None: the default family's."""
@@ -200,7 +204,10 @@ def _other_family(p: Path, parquet_dir: str | None, options: dict[str, Any],
     return row
 
 
-def _attempt(row: dict[str, Any], run: Callable[[], Any]) -> Any:
+_A = TypeVar("_A")
+
+
+def _attempt(row: JsonObject, run: Callable[[], _A]) -> _A | None:
     """``run()``'s analysis, or None with the row's error set: one bad file must not end a
     fleet run."""
     try:
@@ -212,8 +219,8 @@ def _attempt(row: dict[str, Any], run: Callable[[], Any]) -> Any:
     return None
 
 
-def run_local(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
-              jobs: int | None = None, report_dir: str | None = None) -> list[dict[str, Any]]:
+def run_local(paths: list[str], parquet_dir: str | None, options: JsonObject,
+              jobs: int | None = None, report_dir: str | None = None) -> list[JsonObject]:
     """Every file on a pool of local processes (all cores by default)."""
     jobs = jobs or os.cpu_count() or 1
     if jobs == 1 or len(paths) == 1:
@@ -224,8 +231,8 @@ def run_local(paths: list[str], parquet_dir: str | None, options: dict[str, Any]
                              [report_dir] * n))
 
 
-def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
-             scheduler: Any, report_dir: str | None = None) -> list[dict[str, Any]]:
+def run_dask(paths: list[str], parquet_dir: str | None, options: JsonObject,
+             scheduler: object, report_dir: str | None = None) -> list[JsonObject]:
     """Every file as a task on Dask distributed (``scheduler``: an address or a cluster)."""
     try:
         from dask.distributed import Client
@@ -245,8 +252,8 @@ def run_dask(paths: list[str], parquet_dir: str | None, options: dict[str, Any],
 
 
 def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
-                  options: dict[str, Any] | None = None, jobs: int | None = None,
-                  scheduler: Any = None, report_dir: str | None = None) -> dict[str, Any]:
+                  options: JsonObject | None = None, jobs: int | None = None,
+                  scheduler: object = None, report_dir: str | None = None) -> JsonObject:
     """Analyse every capture in ``inputs``; the fleet summary (see ``summarise``). With
     ``report_dir`` each session's own report is written under it (``sessions/``) and its
     row links it (``report``); ``write_fleet_report`` adds the fleet's."""
@@ -262,7 +269,7 @@ def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
     return summarise(rows)
 
 
-def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+def summarise(rows: list[JsonObject]) -> JsonObject:
     """Sessions sorted by machine and session, one aggregate row per machine and the
     fleet's totals (findings per severity summed in ``severities``); ``columns``: the
     families' columns (``fleet_columns``) as plain dicts; ``verdict``: the fleet in a word
@@ -270,7 +277,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     cols = fleet_columns()
     totals = [c.key for c in cols if c.total]
     rows = sorted(rows, key=lambda r: (str(r["machine"]), str(r["session"])))
-    machines: dict[str, dict[str, Any]] = {}
+    machines: dict[str, JsonObject] = {}
     for r in rows:
         m = machines.setdefault(r["machine"], {
             "machine": r["machine"], "sessions": 0, "errors": 0, "damaged": 0,
@@ -310,14 +317,14 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def verdict(s: dict[str, Any]) -> dict[str, str]:
+def verdict(s: JsonObject) -> dict[str, str]:
     """The fleet in a word (``INCOMPLETE``: a capture damaged or not analysed; ``HAZARD``:
     a finding of that severity; ``ERROR``: one of that; else ``CLEAN``) and a sentence
     naming the machines concerned."""
     t = s["totals"]
     sev = t["severities"]
 
-    def where(test: Callable[[dict[str, Any]], Any]) -> str:
+    def where(test: Callable[[JsonObject], object]) -> str:
         names = [str(m["machine"]) for m in s["machines"] if test(m)]
         return f"on {', '.join(names[:5])}{' …' if len(names) > 5 else ''}"
 
@@ -338,14 +345,14 @@ def verdict(s: dict[str, Any]) -> dict[str, str]:
     return {"word": word, "text": text}
 
 
-def totals_text(counts: dict[str, Any], columns: list[dict[str, Any]]) -> str:
+def totals_text(counts: JsonObject, columns: list[JsonObject]) -> str:
     """The families' totals of a fleet or a machine as text: ``, 3 hazards, 10 starvations``
     (their ``summary`` columns), or nothing."""
     return "".join(f", {counts.get(c['key']) or 0} {c['label']}" for c in columns
                    if c["total"] and c["summary"])
 
 
-def write_fleet_report(summary: dict[str, Any], out_dir: str | Path) -> dict[str, Path]:
+def write_fleet_report(summary: JsonObject, out_dir: str | Path) -> dict[str, Path]:
     """``fleet.json``, ``summary.md`` and a self-contained ``index.html`` (the page pieces
     and look of a session's analysis report: the verdict first, then the plots and the
     tables, each session's row linking its own report when one was written)."""
@@ -368,7 +375,7 @@ def fleet_datasets(parquet_dir: str | Path) -> list[str]:
     """The datasets a fleet run wrote into ``parquet_dir`` (each table's folder, a family's
     under its name), as paths to say: ``t/exchanges``, never ``t//exchanges``."""
     root = Path(parquet_dir)
-    out = []
+    out: list[str] = []
     for d in sorted(q for q in root.glob("*") if q.is_dir() and not q.name.startswith(".")):
         subs = [q for q in sorted(d.iterdir()) if q.is_dir() and not q.name.startswith(("machine=", "."))]
         out.extend(str(q) for q in subs) if subs else out.append(str(d))
@@ -380,7 +387,7 @@ def count(n: int, noun: str) -> str:
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
-def _fmt(v: Any, spec: str = ".2f") -> str:
+def _fmt(v: object, spec: str = ".2f") -> str:
     if v is None:
         return "–"
     if isinstance(v, float):

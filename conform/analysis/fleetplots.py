@@ -7,28 +7,28 @@ before the tables are read."""
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Any
 
 import numpy as np
 
 from conform.analysis.plots import legend_beside, to_png, use_agg
+from conform.jsondoc import JsonObject
 
 
-def _counted(s: dict[str, Any]) -> list[tuple[str, str]]:
+def _counted(s: JsonObject) -> list[tuple[str, str]]:
     """(key, label) of what is counted per session: error findings, then the families'
     summary columns."""
     return [("error_findings", "error findings"),
             *((c["key"], c["label"]) for c in s.get("columns", []) if c["summary"])]
 
 
-def _value(r: dict[str, Any], key: str) -> float:
+def _value(r: JsonObject, key: str) -> float:
     if key == "error_findings":
         return float((r.get("severities") or {}).get("error", 0))
     v = r.get(key)
     return float(v) if isinstance(v, (int, float)) else np.nan
 
 
-def sessions_plot(s: dict[str, Any]) -> str | None:
+def sessions_plot(s: JsonObject) -> str | None:
     """Every analysed session at its start: its counts and its round trip (p50 to p99,
     p95 marked), one colour per machine."""
     rows = [r for r in s["sessions"] if r["state"] != "error" and r.get("started") is not None]
@@ -62,7 +62,7 @@ def sessions_plot(s: dict[str, Any]) -> str | None:
     return to_png(fig)
 
 
-def machines_plot(s: dict[str, Any]) -> str | None:
+def machines_plot(s: JsonObject) -> str | None:
     """Per machine: the counts summed over its sessions, and its worst p95 and p99 round
     trip."""
     ms = s["machines"]
@@ -88,7 +88,7 @@ def machines_plot(s: dict[str, Any]) -> str | None:
     return to_png(fig)
 
 
-def fleet_plots(s: dict[str, Any]) -> dict[str, str]:
+def fleet_plots(s: JsonObject) -> dict[str, str]:
     """The fleet report's plots (key -> base64 PNG); one that fails is left out and said."""
     out: dict[str, str] = {}
     for key, fn in (("sessions", sessions_plot), ("machines", machines_plot)):

@@ -14,11 +14,25 @@ from __future__ import annotations
 import base64
 import io
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from conform.analysis.result import Reported
+
 MAX_POINTS = 20_000
+
+R = TypeVar("R", bound="Reported")   # a family's analysis: its plots read its own records
+
+
+class Plotted(Protocol):
+    def plots(self) -> dict[str, str]:
+        """Its plots: key -> base64 PNG."""
 
 
 def use_agg() -> None:
@@ -27,7 +41,7 @@ def use_agg() -> None:
     matplotlib.use("Agg")
 
 
-def new_figure(w: float = 7.5, h: float = 3.2) -> Any:
+def new_figure(w: float = 7.5, h: float = 3.2) -> tuple[Figure, Axes]:
     use_agg()
     import matplotlib.pyplot as plt
 
@@ -35,7 +49,7 @@ def new_figure(w: float = 7.5, h: float = 3.2) -> Any:
     return fig, ax
 
 
-def to_png(fig: Any) -> str:
+def to_png(fig: Figure) -> str:
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -45,29 +59,32 @@ def to_png(fig: Any) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def legend_beside(ax: Any, handles: Any = None, labels: Any = None) -> None:
+def legend_beside(ax: Axes, handles: list[Artist] | None = None,
+                  labels: list[str] | None = None) -> None:
     """A legend beside the axes, never over the curves."""
     if handles is None:
         handles, labels = ax.get_legend_handles_labels()
     if handles:
+        if labels is None:
+            labels = [str(h.get_label()) for h in handles]
         ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0),
                   borderaxespad=0.0, fontsize=8, frameon=False)
 
 
-def window(a: Any, t: np.ndarray) -> np.ndarray:
+def window(a: object, t: np.ndarray) -> np.ndarray:
     """Mask of times (seconds from the start) inside the report's time range."""
     lo, hi = getattr(a, "time_range", None) or (-np.inf, np.inf)
     return (t >= lo) & (t <= hi)
 
 
-def limit(ax: Any, a: Any) -> None:
+def limit(ax: Axes, a: object) -> None:
     rng = getattr(a, "time_range", None)
     if rng:
         lo, hi = rng
         ax.set_xlim(left=lo if np.isfinite(lo) else None, right=hi if np.isfinite(hi) else None)
 
 
-def over_time(fig: Any, ax: Any, a: Any, ylabel: str, title: str, legend: bool = True) -> str:
+def over_time(fig: Figure, ax: Axes, a: object, ylabel: str, title: str, legend: bool = True) -> str:
     """Labels, the report's time range and the legend of a plot over time (``legend``
     False: the caller placed it, e.g. for twin axes); its PNG."""
     ax.set_xlabel("s from the start")
@@ -93,7 +110,7 @@ def thin_points(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.asarray(a)[idx] for a in arrays)
 
 
-def draw(a: Any, makers: Iterable[tuple[str, Callable[[Any], str | None]]]) -> dict[str, str]:
+def draw(a: R, makers: Iterable[tuple[str, Callable[[R], str | None]]]) -> dict[str, str]:
     """Every plot ``makers`` draws of analysis ``a`` (key -> base64 PNG); one that fails
     becomes a note of ``a`` instead of sinking the report."""
     out = {}
@@ -108,6 +125,6 @@ def draw(a: Any, makers: Iterable[tuple[str, Callable[[Any], str | None]]]) -> d
     return out
 
 
-def all_plots(a: Any) -> dict[str, str]:
+def all_plots(a: Plotted) -> dict[str, str]:
     """The plots of a family's analysis (its ``plots()``)."""
     return a.plots()

@@ -26,6 +26,7 @@ import zstandard
 
 from conform.capture.scan import data_records, decompress_chunk
 from conform.capture.schemas import TOPIC_HOST, TOPIC_LINK, TOPIC_UNIT
+from conform.jsondoc import JsonObject
 
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
 OP_METADATA, OP_DATA_END = 0x0C, 0x0F
@@ -115,7 +116,7 @@ class RawCapture:
     metadata: dict[str, dict[str, str]]
     host: Direction
     unit: Direction
-    link_events: list[dict[str, Any]]
+    link_events: list[JsonObject]
     topics: dict[str, int]  # messages per topic
 
     released: bool = False  # the per-read tables and bytes were let go (``release``)
@@ -140,7 +141,7 @@ class _Collector:
         self.parts: dict[str, list[Direction]] = {"host": [], "unit": []}
         self.status: ReadStatus | None = None
         self.raw_encoded: dict[str, bool] = {"host": False, "unit": False}
-        self.link: list[dict[str, Any]] = []
+        self.link: list[JsonObject] = []
         self.topics: dict[str, int] = {}
         self.count = 0
 

@@ -14,11 +14,17 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    import jinja2
+
+    from conform.analysis.result import Reported
+    from conform.families import AnalysisResult
 
 TEMPLATES = Path(__file__).with_name("templates")
 
@@ -37,7 +43,7 @@ def _clean(x: Any, finite: bool = True) -> Any:
     return x
 
 
-def findings_document(a: Any) -> dict[str, Any]:
+def findings_document(a: Any) -> dict[str, object]:
     return _clean({
         "capture": a.path,
         "variant": a.variant.id,
@@ -47,7 +53,7 @@ def findings_document(a: Any) -> dict[str, Any]:
     })
 
 
-def _env(*folders: Path) -> Any:
+def _env(*folders: Path) -> jinja2.Environment:
     """Templates from ``folders`` (a family's) first, then the engine's and the shared
     pieces."""
     import jinja2
@@ -60,11 +66,11 @@ def _env(*folders: Path) -> Any:
                               trim_blocks=True, lstrip_blocks=True)
 
 
-def fmt_ms(v: Any) -> str:
+def fmt_ms(v: float | None) -> str:
     return "–" if v is None or v != v else f"{v * 1000:.3f}"
 
 
-def base_context(a: Any) -> dict[str, Any]:
+def base_context(a: Reported) -> dict[str, object]:
     """What every analysis report's templates get: the analysis ``a``, its metrics ``m``
     (plain, non-finite kept), ``findings``, their number per severity and per kind, the
     notes and ``ms`` (seconds as milliseconds)."""
@@ -87,8 +93,8 @@ def report_folder(out_dir: str | Path) -> Path:
     return d
 
 
-def render_report(out_dir: str | Path, templates: Path, context: dict[str, Any],
-                  document: dict[str, Any]) -> dict[str, Path]:
+def render_report(out_dir: str | Path, templates: Path, context: dict[str, object],
+                  document: dict[str, object]) -> dict[str, Path]:
     """A family's report: ``index.html`` and ``summary.md`` from its ``templates`` folder
     (``report.html.j2``, ``summary.md.j2``) with ``context`` (``base_context`` and its own
     keys), and ``document`` as ``findings.json``."""
@@ -102,9 +108,9 @@ def render_report(out_dir: str | Path, templates: Path, context: dict[str, Any],
     return paths
 
 
-def write_report(a: Any, out_dir: str | Path) -> dict[str, Path]:
+def write_report(a: AnalysisResult, out_dir: str | Path) -> dict[str, Path]:
     """The report of any family's analysis (its ``write_report``)."""
-    return a.write_report(out_dir)
+    return a.write_report(str(out_dir))
 
 
 def write_parquet(a: Any, out_dir: str | Path, row_group: int | None = None

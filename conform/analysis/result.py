@@ -11,7 +11,12 @@ import json
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import KW_ONLY, asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
+
+from conform.jsondoc import JsonObject
+
+if TYPE_CHECKING:
+    from conform.analysis.rawread import ReadStatus
 
 SERIOUS = ("hazard", "error")
 """The severities ``conform analyze`` lists one by one under the findings line."""
@@ -27,13 +32,27 @@ class Finding:
     severity: str         # info | warning | error | hazard
     message: str
     clause: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, object] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """Its fields, ``extra``'s keys in place of ``extra`` (the ``--json`` shape)."""
         d = asdict(self)
         d.update(d.pop("extra"))
         return d
+
+
+class Reported(Protocol):
+    """What the engine's report pieces read of any family's analysis: its findings, metrics
+    (``finding_counts``...) and notes (a plot that failed adds one)."""
+
+    @property
+    def findings(self) -> Sequence[Finding]: ...
+
+    @property
+    def metrics(self) -> JsonObject: ...
+
+    @property
+    def notes(self) -> list[str]: ...
 
 
 @dataclass
@@ -54,7 +73,7 @@ class ResultBase:
     complete: bool = True
     if TYPE_CHECKING:   # the family's fields, after its own records
         findings: list[Finding]
-        metrics: dict[str, Any]
+        metrics: JsonObject
 
     def kinds(self) -> dict[str, int]:
         """How many findings of each kind (all of them, listed or not)."""
@@ -63,7 +82,7 @@ class ResultBase:
     def hazards(self) -> list[Finding]:
         return [f for f in self.findings if f.severity == "hazard"]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         """``findings.json``: the analysis as a document, named by its family."""
         return {"format": f"conform-{self.family}-analysis/1", "path": self.path,
                 "family": self.family, "variant": self.variant, "detected": self.detected,
@@ -100,7 +119,7 @@ class ResultBase:
         return {"json": d / "findings.json", "md": d / "summary.md", "html": d / "index.html"}
 
     def fleet_row_of(self, exchanges: int, exchanges_per_s: float,
-                     rtt_ms: Sequence[float | None], **own: Any) -> dict[str, Any]:
+                     rtt_ms: Sequence[float | None], **own: object) -> dict[str, object]:
         """A fleet row (``fleet_row``): the engine's columns from the metrics, ``exchanges``
         and their rate, the p50/p95/p99/max round trip in ms, then the family's ``own``."""
         p50, p95, p99, top = rtt_ms
@@ -111,7 +130,7 @@ class ResultBase:
                 "rtt_p99_ms": p99, "rtt_max_ms": top, **own}
 
 
-    def add_notes(self, notes: Sequence[str], status: Any) -> None:
+    def add_notes(self, notes: Sequence[str], status: ReadStatus) -> None:
         """``notes`` from reading the capture, then whether the file was whole (``status``:
         conform.analysis.rawread's ``complete`` and ``problem``)."""
         self.notes += notes
@@ -120,7 +139,7 @@ class ResultBase:
             self.notes.append(f"capture incomplete: {status.problem}")
 
 
-def capture_variant(metadata: Mapping[str, Any], asked: str | None, known: Collection[str],
+def capture_variant(metadata: JsonObject, asked: str | None, known: Collection[str],
                     default: str, title: str) -> tuple[str, list[str]]:
     """The variant to analyse a capture as: the one ``asked`` for, else the one its session
     metadata names, else ``default``; a name ``known`` lacks falls back to ``default`` with a

@@ -24,9 +24,9 @@ ROW_GROUP = 131_072
 Slice = Callable[[int, int], pd.DataFrame]
 
 
-def text_categories(df: pd.DataFrame) -> dict[str, list[Any] | None]:
+def text_categories(df: pd.DataFrame) -> dict[str, list[str] | None]:
     """Per object column: its categories if its values repeat, else None (plain text)."""
-    out: dict[str, list[Any] | None] = {}
+    out: dict[str, list[str] | None] = {}
     for col in df.columns:
         if df[col].dtype == object:
             u = categories_of(df[col].to_numpy())
@@ -34,12 +34,12 @@ def text_categories(df: pd.DataFrame) -> dict[str, list[Any] | None]:
     return out
 
 
-def categories_of(values: Any) -> list[str]:
+def categories_of(values: np.ndarray) -> list[str]:
     """The distinct values of a text column, sorted, without None/NaN."""
     return sorted(str(x) for x in pd.unique(values) if x is not None and x == x)
 
 
-def _coded(df: pd.DataFrame, cats: dict[str, list[Any] | None]) -> pd.DataFrame:
+def _coded(df: pd.DataFrame, cats: dict[str, list[str] | None]) -> pd.DataFrame:
     for col, c in cats.items():
         if col not in df:
             continue
@@ -61,7 +61,7 @@ def open_writer(path: Path, schema: pa.Schema) -> pq.ParquetWriter:
     return pq.ParquetWriter(path, schema, use_dictionary=coded)
 
 
-def write_table(path: Path, n: int, take: Slice, cats: dict[str, list[Any] | None],
+def write_table(path: Path, n: int, take: Slice, cats: dict[str, list[str] | None],
                 rows: int = ROW_GROUP) -> Path:
     """Write ``take(lo, hi)`` for every slice of ``n`` rows as one row group each."""
     writer: pq.ParquetWriter | None = None
@@ -147,7 +147,7 @@ class ParquetStream:
     capture whose earliest byte comes later in the file, rewritten a row group at a time."""
 
     def __init__(self, out_dir: str | Path, only: tuple[str, ...] | None = None,
-                 files: dict[str, Path] | None = None, const: dict[str, Any] | None = None,
+                 files: dict[str, Path] | None = None, const: dict[str, object] | None = None,
                  part: Path | None = None) -> None:
         """``only``: the tables to write (all by default); ``files``: a path per table
         instead of ``DIR/NAME.parquet``; ``part``: every table as ``DIR/NAME/part`` instead
@@ -193,7 +193,7 @@ class ParquetStream:
 
     def write(self, ex: pd.DataFrame, host: Any, unit: Any, unit_base: int,
               frames_frame: Callable[..., pd.DataFrame],
-              host_columns: dict[str, Any] | None = None) -> None:
+              host_columns: dict[str, object] | None = None) -> None:
         """Exchange rows with their host lines, and unit lines (numbered from ``unit_base``);
         ``frames_frame(lines, t0, base=, arrow_text=)`` is the family's frames table, and
         ``host_columns`` the columns it adds to the host lines' one."""

@@ -35,6 +35,7 @@ from conform.capture.schemas import (
     CaptureFields,
 )
 from conform.capture.session import CaptureSession, Decoder, Record, to_ns
+from conform.jsondoc import JsonObject
 
 BATCH_BYTES = 32 * 1024  # a direction's pending bytes that force a batch out
 
@@ -43,10 +44,10 @@ EXCHANGE_KEYS = NEUTRAL.exchange_keys
 BATCH_KEYS = {TOPIC_FRAMES: FRAME_KEYS, TOPIC_EXCHANGES: EXCHANGE_KEYS}  # a batched topic's
 
 
-def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str, Any]:
+def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> JsonObject:
     """Items as one batch: ``count`` and one list per field (JSON of lists costs less), from
     tuples whose fields are in ``keys`` order."""
-    out: dict[str, Any] = {"count": len(items)}
+    out: JsonObject = {"count": len(items)}
     if items:
         out.update(zip(keys, map(list, zip(*items, strict=True)), strict=True))
     else:
@@ -54,7 +55,7 @@ def row_columns(items: list[tuple[Any, ...]], keys: tuple[str, ...]) -> dict[str
     return out
 
 
-def rows(payload: dict[str, Any], keys: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+def rows(payload: JsonObject, keys: tuple[str, ...] = ()) -> list[JsonObject]:
     """The items of a batch: the fields ``keys`` (None where a batch lacks one) and every
     other column it carries (a family's fields: the batch names them, so no family is
     needed to read it); ``ValueError`` if its columns do not hold together."""
@@ -72,7 +73,7 @@ def rows(payload: dict[str, Any], keys: tuple[str, ...] = ()) -> list[dict[str, 
         if n else []
 
 
-def is_batch(payload: dict[str, Any]) -> bool:
+def is_batch(payload: JsonObject) -> bool:
     return "count" in payload
 
 
@@ -202,11 +203,11 @@ class BatchSession(CaptureSession):
         return self.flush()
 
 
-def is_raw_batch(payload: dict[str, Any]) -> bool:
+def is_raw_batch(payload: JsonObject) -> bool:
     return "reads" in payload
 
 
-def payload_bytes(payload: dict[str, Any]) -> bytes:
+def payload_bytes(payload: JsonObject) -> bytes:
     """The bytes a raw message carries (a format 1 read or a format 2 batch: both keep them
     as base64 in ``data``); ``ValueError`` if they are not base64."""
     try:
@@ -215,7 +216,7 @@ def payload_bytes(payload: dict[str, Any]) -> bytes:
         raise ValueError(f"bad raw message: {exc}") from None
 
 
-def unbatch_arrays(raw: bytes | dict[str, Any]) -> tuple[bytes, Any, int, Any, Any, Any]:
+def unbatch_arrays(raw: bytes | JsonObject) -> tuple[bytes, Any, int, Any, Any, Any]:
     """A ``conform.RawBatch`` message (JSON text or parsed) as (bytes, lengths, offset, t_read,
     t_first, order), numpy arrays; ``ValueError`` if it does not hold together."""
     try:
@@ -239,7 +240,7 @@ def unbatch_arrays(raw: bytes | dict[str, Any]) -> tuple[bytes, Any, int, Any, A
             reads["t_first"].astype(np.float64), reads["order"].astype(np.int64))
 
 
-def unbatch_raw(payload: dict[str, Any], log_time: int) -> list[dict[str, Any]]:
+def unbatch_raw(payload: JsonObject, log_time: int) -> list[JsonObject]:
     """The reads of a ``conform.RawBatch`` as chunk dicts like format 1's (with ``bytes``);
     ``ValueError`` if the batch does not hold together."""
     data, lengths, offset, t_read, t_first, order = unbatch_arrays(payload)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable
+from typing import Self
 
 from conform.capture.merge import HostLines, Merger
 from conform.capture.recorder import Recorder
@@ -39,6 +40,14 @@ class _Live:
     def stop(self) -> None:
         self.runner.stop()
 
+    asked = False   # a stop asked by a signal, acted on by :func:`run_until_signal`'s loop
+
+    def ask_stop(self) -> None:
+        """What a signal handler may call: it only records the request. ``stop()`` sets an
+        ``Event``, whose lock the interrupted main thread may hold (inside ``Event.wait``):
+        called from the handler it would wait for itself forever."""
+        self.asked = True
+
     @property
     def failure(self) -> str | None:
         """Why the capture ended by itself (a port lost for good), else ``None``."""
@@ -47,7 +56,7 @@ class _Live:
     def _event(self, kind: str, side: str, detail: str) -> None:
         self.recorder.link_event(kind, detail, side=side)
 
-    def __enter__(self):  # type: ignore[no-untyped-def]
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -185,7 +194,7 @@ class SniffCapture(_Live):
         self.runner.start()
         self._ticker.start()
 
-    def _emit(self, chunks: list) -> None:  # type: ignore[type-arg]
+    def _emit(self, chunks: list) -> None:
         for c in chunks:
             self.recorder.chunk(c.direction, c.data, c.t_read, c.t_first)
 
@@ -230,13 +239,14 @@ def run_until_signal(live: _Live) -> str | None:
     previous = {}
 
     def stop(signum: int, frame: object) -> None:
-        live.stop()
+        live.ask_stop()
 
     for sig in STOP_SIGNALS:
         previous[sig] = signal.signal(sig, stop)
     try:
-        while not live.wait(0.2):
-            pass
+        while not live.wait(0.05):
+            if live.asked:
+                live.stop()
     finally:
         live.close()
         for sig, handler in previous.items():

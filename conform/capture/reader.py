@@ -19,7 +19,7 @@ import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from mcap.records import Channel, Message
 
@@ -32,6 +32,7 @@ from conform.capture.schemas import (
     TOPIC_LINK,
     TOPIC_LOG,
 )
+from conform.jsondoc import JsonObject
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -42,7 +43,7 @@ class CaptureMessage:
     topic: str
     log_time: int  # ns since the epoch
     sequence: int
-    payload: dict[str, Any]
+    payload: JsonObject
 
 
 class Capture:
@@ -107,7 +108,7 @@ class Capture:
         return self._metadata
 
     # -- typed views -----------------------------------------------------------------------
-    def raw_chunks(self, direction: str | None = None) -> Iterator[dict[str, Any]]:
+    def raw_chunks(self, direction: str | None = None) -> Iterator[JsonObject]:
         """Raw chunks (reads), both directions merged in file order, with ``bytes`` added.
 
         Format 2 batches are unpacked into one dict per read (``direction``, ``bytes``,
@@ -116,7 +117,7 @@ class Capture:
         if direction is not None and direction not in DIRECTION_TOPIC:
             raise ValueError(f"direction must be 'host' or 'unit', not {direction!r}")
         topics = [DIRECTION_TOPIC[direction]] if direction else list(DIRECTION_TOPIC.values())
-        batched: list[dict[str, Any]] = []  # both directions: put back in call order
+        batched: list[JsonObject] = []  # both directions: put back in call order
         for m in self.messages(topics):
             if is_raw_batch(m.payload):
                 try:
@@ -140,11 +141,11 @@ class Capture:
         batched.sort(key=lambda r: r["order"])
         yield from batched
 
-    def _topic(self, topic: str) -> Iterator[dict[str, Any]]:
+    def _topic(self, topic: str) -> Iterator[JsonObject]:
         for m in self.messages([topic]):
             yield {**m.payload, "log_time": m.log_time}
 
-    def _batched(self, topic: str) -> Iterator[dict[str, Any]]:
+    def _batched(self, topic: str) -> Iterator[JsonObject]:
         for m in self.messages([topic]):
             if not is_batch(m.payload):  # format 1: one message per item
                 yield {**m.payload, "log_time": m.log_time}
@@ -157,19 +158,19 @@ class Capture:
             for item in items:
                 yield {**item, "log_time": m.log_time}
 
-    def frames(self) -> Iterator[dict[str, Any]]:
+    def frames(self) -> Iterator[JsonObject]:
         """Decoded lines (``conform.Frame`` dicts with the fields of the family that decoded
         them), unpacked from format 2 batches."""
         return self._batched(TOPIC_FRAMES)
 
-    def exchanges(self) -> Iterator[dict[str, Any]]:
+    def exchanges(self) -> Iterator[JsonObject]:
         """Exchanges (``conform.Exchange`` dicts), unpacked from format 2 batches."""
         return self._batched(TOPIC_EXCHANGES)
 
-    def link_events(self) -> Iterator[dict[str, Any]]:
+    def link_events(self) -> Iterator[JsonObject]:
         return self._topic(TOPIC_LINK)
 
-    def logs(self) -> Iterator[dict[str, Any]]:
+    def logs(self) -> Iterator[JsonObject]:
         return self._topic(TOPIC_LOG)
 
     def stream(self, direction: str) -> bytes:
@@ -182,7 +183,7 @@ class Capture:
 
         by_topic = {t: d for d, t in DIRECTION_TOPIC.items()}
         if topic in DIRECTION_TOPIC or topic in by_topic:
-            rows: Iterable[dict[str, Any]] = self.raw_chunks(by_topic.get(topic, topic))
+            rows: Iterable[JsonObject] = self.raw_chunks(by_topic.get(topic, topic))
         elif topic == TOPIC_FRAMES:
             rows = self.frames()
         elif topic == TOPIC_EXCHANGES:

@@ -308,7 +308,7 @@ def _make_decoder(variant: str, baud: int | None) -> tuple[Decoder | None, str]:
 
 def _int_or_none(value: object) -> int | None:
     try:
-        return int(value) if value not in (None, "") else None  # type: ignore[arg-type]
+        return int(value) if value not in (None, "") else None  # type: ignore[call-overload]
     except (TypeError, ValueError):
         return None
 

@@ -12,8 +12,10 @@ import binascii
 import json
 import os
 from collections import Counter
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
@@ -206,7 +208,7 @@ def recover(
             library = first.library if isinstance(first, Header) else ""
             profile = first.profile if isinstance(first, Header) else ""
             writer.start(profile=profile, library=library or f"conform {__version__}")
-            pending = [first] if first is not None and not isinstance(first, Header) else []
+            pending: list[object] = [first] if first is not None and not isinstance(first, Header) else []
             for rec in _chain(pending, records):
                 if isinstance(rec, Schema) and rec.id not in schemas:
                     schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
@@ -258,6 +260,9 @@ def recover(
     return RecoverResult(src, dst, status, count, last_ns)
 
 
-def _chain(first: list, rest):  # type: ignore[no-untyped-def]
+_T = TypeVar("_T")
+
+
+def _chain(first: Iterable[_T], rest: Iterable[_T]) -> Iterator[_T]:
     yield from first
     yield from rest

@@ -148,7 +148,7 @@ def decompress_chunk(compression: str, raw: bytes, usize: int, crc: int) -> byte
 def _lz4_bounded(raw: bytes, usize: int) -> bytes:
     """An lz4 frame decompressed to at most ``usize`` bytes (a bomb stops there)."""
     try:
-        import lz4.frame  # type: ignore[import-not-found]
+        import lz4.frame
     except ImportError:
         raise ValueError("lz4 chunk, but the lz4 package is not installed") from None
     try:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Any
+
+from conform.jsondoc import JsonObject
 
 FORMAT_VERSION = "2"  # 1: one message per read and per line; 2: batches
 PROFILE = ""  # plain MCAP, JSON messages (no ROS profile)
@@ -30,7 +31,7 @@ LINK_KINDS = ("open", "close", "error", "disconnect", "reconnect", "baud")
 _TIME = {"type": "number", "description": "seconds since the Unix epoch (clock in metadata)"}
 _NULLABLE_TIME = {"type": ["number", "null"], "description": _TIME["description"]}
 
-RAW_CHUNK: dict[str, Any] = {
+RAW_CHUNK: JsonObject = {
     "title": "conform.RawChunk",
     "description": "Bytes as one read returned them, in one direction",
     "type": "object",
@@ -50,7 +51,7 @@ RAW_CHUNK: dict[str, Any] = {
     "required": ["direction", "data", "hex", "text", "length", "offset", "t_read", "t_first"],
 }
 
-FRAME: dict[str, Any] = {
+FRAME: JsonObject = {
     "title": "conform.Frame",
     "description": "One decoded line: a command from the host or an answer from the unit",
     "type": "object",
@@ -66,7 +67,7 @@ FRAME: dict[str, Any] = {
     "required": ["direction", "kind", "text", "offset", "length", "t_first", "t_last"],
 }
 
-EXCHANGE: dict[str, Any] = {
+EXCHANGE: JsonObject = {
     "title": "conform.Exchange",
     "description": "A command paired with its answer (or its lack of one)",
     "type": "object",
@@ -97,8 +98,8 @@ class CaptureFields:
     per field, so reading one needs no family (``batch.rows``).
     """
 
-    frame: tuple[tuple[str, dict[str, Any]], ...] = ()
-    exchange: tuple[tuple[str, dict[str, Any]], ...] = ()
+    frame: tuple[tuple[str, JsonObject], ...] = ()
+    exchange: tuple[tuple[str, JsonObject], ...] = ()
 
     @property
     def frame_keys(self) -> tuple[str, ...]:
@@ -108,13 +109,13 @@ class CaptureFields:
     def exchange_keys(self) -> tuple[str, ...]:
         return tuple(EXCHANGE["properties"]) + tuple(k for k, _ in self.exchange)
 
-    def frame_schema(self) -> dict[str, Any]:
+    def frame_schema(self) -> JsonObject:
         return _with(FRAME, self.frame)
 
-    def exchange_schema(self) -> dict[str, Any]:
+    def exchange_schema(self) -> JsonObject:
         return _with(EXCHANGE, self.exchange)
 
-    def channels(self) -> dict[str, tuple[str, dict[str, Any]]]:
+    def channels(self) -> dict[str, tuple[str, JsonObject]]:
         """topic -> (schema name, schema) of a format 2 capture with these fields."""
         if not (self.frame or self.exchange):
             return CHANNELS
@@ -124,7 +125,7 @@ class CaptureFields:
                         _batch_of("conform.ExchangeBatch", self.exchange_schema())))
 
 
-def _with(item: dict[str, Any], extra: tuple[tuple[str, dict[str, Any]], ...]) -> dict[str, Any]:
+def _with(item: JsonObject, extra: tuple[tuple[str, JsonObject], ...]) -> JsonObject:
     clash = [k for k, _ in extra if k in item["properties"]]
     if clash:
         raise ValueError(f"{item['title']}: a family field may not replace {clash[0]!r}")
@@ -133,7 +134,7 @@ def _with(item: dict[str, Any], extra: tuple[tuple[str, dict[str, Any]], ...]) -
 
 NEUTRAL = CaptureFields()  # a capture recorded without a family's decoder
 
-LINK_EVENT: dict[str, Any] = {
+LINK_EVENT: JsonObject = {
     "title": "conform.LinkEvent",
     "description": "Something that happened to a port, not to the bytes on it",
     "type": "object",
@@ -147,7 +148,7 @@ LINK_EVENT: dict[str, Any] = {
 }
 
 # Foxglove's published foxglove.Log JSON schema (the fields every Log panel reads).
-FOXGLOVE_LOG: dict[str, Any] = {
+FOXGLOVE_LOG: JsonObject = {
     "title": "foxglove.Log",
     "description": "A log message",
     "type": "object",
@@ -177,8 +178,8 @@ FOXGLOVE_LOG: dict[str, Any] = {
     "required": ["timestamp", "level", "message", "name", "file", "line"],
 }
 
-def _batch_of(title: str, item: dict[str, Any]) -> dict[str, Any]:
-    props: dict[str, Any] = {"count": {"type": "integer", "minimum": 0,
+def _batch_of(title: str, item: JsonObject) -> JsonObject:
+    props: JsonObject = {"count": {"type": "integer", "minimum": 0,
                                        "description": "items in this batch"}}
     for key, prop in item["properties"].items():
         props[key] = {"type": "array", "items": prop, "description": prop.get("description", key)}
@@ -192,7 +193,7 @@ def _batch_of(title: str, item: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-RAW_BATCH: dict[str, Any] = {
+RAW_BATCH: JsonObject = {
     "title": "conform.RawBatch",
     "description": "Consecutive reads in one direction, their bytes stored once",
     "type": "object",
@@ -217,8 +218,8 @@ RAW_BATCH: dict[str, Any] = {
 FRAME_BATCH = _batch_of("conform.FrameBatch", FRAME)
 EXCHANGE_BATCH = _batch_of("conform.ExchangeBatch", EXCHANGE)
 
-def _layout(raw: tuple[str, dict[str, Any]], frames: tuple[str, dict[str, Any]],
-            exchanges: tuple[str, dict[str, Any]]) -> dict[str, tuple[str, dict[str, Any]]]:
+def _layout(raw: tuple[str, JsonObject], frames: tuple[str, JsonObject],
+            exchanges: tuple[str, JsonObject]) -> dict[str, tuple[str, JsonObject]]:
     return {TOPIC_HOST: raw, TOPIC_UNIT: raw, TOPIC_FRAMES: frames, TOPIC_EXCHANGES: exchanges,
             TOPIC_LINK: ("conform.LinkEvent", LINK_EVENT),
             TOPIC_LOG: ("foxglove.Log", FOXGLOVE_LOG)}
@@ -234,5 +235,5 @@ CHANNELS = _layout(("conform.RawBatch", RAW_BATCH), ("conform.FrameBatch", FRAME
                    ("conform.ExchangeBatch", EXCHANGE_BATCH))
 
 
-def schema_bytes(schema: dict[str, Any]) -> bytes:
+def schema_bytes(schema: JsonObject) -> bytes:
     return json.dumps(schema, separators=(",", ":"), sort_keys=True).encode()

@@ -12,7 +12,7 @@ import base64
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 from conform.capture.schemas import (
     DIRECTION_TOPIC,
@@ -32,7 +32,7 @@ class Record:
 
     topic: str
     log_time: int
-    payload: dict[str, Any]
+    payload: dict[str, object]
 
 
 class Decoder(Protocol):
@@ -78,7 +78,7 @@ def wire_time(n_bytes: int, baud: int | None) -> float:
 
 
 def log_payload(level: str | int, message: str, t: float, name: str, file: str = "",
-                line: int = 0) -> dict[str, Any]:
+                line: int = 0) -> dict[str, object]:
     """A ``foxglove.Log`` message."""
     ns = to_ns(t)
     if isinstance(level, str):

@@ -46,7 +46,7 @@ class McapSink:
         chunk_size: int = CHUNK_SIZE,
         compression: CompressionType = CompressionType.ZSTD,
         library: str = LIBRARY,
-        topics: Mapping[str, tuple[str, dict[str, Any]]] = CHANNELS,
+        topics: Mapping[str, tuple[str, dict[str, object]]] = CHANNELS,
     ) -> None:
         self._stream = stream
         self._writer = Writer(stream, chunk_size=chunk_size, compression=compression,

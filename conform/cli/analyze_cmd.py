@@ -98,6 +98,11 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                    echo, as_json, fail_on)
         return
     file = files[0]
+    spread = [o for o, v in (("--scheduler", scheduler), ("--jobs", jobs)) if v is not None]
+    if spread:   # said, not silently dropped: they spread several captures over workers
+        click.echo(f"note: {' and '.join(spread)} {'spread' if len(spread) > 1 else 'spreads'} "
+                   "several captures over workers; one capture is analysed here, in this "
+                   "process", err=True)
     from conform.families.capture_hook import analyze_other_family, not_this_family
 
     wrong = not_this_family(file, variant) if variant else None

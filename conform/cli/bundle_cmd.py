@@ -23,7 +23,12 @@ def cli(files: tuple[str, ...], output: str, redact: bool, force: bool) -> None:
       conform bundle session.mcap -o support.zip --redact
       conform analyze support.zip          # open it again
     """
+    from pathlib import Path
+
     from conform.diagnosis.bundle import write_bundle
+    from conform.errors import writable_folder
+
+    writable_folder(Path(output).parent, f"-o {output}: its folder")   # before the work
 
     out = write_bundle(list(files), output, redact=redact, force=force,
                        echo=lambda s: click.echo(s, err=True))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from pathlib import Path
 
 import click
 
@@ -63,6 +64,10 @@ def recover_cmd(file: str, output: str | None, force: bool, quiet: bool) -> None
     Example:
       conform capture recover session.mcap.part
     """
+    if output:   # a folder that cannot be written: one line before the work
+        from conform.errors import writable_folder
+
+        writable_folder(Path(output).parent, f"-o {output}: its folder")
     with progress("conform capture recover", quiet=quiet, transient=True) as bar:
         bar.task(f"salvaging {file}")
         res = recover(file, output, force=force)

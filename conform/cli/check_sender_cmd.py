@@ -98,7 +98,8 @@ def cli(variant: str | None, scenarios: tuple[str, ...], report_dir: str | None,
             if v.grade not in ("PASS", "NOT-APPLICABLE"):
                 click.echo(f"  {v.grade} {v.scenario}/{v.rule} ({v.level}, {v.clause}): "
                            f"{v.detail}")
-        click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: {counts}")
+        click.echo(f"{len(results.scenarios)} scenario(s) in {results.duration:.1f} s: "
+                   f"{counts or 'nothing graded'}")
         if results.interrupted:
             click.echo(f"INCOMPLETE: {results.interrupted}")
         click.echo(f"report: {directory / 'index.html'}")

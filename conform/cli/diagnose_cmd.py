@@ -13,12 +13,14 @@ from conform.cli.params import INPUT_PATH, VARIANT, echo_json, json_option
               help="Decode as this variant (default: the capture's).")
 @json_option("{\"causes\": [...], ...} per capture, most likely cause first")
 def cli(files: tuple[str, ...], variant: str | None, as_json: bool) -> None:
-    """Name the most likely cause of a stop or stall, with its evidence and what to do, the
-    lines as the unit read them, and where to resume.
+    """Say how the session ended (completed, ended, stopped and by whom, stalled, aborted by
+    the unit, capture damaged), then the cause of a stop or stall with its evidence and what
+    to do, the hazards seen on the way, the lines as the unit read them, and where to resume
+    a job that did not finish.
 
     \b
-    Causes: sender-stopped, unit-silent, link-lost, buffer-overflow, deadlock,
-    starvation, noise, protocol-misuse, unit-alarm.
+    Causes: sender-stopped, unit-silent, unit-busy, link-lost, buffer-overflow, lost-line,
+    deadlock, starvation, noise, protocol-misuse, unit-alarm, overflow-risk.
 
     \b
     Examples:

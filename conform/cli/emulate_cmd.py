@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import sys
-from typing import Any
 
 import click
 
@@ -78,7 +77,7 @@ def cli() -> None:
 def serve_cmd(variant: str, baud: int | None, tcp_port: int | None, faults: str | None,
               seed: int, quiet: bool, control_path: str | None, link_path: str | None,
               record_path: str | None, answer_delay: float, force: bool,
-              **family_values: Any) -> None:
+              **family_values: object) -> None:
     """Serve VARIANT until SIGINT/SIGTERM; the first line of stdout is the device path.
 
     \b
@@ -111,12 +110,26 @@ def control_cmd(socket_path: str, words: tuple[str, ...]) -> None:
       conform emulate grbl-1.1f --control /tmp/grbl.sock &
       conform emulate control /tmp/grbl.sock press door
     """
+    import os
+    import stat
+
     from conform.emulator.control import send_control
 
     try:
+        mode = os.stat(socket_path).st_mode
+    except OSError:
+        mode = None
+    if mode is None or not stat.S_ISSOCK(mode):
+        what = "no such file" if mode is None else \
+            f"a {'folder' if stat.S_ISDIR(mode) else 'file'}, not a control socket"
+        raise UserError(f"{socket_path}: cannot reach the emulator ({what}): start it with "
+                        f"`conform emulate serve VARIANT --control {socket_path}` and give "
+                        "the same path while it runs")
+    try:
         reply = send_control(socket_path, " ".join(words))
     except (OSError, TimeoutError) as exc:
-        raise UserError(f"{socket_path}: cannot reach the emulator: {exc}") from None
+        raise UserError(f"{socket_path}: cannot reach the emulator ({exc.strerror or exc}): "
+                        "is `conform emulate serve --control` still running?") from None
     click.echo(reply)
     if not reply.startswith("ok"):
         sys.exit(1)

@@ -9,7 +9,6 @@ addresses another family's unit is a usage error naming both.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import click
 from click.core import ParameterSource
@@ -39,11 +38,11 @@ def family_options(command: str) -> Callable[[click.Command], click.Command]:
     return attach
 
 
-def split(command: str, family_name: str, values: dict[str, Any]) -> dict[str, Any]:
+def split(command: str, family_name: str, values: dict[str, object]) -> dict[str, object]:
     """The family options among ``values`` meant for ``family_name``'s hook; an option of
     another family that the user set is refused in one line."""
     ctx = click.get_current_context(silent=True)
-    mine: dict[str, Any] = {}
+    mine: dict[str, object] = {}
     for name, value in values.items():
         owners = _OWNERS.get((command, name), {family_name})
         if family_name in owners:

@@ -35,6 +35,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bundle",
     "check-sender",
     "ports",
+    "samples",
 )
 
 
@@ -120,6 +121,12 @@ def main(argv: list[str] | None = None) -> None:
             code = 130
         except Stopped as exc:   # raised outside click's invoke (cannot happen often)
             click.echo(f"conform: interrupted ({exc.name})", err=True)
+            code = exc.exit_code
+        except click.MissingParameter as exc:   # what is missing, and where it goes
+            usage = exc.ctx.get_usage().replace("Usage: ", "", 1) if exc.ctx else ""
+            path = exc.ctx.command_path if exc.ctx else "conform"
+            click.echo(f"conform: {exc.format_message().rstrip('.')}"
+                       + (f": {usage} ({path} --help has examples)" if usage else ""), err=True)
             code = exc.exit_code
         except click.ClickException as exc:
             click.echo(f"conform: {exc.format_message()}", err=True)

@@ -7,16 +7,21 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
 from conform.errors import UserError, writable_folder
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from click.decorators import FC
+
 __all__ = ["force_option", "free_link", "fresh_output", "writable_folder"]
 
 
-def force_option(what: str = "FILE") -> Any:
+def force_option(what: str = "FILE") -> Callable[[FC], FC]:
     """``--force``: replace an existing output file."""
     return click.option("--force", is_flag=True,
                         help=f"Replace {what} if it exists (by default an existing file is "
@@ -24,10 +29,16 @@ def force_option(what: str = "FILE") -> Any:
 
 
 def fresh_output(path: str | os.PathLike[str] | None, force: bool, option: str) -> None:
-    """Refuse ``path`` when a file is already there, unless ``force``."""
-    if path is None or force:
+    """Refuse ``path`` when a file is already there, unless ``force``, and when its folder
+    cannot be made or written (a file in the way, no permission): before the work."""
+    if path is None:
         return
     p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{option} {p}: is a folder; name a file in it")
+    writable_folder(p.parent, f"{option} {p}: its folder")
+    if force:
+        return
     if p.exists() or p.is_symlink():
         raise UserError(f"{option} {p}: the file exists; choose another name or add --force "
                         "to replace it")

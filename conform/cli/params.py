@@ -3,10 +3,15 @@ and targets the same way, so a mistake is the same one line (exit 2) everywhere.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 from click.shell_completion import CompletionItem
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from click.decorators import FC
 
 MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware limit
 
@@ -66,6 +71,9 @@ class TargetType(click.ParamType):
         if len(parts) > 3:
             self.fail(f"{text!r}: expected emu:VARIANT[:MUTANT]", param, ctx)
         known = _variant_ids()
+        if len(parts) > 1 and not parts[1]:
+            self.fail(f"{text!r} names no variant: emu:VARIANT (one of {', '.join(known)}), "
+                      "or emu alone for the default", param, ctx)
         if len(parts) > 1 and parts[1] and parts[1] not in known:
             self.fail(f"{text!r}: {parts[1]!r} is not a variant (known: {', '.join(known)})",
                       param, ctx)
@@ -147,8 +155,20 @@ TARGET = TargetType()
 BAUD = BaudType()
 FRACTIONAL_BAUD = BaudType(fractional=True)
 PROBABILITY = ProbabilityType()
-POSITIVE_INT = click.IntRange(min=1)
-NON_NEGATIVE_INT = click.IntRange(min=0)
+class WholeNumber(click.IntRange):
+    """An integer with a lower bound; anything else is said as what is expected."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        try:
+            int(str(value).strip())
+        except ValueError:
+            self.fail(f"{value!r} is not a whole number (e.g. {self.min or 0})", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+POSITIVE_INT = WholeNumber(min=1)
+NON_NEGATIVE_INT = WholeNumber(min=0)
 NON_NEGATIVE = click.FloatRange(min=0.0)
 POSITIVE = click.FloatRange(min=0.0, min_open=True)
 PORT_NUMBER = click.IntRange(0, 65535)
@@ -159,21 +179,21 @@ INPUT_PATH = InputPathType(dir_okay=True)
 OUTPUT_DIR = click.Path(file_okay=False, path_type=str)
 OUTPUT_FILE = click.Path(dir_okay=False, path_type=str)
 
-def json_option(what: str = "") -> Any:
+def json_option(what: str = "") -> Callable[[FC], FC]:
     """``--json`` (``as_json``): one JSON document on stdout; human messages go to stderr."""
     return click.option("--json", "as_json", is_flag=True,
                         help=f"One JSON document on stdout{': ' + what if what else ''}; "
                              "messages go to stderr.")
 
 
-def echo_json(doc: Any) -> None:
+def echo_json(doc: object) -> None:
     """The one JSON document of a ``--json`` command."""
     import json
 
     click.echo(json.dumps(doc, indent=1, default=str, ensure_ascii=False))
 
 
-def quiet_option() -> Any:
+def quiet_option() -> Callable[[FC], FC]:
     """``-q/--quiet``: the same on every long-running command (README, "Options that mean the
     same everywhere")."""
     return click.option("-q", "--quiet", is_flag=True,
@@ -185,7 +205,7 @@ def quiet_option() -> Any:
 DEFAULT_SEED = 1
 
 
-def seed_option() -> Any:
+def seed_option() -> Callable[[FC], FC]:
     """``--seed N``: one default and one meaning wherever it appears."""
     return click.option("--seed", type=NON_NEGATIVE_INT, default=DEFAULT_SEED,
                         show_default=True,

@@ -30,7 +30,7 @@ MAX_PROFILE_BYTES = 4 << 20
 """A profile is a few kilobytes; a larger file is refused before it is read."""
 
 
-def _read(path: str) -> dict[str, Any]:
+def _read(path: str) -> dict[str, object]:
     """The profile's TOML; a file too large, unreadable or not TOML is one line (exit 2)."""
     from conform.errors import load_user_file
 
@@ -38,7 +38,7 @@ def _read(path: str) -> dict[str, Any]:
     return doc if isinstance(doc, dict) else {}
 
 
-def _variant(doc: dict[str, Any]) -> str:
+def _variant(doc: dict[str, object]) -> str:
     meta = doc.get("meta")
     named = doc.get("variant") or (meta.get("variant") if isinstance(meta, dict) else None)
     return named if isinstance(named, str) else ""

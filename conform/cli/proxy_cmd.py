@@ -57,12 +57,19 @@ def cli(unit_url: str, output: str, baud: int, variant: str | None, no_decode: b
     # them hundreds of times a second (about a tenth of the recorder's CPU at 921 600 Bd)
     gc.freeze()
     gc.set_threshold(10_000, 10, 10)
+    # from here a signal only asks for the stop: raised while the forwarding threads start, it
+    # would end the command with them still running and the capture never finished
+    asked: list[int] = []
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, lambda signum, _frame: asked.append(signum))
     proxy = ProxyCapture(unit_url, output, baud=baud, variant=variant, decode=not no_decode,
                          reconnect=reconnect, link=link)
     # a sender may start on the pty and stop us before run_until_signal is reached: from the
     # moment the path is out, SIGINT/SIGTERM end the recording cleanly
     for sig in STOP_SIGNALS:
-        signal.signal(sig, lambda _signum, _frame: proxy.stop())
+        signal.signal(sig, lambda _signum, _frame: proxy.ask_stop())
+    if asked:
+        proxy.ask_stop()
     if live:
         from conform.diagnosis.live import LiveView, watching
 

@@ -11,7 +11,7 @@ import click
 
 from conform.cli.params import INPUT_FILE, OUTPUT_DIR
 from conform.conformance.results import Grade, RunResults
-from conform.errors import UserError, load_user_file
+from conform.errors import UserError, load_user_file, writable_folder
 from conform.report.render import write_reports
 
 MAX_RESULTS_BYTES = 256 << 20
@@ -84,13 +84,17 @@ def check_results(data: Any, name: str) -> None:
 
 def _json_error(exc: ValueError) -> str:
     if isinstance(exc, json.JSONDecodeError):
-        return f"line {exc.lineno} column {exc.colno}: {exc.msg}"
+        return (f"not a conform results file (JSON, line {exc.lineno} column {exc.colno}: "
+                f"{exc.msg}); `conform report` re-renders the results.json of a run")
     return str(exc).split("; use sys")[0]
 
 
 def load_results(path: str) -> RunResults:
     """``RunResults.load`` with every hostile file turned into one UserError line."""
     p = Path(path)
+    if p.suffix in (".mcap", ".part", ".zip"):   # a capture or a bundle: another command's
+        raise UserError(f"{p}: a capture, not a conform results file: `conform analyze {p}` "
+                        "reads it; `conform report` re-renders the results.json of a run")
     data = load_user_file(p, json.loads, max_bytes=MAX_RESULTS_BYTES, what="results file",
                           describe=_json_error)
     if not isinstance(data, dict) or not isinstance(data.get("checks"), list):
@@ -114,6 +118,6 @@ def cli(results: str, output: str | None) -> None:
       conform report reports/latest/results.json -o shared/
     """
     data = load_results(results)
-    out = Path(output) if output else Path(results).resolve().parent
+    out = writable_folder(output, "-o") if output else Path(results).resolve().parent
     write_reports(data, out)
     click.echo(f"report: {out / 'index.html'}")

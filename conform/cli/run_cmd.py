@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
@@ -31,6 +31,9 @@ from conform.conformance.target import parse_target
 from conform.errors import UserError, writable_folder
 from conform.report.render import default_dir, link_latest, not_verified_lines, write_reports
 from conform.stops import exit_status, shield
+
+if TYPE_CHECKING:
+    from conform.families import Family
 
 
 @family_options("run")
@@ -67,7 +70,7 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         report_dir: str | None, patterns: tuple[str, ...], list_only: bool, matrix: bool,
         mutants: bool, replay: str | None, seed: int,
         allow_motion: bool, max_steps: int | None, allow_eeprom: bool, no_machine: bool,
-        inputs_control: str | None, quiet: bool, as_json: bool, **family_values: Any) -> None:
+        inputs_control: str | None, quiet: bool, as_json: bool, **family_values: object) -> None:
     """Run the conformance checks; exit 0 when nothing FAILs, 1 when something does, 2 for a
     usage or link error, a check that could not be run (ERROR) or a run that stopped early.
 
@@ -80,7 +83,14 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
     """
     if report_dir:   # before the run: a folder that cannot be written is one line now
         writable_folder(report_dir, "--report")
-    fam = _family_of(targets, variant)
+    fam, variant = _family_of(targets, variant, baud, probe=not list_only, quiet=quiet)
+    if matrix and len(fam.variants()) < 2:
+        raise UserError(f"--matrix sets a family's variants side by side; {fam.name} has one "
+                        f"({fam.default_variant}): leave --matrix out")
+    if inputs_control and all(parse_target(t)[0] == "emu" for t in targets or ["emu"]):
+        raise UserError(f"--inputs-control {inputs_control}: drives the inputs of an emulator "
+                        "behind a port (--target PORT); an emu: target's inputs are driven "
+                        "in-process: leave the option out")
     if mutants and not fam.mutants():
         raise fam.lacks("mutants (--mutants)")
     command = command_line()
@@ -121,16 +131,29 @@ def cli(targets: tuple[str, ...], variant: str | None, baud: int, profile: str,
         sys.exit(code)
 
 
-def _family_of(targets: tuple[str, ...], variant: str | None) -> Any:
-    """The family whose units this run addresses (conform.families); one per run."""
-    from conform.families import default_family, family, family_for_variant
+def _family_of(targets: tuple[str, ...], variant: str | None, baud: int = 115200, *,
+               probe: bool = False, quiet: bool = False) -> tuple[Family, str | None]:
+    """The family whose units this run addresses (conform.families), one per run, and the
+    variant expected. ``probe``: a port given no ``--variant`` is asked `conform ports
+    --probe`'s harmless questions, in the families' probe order (never one family's identify,
+    which another family's unit may act on), and a port where nobody answers is refused."""
+    from conform.families import default_family, family, family_for_variant, unit_on_port
 
     wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
     named = {family_for_variant(v).name for v in wanted if v}
+    ports = [t for t in targets if parse_target(t)[0] != "emu"]
+    if probe and variant is None and ports:
+        found = [unit_on_port(p, baud=baud) for p in ports]
+        named |= {f.name for f, _ in found}
+        for p, (_, vid) in zip(ports, found, strict=True):
+            if not quiet:
+                click.echo(f"{p}: {vid} answered", err=True)
+        if len(targets) == 1:
+            variant = found[0][1]
     if len(named) > 1:
         raise UserError(f"this run names units of {' and '.join(sorted(named))}: run each "
                         "family's targets separately")
-    return family(named.pop()) if named else default_family()
+    return (family(named.pop()) if named else default_family()), variant
 
 
 def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN001
@@ -145,7 +168,7 @@ def _print_summary(results, out: Path, err: bool = False) -> None:  # noqa: ANN0
         for note in r.notes:
             if note.startswith("hint: "):
                 echo(f"  {note}")
-        told = set()
+        told: set[int] = set()
         for cause in (g for g in grouped if g.checks[0].target == r.target):
             echo(f"  FAIL ×{len(cause.checks)} {cause.sentence()}")
             told.update(id(c) for c in cause.checks)

@@ -11,7 +11,7 @@ the unit is another family's.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
@@ -20,6 +20,9 @@ from conform.cli.outputs import force_option, fresh_output
 from conform.cli.params import BAUD, INPUT_FILE, OUTPUT_FILE, TARGET, VARIANT
 from conform.conformance.target import parse_target
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.families import Family
 
 PROBE_TIMEOUT = 0.5   # seconds for each family's question when the port's unit is not named
 MAX_TIMEOUT = 600.0
@@ -44,7 +47,7 @@ MAX_TIMEOUT = 600.0
 @click.option("-q", "--quiet", is_flag=True, help="No progress lines.")
 def cli(job: str, target: str, variant: str | None, baud: int, timeout: float | None,
         record: str | None, force: bool, allow_motion: bool, quiet: bool,
-        **family_values: Any) -> None:
+        **family_values: object) -> None:
     """Stream JOB to the unit on TARGET with its family's reference sender and report what
     happened; exit 0 when every job line was acknowledged, 1 for a failed or incomplete send.
 
@@ -62,12 +65,25 @@ def cli(job: str, target: str, variant: str | None, baud: int, timeout: float | 
 
     with held_open(target, baud):       # the probe and the stream share one open of the port
         fam, variant = _family_of(target, variant, baud)
+        _job_of(fam, job)
         mine = split("send", fam.name, family_values)
         fam.send_job(job, target, variant=variant, baud=baud, allow_motion=allow_motion,
                      record=record, timeout=timeout, quiet=quiet, **mine)
 
 
-def _family_of(target: str, variant: str | None, baud: int) -> tuple[Any, str | None]:
+def _job_of(fam: Family, job: str) -> None:
+    """A job in which the family finds no move its unit executes is another family's (a
+    vector file for a g-code unit): refused before anything is sent, as check-sender's
+    ``--job`` is (the family's ``check_sender.moves``, where it has one)."""
+    from conform.sendercheck.options import read_job
+
+    moves = getattr(fam.check_sender, "moves", None)
+    if moves is not None and not moves(read_job(job) or []):
+        raise UserError(f"{job}: no line of it is a move a {fam.name} unit executes; is it a "
+                        "job of another family? Nothing was sent")
+
+
+def _family_of(target: str, variant: str | None, baud: int) -> tuple[Family, str | None]:
     """The family whose unit is on ``target``, and its variant when known."""
     from conform.families import default_family, family_for_variant, identify_port
 

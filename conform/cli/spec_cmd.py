@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from conform.cli.params import VARIANT, echo_json, json_option
+from conform.jsondoc import JsonObject
 
 
 def _console() -> Console:
@@ -20,7 +21,7 @@ def _console() -> Console:
 _JSON = json_option("the table's rows")
 
 
-def _emit(title: str, columns: Sequence[str], rows: list[Sequence[Any]], as_json: bool,
+def _emit(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]], as_json: bool,
           key: str, **extra: Any) -> None:
     """Print rows as a rich table, or as ``{key: [{column: value}], ...extra}`` JSON."""
     if as_json:
@@ -56,7 +57,7 @@ def list_cmd(as_json: bool) -> None:
     """
     from conform.families import families
 
-    doc: dict[str, Any] = {"variants": [], "families": {}}
+    doc: JsonObject = {"variants": [], "families": {}}
     for fam in families():
         title, columns, rows = fam.variant_table(pretty=not as_json)
         if not as_json:

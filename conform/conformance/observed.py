@@ -7,16 +7,21 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from conform.errors import UserError
+from conform.jsondoc import JsonObject
+
+if TYPE_CHECKING:
+    from conform.conformance.target import Target
+    from conform.families import Family
 
 
 @dataclass
 class Observation:
     name: str
-    table: Any
-    observed: Any
+    table: object      # what the tables say
+    observed: object   # what the unit did
     evidence: str
 
     @property
@@ -24,7 +29,7 @@ class Observation:
         return self.observed == self.table
 
 
-def _toml(x: Any) -> str:
+def _toml(x: object) -> str:
     if isinstance(x, bool):
         return "true" if x else "false"
     if isinstance(x, int):
@@ -56,7 +61,7 @@ def _key(name: str) -> str:
     return name if name.replace("_", "").isalnum() else _toml(name)
 
 
-def report(obs: Sequence[Observation], output: str, echo: Callable[[str], Any] = print) -> None:
+def report(obs: Sequence[Observation], output: str, echo: Callable[[str], object] = print) -> None:
     """One line per item (``=`` as the tables say, ``!`` not), then the count that differ."""
     for o in obs:
         mark = "=" if o.same else "!"
@@ -66,19 +71,23 @@ def report(obs: Sequence[Observation], output: str, echo: Callable[[str], Any] =
          + (": " + ", ".join(differ) if differ else ""))
 
 
-Probe = Callable[[Any, str, list[Observation]], Any]
+Probe = Callable[["Target", str, list[Observation]], object]
 """probe(target, variant, out): appends each Observation to ``out`` as it is found."""
 
+ProbeHooks = tuple[Probe, Callable[["Target"], str], Sequence[str]]
+"""``Family.characterize_probes``: (probe, stop(target) halting the unit, the items probed)."""
 
-def characterize_target(fam: Any, target_text: str, output: str, variant: str | None, *,
-                        baud: int, probe: Probe, stop: Callable[[Any], str],
+
+def characterize_target(fam: Family, target_text: str, output: str, variant: str | None, *,
+                        baud: int, probe: Probe, stop: Callable[[Target], str],
                         items: Sequence[str], title: str,
-                        echo: Callable[[str], Any] = print) -> None:
+                        echo: Callable[[str], object] = print) -> None:
     """``conform characterize`` for a family whose probes yield observations: open the target
     (``emu:VARIANT[:MUTANT]`` or a port) and probe, the unit halted by ``stop`` however the run
     ends; then write the profile and print it. Stopped by a signal, it writes what was found
     so far as a partial profile (``items``: what is probed, in order; a name ending in ``*``
     stands for every item it begins) and exits 128 + N."""
+    from conform.conformance.target import HarnessError
     from conform.stops import halting
 
     target, implied = fam.open_target(target_text, baud=baud, permissions=None)
@@ -98,15 +107,20 @@ def characterize_target(fam: Any, target_text: str, output: str, variant: str | 
         if vid not in known:
             raise UserError(f"{vid!r} is not a {fam.name} variant (known: {', '.join(known)})")
         with halting(None if target.emulated else lambda: stop(target), partial):
-            probe(target, vid, obs)
+            try:
+                probe(target, vid, obs)
+            except HarnessError as exc:   # the unit fell silent: say so, never a profile of guesses
+                said = partial("the unit stopped answering") if obs else "Nothing was written"
+                raise UserError(f"{target_text}: the unit did not answer ({exc}): is it on, on "
+                                f"this port and at this baud rate (--baud)? {said}") from None
     finally:
         target.close()
     write_profile(obs, output, target=target_text, variant=vid, title=title)
     report(obs, output, echo)
 
 
-def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
-                  ) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+def diff_observed(a: str, doc_a: JsonObject, b: str, doc_b: JsonObject
+                  ) -> tuple[list[str], list[tuple[str, object, object]], str]:
     """Two observation profiles item by item: (notes on partial ones, rows (item, a, b) that
     differ, the line when none does)."""
     notes = []
@@ -118,7 +132,7 @@ def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
     oa, ob = doc_a.get("observed", {}), doc_b.get("observed", {})
     names = list(dict.fromkeys([*oa, *ob, *_left(doc_a), *_left(doc_b)]))
 
-    def shown(doc: dict[str, Any], obs: dict[str, Any], name: str) -> Any:
+    def shown(doc: JsonObject, obs: JsonObject, name: str) -> object:
         if name in obs:
             return obs[name]
         return "(not answered)" if name in _left(doc) else "(absent)"
@@ -128,6 +142,6 @@ def diff_observed(a: str, doc_a: dict[str, Any], b: str, doc_b: dict[str, Any]
     return notes, rows, "same observations"
 
 
-def _left(doc: dict[str, Any]) -> list[str]:
+def _left(doc: JsonObject) -> list[str]:
     left = doc.get("unanswered") if doc.get("partial") is True else None
     return [str(x) for x in left] if isinstance(left, list) else []

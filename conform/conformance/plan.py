@@ -11,13 +11,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from conform.conformance.results import Grade, TargetRun
 from conform.conformance.runner import Progress, RunAborted, RunOptions
 from conform.conformance.suite import parse_replay
 from conform.conformance.target import parse_target
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.cli.progress import Task, Tracker
+    from conform.conformance.results import CheckResult
+    from conform.conformance.runner import Check
+    from conform.conformance.target import Target
+    from conform.families import Family
 
 
 @dataclass(frozen=True)
@@ -41,7 +48,7 @@ class Permissions:
 class _Plan:
     """The targets of a run and what it may do, from the command's options."""
 
-    def __init__(self, fam: Any, targets: Sequence[str], variant: str | None, *,
+    def __init__(self, fam: Family, targets: Sequence[str], variant: str | None, *,
                  matrix: bool, replay: str | None, seed: int, allow_motion: bool,
                  max_steps: int | None, allow_eeprom: bool) -> None:
         known = [v.id for v in fam.variants()]
@@ -69,15 +76,15 @@ class _Plan:
         return Permissions.of(parse_target(target)[0] == "emu", *self.allow)
 
 
-def list_checks(fam: Any, targets: Sequence[str], variant: str | None, *,
+def list_checks(fam: Family, targets: Sequence[str], variant: str | None, *,
                 profile: str = "quick", patterns: Sequence[str] = (), matrix: bool = False,
                 replay: str | None = None, allow_motion: bool = False,
                 max_steps: int | None = None, allow_eeprom: bool = False,
-                no_machine: bool = False, **family_values: Any) -> list[dict[str, Any]]:
+                no_machine: bool = False, **family_values: object) -> list[dict[str, object]]:
     """``conform run --list``: the checks each target would get, without running them."""
     plan = _Plan(fam, targets, variant, matrix=matrix, replay=replay, seed=0,
                  allow_motion=allow_motion, max_steps=max_steps, allow_eeprom=allow_eeprom)
-    listed = []
+    listed: list[dict[str, object]] = []
     for t in plan.targets:
         kind, what, _ = parse_target(t)
         vid = plan.variant or (what if kind == "emu" and what else fam.default_variant)
@@ -88,14 +95,14 @@ def list_checks(fam: Any, targets: Sequence[str], variant: str | None, *,
     return listed
 
 
-def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, display: Any,
+def run_targets(fam: Family, targets: Sequence[str], variant: str | None, *, display: Tracker,
                 baud: int = 115200, profile: str = "quick", patterns: Sequence[str] = (),
                 matrix: bool = False, mutants: bool = False, replay: str | None = None,
                 seed: int = 0, allow_motion: bool = False, max_steps: int | None = None,
                 allow_eeprom: bool = False, no_machine: bool = False,
                 inputs_control: str | None = None,
-                announce: Callable[[str], None] | None = None, **family_values: Any
-                ) -> tuple[list[TargetRun], list[dict[str, Any]]]:
+                announce: Callable[[str], None] | None = None, **family_values: object
+                ) -> tuple[list[TargetRun], list[dict[str, object]]]:
     """Run ``fam``'s checks on each target; (runs, mutant report). ``display`` shows progress:
     ``display.task(name, total)`` gives a task with ``update(advance=, step=)`` and
     ``completed`` (conform.cli.progress)."""
@@ -141,7 +148,7 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
                 break
         finally:
             target.close()
-    mutant_report: list[dict[str, Any]] = []
+    mutant_report: list[dict[str, object]] = []
     if mutants and aborted is None:
         variants = [r.variant for r in runs] or [fam.default_variant]
         task = display.task("mutants", fam.mutant_count(variants))
@@ -150,7 +157,7 @@ def run_targets(fam: Any, targets: Sequence[str], variant: str | None, *, displa
     return runs, mutant_report
 
 
-def _other_variant(fam: Any, target: Any, vid: str, implied: str | None) -> list[str]:
+def _other_variant(fam: Family, target: Target, vid: str, implied: str | None) -> list[str]:
     """A hint, said first, when the unit is another variant than the one asked for: then most
     FAILs are the variants' differences, not faults of the unit."""
     if implied is not None:
@@ -164,11 +171,11 @@ def _other_variant(fam: Any, target: Any, vid: str, implied: str | None) -> list
     return [f"hint: {how}, not {vid}: try --variant {found}"]
 
 
-def _step(task: Any, checks: Sequence[Any]) -> Progress:
+def _step(task: Task, checks: Sequence[Check]) -> Progress:
     """The runner's per-check callback: advance, count FAILs, name the check now running."""
     fails = [0]
 
-    def step(result: Any) -> None:
+    def step(result: CheckResult) -> None:
         fails[0] += result.grade is Grade.FAIL
         done = int(task.completed) + 1
         upcoming = checks[done].id if done < len(checks) else "writing the report"

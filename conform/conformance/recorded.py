@@ -13,7 +13,12 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from conform.capture.recorder import Recorder
+    from conform.conformance.target import Target
+    from conform.families import Family
 
 EPOCH = 1_750_000_000.0   # an emulated session's virtual clock starts at this date (2025-06-15)
 TAP = "host end of the serial cable (host bytes as sent, unit bytes as read)"
@@ -24,7 +29,7 @@ class RecordedTarget:
     ``recorder``; the bytes ``Target.send`` drains before it writes are kept for the next
     ``receive``, so a sender reading through this never misses an answer."""
 
-    def __init__(self, target: Any, recorder: Any = None, base: float = 0.0) -> None:
+    def __init__(self, target: Target, recorder: Recorder | None = None, base: float = 0.0) -> None:
         self.target = target
         self.recorder = recorder
         self.base = base
@@ -32,7 +37,7 @@ class RecordedTarget:
         self._held = b""
 
     @classmethod
-    def open(cls, target: Any, path: str | None, metadata: Mapping[str, object]
+    def open(cls, target: Target, path: str | None, metadata: Mapping[str, object]
              ) -> RecordedTarget:
         """Wrap ``target``; with a ``path``, record to it (the caller has checked it free)."""
         from conform.capture.recorder import Recorder, WallClock
@@ -86,7 +91,7 @@ class RecordedTarget:
 
 
 @contextmanager
-def sending_to(fam: Any, target: str, variant: str, *, job: str, job_lines: int, baud: int,
+def sending_to(fam: Family, target: str, variant: str, *, job: str, job_lines: int, baud: int,
                record: str | None, allow_motion: bool, metadata: Mapping[str, object]
                ) -> Iterator[RecordedTarget]:
     """What a family's ``send_job`` does around its streamer: refuse a non-emulated target

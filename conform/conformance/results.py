@@ -10,9 +10,9 @@ import json
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
 
 from conform.errors import UserError, read_user_text
+from conform.jsondoc import JsonObject
 
 
 class Grade(StrEnum):
@@ -41,11 +41,11 @@ class LogEntry:
     dir: str
     data: bytes
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"t": round(self.t, 6), "dir": self.dir, "data": self.data.decode("latin-1")}
 
     @staticmethod
-    def from_json(d: dict[str, Any]) -> LogEntry:
+    def from_json(d: JsonObject) -> LogEntry:
         return LogEntry(float(d["t"]), str(d["dir"]), str(d["data"]).encode("latin-1"))
 
 
@@ -86,14 +86,14 @@ class CheckResult:
         parts = self.id.split("/")
         return "/".join(parts[2:]) if len(parts) > 2 else self.id
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         d = asdict(self)
         d["grade"] = self.grade.value
         d["log"] = [e.to_json() for e in self.log]
         return d
 
     @staticmethod
-    def from_json(d: dict[str, Any]) -> CheckResult:
+    def from_json(d: JsonObject) -> CheckResult:
         d = dict(d)
         d["grade"] = Grade(d["grade"])
         d["log"] = [LogEntry.from_json(e) for e in d.get("log", [])]
@@ -117,11 +117,11 @@ class TargetRun:
     # a link's costs: how the checks' states were reached (the family's state keeping, set by
     # its Runner.finish), the estimate printed before starting and the budget of the family's
     # open-ended checks (the GVE state machine) in s
-    state: dict[str, Any] = field(default_factory=dict)
+    state: dict[str, object] = field(default_factory=dict)
     estimate_s: float | None = None
     machine_budget_s: float | None = None
     # what this run did not verify and how to enable it (the family's Runner.finish)
-    not_verified: list[dict[str, Any]] = field(default_factory=list)
+    not_verified: list[dict[str, object]] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
@@ -141,7 +141,7 @@ class RunResults:
     runs: list[TargetRun]
     command: str = ""
     created: str = ""
-    mutants: list[dict[str, Any]] = field(default_factory=list)
+    mutants: list[JsonObject] = field(default_factory=list)
 
     @property
     def checks(self) -> list[CheckResult]:
@@ -154,7 +154,7 @@ class RunResults:
         """Some check could not be run (the harness or the link failed): not a pass."""
         return any(c.grade is Grade.ERROR for c in self.checks)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {
             "format": "conform-results/1",
             "command": self.command,
@@ -172,7 +172,7 @@ class RunResults:
         Path(path).write_text(json.dumps(self.to_json(), indent=1), encoding="utf-8")
 
     @staticmethod
-    def from_json(d: dict[str, Any]) -> RunResults:
+    def from_json(d: JsonObject) -> RunResults:
         checks = [CheckResult.from_json(c) for c in d.get("checks", [])]
         runs = []
         for r in d.get("runs", []):

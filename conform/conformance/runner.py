@@ -19,11 +19,37 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
+from typing import Generic, Protocol, TypeVar
 
 from conform.conformance.results import CheckResult, Grade, TargetRun
 from conform.conformance.target import Target
 from conform.stops import interrupted_by
+
+
+class Check(Protocol):
+    """What the engine reads of any family's check (``Family.plan_checks``); the rest (its
+    script, what it moves, how it is graded) is the family's, read by its own runner. A check
+    may also name its ``subject`` (see the module docstring)."""
+
+    @property
+    def id(self) -> str:
+        """``VARIANT/GROUP/...``: unique in a run, what ``--replay`` and the report name."""
+
+    @property
+    def level(self) -> str:
+        """MUST, SHOULD or MAY: how a failure counts."""
+
+    @property
+    def clause(self) -> str:
+        """The source the check holds the unit to (manual clause, source function)."""
+
+    @property
+    def title(self) -> str:
+        """What is checked, in a line."""
+
+
+CheckT = TypeVar("CheckT", bound=Check)
+"""A family's own check type: its Runner subclass is ``Runner[ItsCheck]``."""
 
 Progress = Callable[[CheckResult], None]
 LINK_ERRORS_TO_ABORT = 3  # consecutive link failures on a real unit end the run (exit 2)
@@ -64,7 +90,7 @@ class Estimate:
         return left
 
 
-class Runner(ABC):
+class Runner(ABC, Generic[CheckT]):
     """Runs the checks of one variant on one target; a family grades them (subclasses)."""
 
     def __init__(self, target: Target, variant_id: str, options: RunOptions | None = None
@@ -77,7 +103,7 @@ class Runner(ABC):
 
     # -- what a family provides ---------------------------------------------------------------
     @abstractmethod
-    def run_check(self, check: Any) -> CheckResult:
+    def run_check(self, check: CheckT) -> CheckResult:
         """Run and grade one check; failures of the link are ERRORs whose detail starts with
         the exception's class name (``LINK_FAILURES``)."""
 
@@ -86,7 +112,7 @@ class Runner(ABC):
         """Stop the unit (retried until acknowledged); what was sent and answered.
         ``after_silence``: the link was silent for a while, so no deaf time is waited out."""
 
-    def estimate_run(self, checks: Sequence[Any]) -> Estimate:
+    def estimate_run(self, checks: Sequence[CheckT]) -> Estimate:
         """The estimate of ``checks`` on a link (announced before, the ETA while running)."""
         return Estimate()
 
@@ -103,7 +129,7 @@ class Runner(ABC):
         verified)."""
 
     # -- the loop ---------------------------------------------------------------------------
-    def run(self, checks: Sequence[Any], progress: Progress | None = None) -> TargetRun:
+    def run(self, checks: Sequence[CheckT], progress: Progress | None = None) -> TargetRun:
         started = datetime.now(UTC).isoformat(timespec="seconds")
         run = TargetRun(self.target.name, self.variant_id, self.target.emulated,
                         self.options.profile, started, notes=list(self.options.notes))

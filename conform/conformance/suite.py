@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Any
 
 from conform.conformance.results import RunResults, TargetRun
 from conform.errors import UserError
@@ -25,6 +24,6 @@ def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def results_of(runs: list[TargetRun], command: str, mutants: list[dict[str, Any]] | None = None
+def results_of(runs: list[TargetRun], command: str, mutants: list[dict[str, object]] | None = None
                ) -> RunResults:
     return RunResults(runs, command, now_iso(), mutants or [])

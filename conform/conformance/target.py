@@ -15,10 +15,13 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from conform.conformance.results import LogEntry
 from conform.errors import LinkError, UserError
+
+if TYPE_CHECKING:
+    from conform.link.endpoint import Endpoint
 
 DEFAULT_TIMEOUT = 0.5
 
@@ -123,7 +126,7 @@ class Target(ABC):
     def close(self) -> None:  # noqa: B027 - nothing to release by default
         pass
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> dict[str, object]:
         """Internal state for reports (emulator only)."""
         return {}
 
@@ -137,7 +140,7 @@ class Target(ABC):
         """Can the harness switch this unit's inputs (``set_input``)?"""
         return self.emulated
 
-    def prepare(self, script: Any) -> None:
+    def prepare(self, script: object) -> None:
         """Reach the state ``script`` starts from (its reset step): by default a reset."""
         self.reset()
 
@@ -299,7 +302,7 @@ class LinkTarget(Target):
 
     emulated = False
 
-    def __init__(self, endpoint: Any, name: str, guard: Guard | None, baud: int) -> None:
+    def __init__(self, endpoint: Endpoint, name: str, guard: Guard | None, baud: int) -> None:
         super().__init__(guard)
         self.endpoint = endpoint
         self.name = name
@@ -314,7 +317,7 @@ class LinkTarget(Target):
     def set_input(self, port: int, bit: int, active: bool) -> None:
         """Inputs of an emulator behind the link, through its control socket (``inputs``)."""
         if self.inputs is None:
-            super().set_input(port, bit, active)
+            return super().set_input(port, bit, active)
         from conform.emulator.control import send_control
 
         word = "press" if active else "release"

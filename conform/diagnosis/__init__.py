@@ -13,16 +13,28 @@ unit's reception (``reception``) and finds the resume point (``resume_state``);
 
 from __future__ import annotations
 
+import gc
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
-from conform.diagnosis.causes import Cause, find_stalls, rank
+from conform.diagnosis.causes import ADVICE, Cause, find_stalls, rank
 from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
+from conform.diagnosis.outcome import Outcome, decide, prove_losses
 from conform.errors import UserError
 
-FORMAT = "conform-diagnosis/1"
+if TYPE_CHECKING:
+    from conform.analysis.rawread import RawCapture
+    from conform.families import AnalysisResult, Family
 
-__all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause"]
+INCOMPLETE = "capture incomplete"   # the note that starts what a cut-short capture says
+
+FORMAT = "conform-diagnosis/1"
+RECEPTION_MAX = 200_000     # host lines up to which the unit's reception is replayed
+
+__all__ = ["Diagnosis", "diagnose", "Facts", "Event", "ParsedLine", "ResumePoint", "Cause",
+           "Outcome"]
 
 
 @dataclass
@@ -30,26 +42,41 @@ class Diagnosis:
     path: str
     family: str
     facts: Facts
-    causes: list[Cause]
+    causes: list[Cause]             # what stopped it, most likely first (none: completed)
     reception: list[ParsedLine] | None = None
     resume: ResumePoint | None = None
     notes: list[str] = field(default_factory=list)
+    outcome: Outcome | None = None
+    hazards: list[Cause] = field(default_factory=list)     # seen on the way, not the end
+
+    def lead(self) -> Cause | None:
+        """What the diagnosis puts first: the stop cause, else the first hazard."""
+        return self.causes[0] if self.causes else (self.hazards[0] if self.hazards else None)
 
     def headline(self) -> str:
-        """The diagnosis in one sentence."""
-        if not self.causes:
-            n = len(self.facts.exchanges)
-            return (f"No stop, stall or anomaly found: {n} lines sent and the session ran to "
-                    "its end.")
-        c = self.causes[0]
-        return f"Most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+        """The diagnosis in one sentence: the outcome first, then what caused it."""
+        o = self.outcome
+        title = o.title() if o is not None else "Session"
+        if self.causes:
+            c = self.causes[0]
+            text = f"{title}: most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+            if o is not None and o.kind == "capture-damaged":
+                text = f"{title}: {o.summary} Within it: {c.kind}: {c.summary}"
+            return text
+        text = f"{title}: {o.summary}" if o is not None else title + "."
+        if self.hazards:
+            kinds = list(dict.fromkeys(h.kind for h in self.hazards))
+            text += f" Hazards on the way: {', '.join(kinds)}."
+        return text
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         f = self.facts
         return {
             "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,
             "headline": self.headline(),
+            "outcome": None if self.outcome is None else self.outcome.to_json(),
             "causes": [c.to_json() for c in self.causes],
+            "hazards": [c.to_json() for c in self.hazards],
             "session": {"duration_s": round(f.duration, 6), "lines": len(f.exchanges),
                         "answered": sum(1 for e in f.exchanges if e.answer is not None),
                         "rx_capacity": f.rx_capacity, "queue_capacity": f.queue_capacity,
@@ -63,7 +90,7 @@ class Diagnosis:
         }
 
 
-def _family_of(path: str, variant: str | None) -> Any:
+def _family_of(path: str, variant: str | None) -> Family:
     from conform.families import default_family, family
     from conform.families.peek import peek_family
 
@@ -75,7 +102,7 @@ def _family_of(path: str, variant: str | None) -> Any:
     return family(d.family)
 
 
-def _link_events(raw: Any, t0: float) -> list[Event]:
+def _link_events(raw: RawCapture, t0: float) -> list[Event]:
     """The capture's own link events: the proxy's sender pty closing is the sender leaving."""
     method = str(raw.metadata.get("conform.session", {}).get("capture_method", ""))
     out = []
@@ -94,17 +121,38 @@ def _link_events(raw: Any, t0: float) -> list[Event]:
     return out
 
 
-def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
+@contextmanager
+def _no_gc() -> Iterator[None]:
+    """The cyclic collector paused while records are made in bulk (it would scan them again
+    and again for cycles they do not have), resumed as it was."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+def diagnose(path: str, *, variant: str | None = None, analysis: AnalysisResult | None = None,
              family: str | None = None) -> Diagnosis:
     """Diagnose one capture file (``analysis``: its family's analysis, when already made;
     ``family``: its family's name, when already known)."""
     from conform.analysis.stream import read_raw
     from conform.families import family as family_named
 
+    if variant and not family:
+        from conform.families.capture_hook import not_this_family
+
+        wrong = not_this_family(path, variant)
+        if wrong:
+            raise UserError(f"{path}: {wrong}")
     fam = family_named(family) if family else _family_of(path, variant)
     facts_hook = getattr(fam, "diagnosis_facts", None)
     raw = read_raw(path)
-    facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook else None
+    with _no_gc():      # a long capture makes a million small records that never cycle
+        facts = facts_hook(raw, path, variant=variant, analysis=analysis) if facts_hook \
+            else None
     if facts is None:
         raise UserError(f"{path}: the {fam.name} family gives no diagnosis")
     if not facts.host_times:
@@ -116,19 +164,54 @@ def diagnose(path: str, *, variant: str | None = None, analysis: Any = None,
     ends = [float(x.get("t", facts.t0)) - facts.t0 for x in raw.link_events]
     facts.duration = max([facts.duration, *ends])
     if not raw.status.complete:
-        facts.notes.append(f"capture incomplete: {raw.status.problem}; diagnosed what is "
-                           "intact")
-    d = Diagnosis(path, fam.name, facts, rank(facts))
+        facts.damaged = str(raw.status.problem or "incomplete")
+        facts.notes.append(f"{INCOMPLETE}: {raw.status.problem}; diagnosed what is intact")
+    with _no_gc():
+        d = judge(path, fam.name, facts)
     rec = getattr(fam, "reception", None)
-    if rec is not None:
+    if rec is not None and len(facts.exchanges) <= RECEPTION_MAX:
         d.reception = rec(raw, variant=facts.variant)
+    elif rec is not None:
+        d.notes.append(f"the lines as the unit read them are not replayed for a capture of "
+                       f"{len(facts.exchanges)} lines (at most {RECEPTION_MAX})")
     res = getattr(fam, "resume_state", None)
-    if res is not None:
+    if res is not None and d.outcome is not None and d.outcome.kind != "completed":
         d.resume = res(raw, facts, variant=facts.variant)
     return d
 
 
-def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> None:
+def judge(path: str, family: str, facts: Facts) -> Diagnosis:
+    """The outcome from the facts, then the causes that fit it: a completed session has no
+    stop cause (what the ranking found becomes hazards, a stall at its end dropped: that is
+    the host done); a damaged capture's end is not judged; otherwise the cause the outcome
+    names leads."""
+    prove_losses(facts)
+    ranked = rank(facts)
+    o = decide(facts, ranked)
+    if o.kind in ("completed", "ended", "capture-damaged", "findings-only"):
+        return Diagnosis(path, family, facts, [], outcome=o,
+                         hazards=[c for c in ranked if not c.at_end])
+    causes = list(ranked)
+    if o.lead is not None:
+        lead = next((c for c in causes if c.kind == o.lead), None)
+        if lead is None:
+            lead = Cause(o.lead, 0.8, facts.duration, facts.duration, o.evidence,
+                         ADVICE[o.lead], o.summary, at_end=True)
+        else:
+            causes.remove(lead)
+            lead.confidence = max(lead.confidence, 0.8)
+            if o.kind in ("stopped", "aborted"):
+                lead.summary = o.summary
+                lead.evidence = [*o.evidence, *(x for x in lead.evidence
+                                                if x not in o.evidence)]
+        causes.insert(0, lead)
+    stop = [c for c in causes if c.at_end or c is causes[0]]
+    return Diagnosis(path, family, facts, stop, outcome=o,
+                     hazards=[c for c in causes if c not in stop])
+
+
+def headline_for(path: str, analysis: AnalysisResult, family: str | None,
+                 echo: Callable[[str], object]) -> None:
     """``conform analyze``: the diagnosis in one sentence first, and kept on the analysis for
     the top of its report (``analysis.diagnosis``); a capture it cannot judge says why.
     An analysis that streamed its tables (too long to keep) is not read whole again here."""
@@ -143,5 +226,6 @@ def headline_for(path: str, analysis: Any, family: str | None, echo: Any) -> Non
     except Exception as exc:  # noqa: BLE001 - the analysis stands without its diagnosis
         echo(f"diagnosis: failed ({type(exc).__name__}: {exc}); the analysis follows")
         return
-    analysis.diagnosis = d.to_json()
+    # kept on whatever result the family made, for the top of its report
+    setattr(analysis, "diagnosis", d.to_json())  # noqa: B010
     echo(f"diagnosis: {d.headline()}")

@@ -26,10 +26,11 @@ import zipfile
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from conform import __version__
+from conform.capture.scan import check_magic
 from conform.errors import UserError
+from conform.jsondoc import JsonObject
 
 FORMAT = "conform-bundle/1"
 MANIFEST = "manifest.json"
@@ -100,7 +101,7 @@ def redact_capture(src: str, dst: Path, subs: list[tuple[str, str]], extra: dict
         w.finish()
 
 
-def serial_ports(named: set[str], redact: bool) -> list[dict[str, Any]]:
+def serial_ports(named: set[str], redact: bool) -> list[JsonObject]:
     """This machine's serial ports (pyserial), those the captures name first."""
     try:
         from conform.cli.ports_cmd import listed_ports
@@ -151,6 +152,11 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
     for c in captures:
         if Path(c).resolve() == out.resolve():
             raise UserError(f"{out}: is one of the captures; the bundle goes elsewhere")
+        check_magic(c)   # not a capture at all: one line now, not a bundle of errors
+    from conform.capture.reader import open_capture
+
+    for c in captures:      # a file that is not a capture is refused, not packed
+        open_capture(c).metadata  # noqa: B018 - reading it raises UserError for a non-capture
     subs = redactions(captures) if redact else []
     work = Path(tempfile.mkdtemp(prefix="conform-bundle-"))
     try:
@@ -165,7 +171,7 @@ def write_bundle(captures: list[str], output: str, *, redact: bool = False, forc
                 k += 1
                 name, stem = f"{Path(c).stem}-{k}{Path(c).suffix}", f"{Path(c).stem}-{k}"
             used.add(name)
-            entry: dict[str, Any] = {"name": name, "bytes": os.path.getsize(c)}
+            entry: dict[str, object] = {"name": name, "bytes": os.path.getsize(c)}
             (work / "captures").mkdir(exist_ok=True)
             if redact:
                 try:
@@ -242,7 +248,7 @@ def is_bundle(path: str) -> bool:
         return MANIFEST in z.namelist()
 
 
-def open_bundle(path: str) -> tuple[dict[str, Any], list[str]]:
+def open_bundle(path: str) -> tuple[JsonObject, list[str]]:
     """The manifest and the captures of a bundle, extracted to a folder removed at exit."""
     try:
         with zipfile.ZipFile(path) as z:

@@ -23,12 +23,12 @@ from __future__ import annotations
 import bisect
 import statistics
 from dataclasses import dataclass, field
-from typing import Any
 
 from conform.diagnosis.facts import Event, Exchange, Facts
 
 CAUSE_KINDS = ("sender-stopped", "unit-silent", "link-lost", "buffer-overflow", "deadlock",
-               "starvation", "noise", "protocol-misuse", "unit-alarm")
+               "starvation", "noise", "protocol-misuse", "unit-alarm", "overflow-risk",
+               "lost-line", "unit-busy")
 
 ADVICE = {
     "sender-stopped": "The unit was ready and waiting: look at the sender (crash, closed "
@@ -43,6 +43,14 @@ ADVICE = {
     "buffer-overflow": "The host sent more than the unit's receive buffer holds: bytes were "
                        "lost. Count every byte sent (polls and extra commands included) "
                        "against the buffer, or send one line at a time.",
+    "overflow-risk": "More bytes were in flight than the receive buffer holds, though no loss "
+                     "shows on the wire (the unit took them fast enough this time): count "
+                     "every byte sent against the buffer before it costs a line.",
+    "unit-busy": "The unit kept saying it was working and never finished: look at what the "
+                 "line waits for (a heater that never reaches its target, a wait for the user, "
+                 "a very long move) before blaming the link.",
+    "lost-line": "A line or its answer was lost on the way: check the cable and the sender's "
+                 "recovery (ask the unit before sending it again).",
     "deadlock": "Each side waited for the other: the unit held its work while the host "
                 "waited for room. Resume the unit (or clear the condition it holds for) "
                 "and make the sender stop waiting on room while the unit holds.",
@@ -73,8 +81,10 @@ class Cause:
     advice: str
     summary: str                # one sentence
     lines: list[int] = field(default_factory=list)
+    at_end: bool = False        # the stall it explains runs to the end of the capture
+    stall: bool = False         # it explains a stall (not an anomaly on its own)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"kind": self.kind, "confidence": round(self.confidence, 3),
                 "t_start": round(self.t_start, 6), "t_end": round(self.t_end, 6),
                 "evidence": self.evidence, "advice": self.advice, "summary": self.summary,
@@ -120,9 +130,11 @@ def find_stalls(f: Facts) -> list[Stall]:
         if b - a < limit:
             continue
         k = bisect.bisect_left(sends, b)
-        if k and any(x.t_answer is None or x.t_answer >= b - 1e-9 for x in ex[:k]
-                     if x.t_sent <= b):
-            found.append((max(a, ex[0].t_sent), b))
+        start = max(a, ex[0].t_sent)    # no stall before the host's first line
+        if k and b - start >= limit and any(
+                x.t_answer is None or x.t_answer >= b - 1e-9 for x in ex[:k]
+                if x.t_sent <= b):
+            found.append((start, b))
     found.sort()
     merged: list[list[float]] = []
     for a, b in found:
@@ -180,7 +192,8 @@ def _count_between(times: list[float], lo: float, hi: float) -> int:
 
 
 def _events(f: Facts, kinds: tuple[str, ...], lo: float, hi: float) -> list[Event]:
-    return [ev for ev in f.events if ev.kind in kinds and lo <= ev.t <= hi]
+    return [ev for ev in f.events if ev.kind in kinds and lo <= (ev.t_end or ev.t) and
+            ev.t <= hi]      # an event that lasts counts where it overlaps
 
 
 def _fmt(t: float) -> str:
@@ -210,9 +223,11 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     gap = s.t_end - s.t_start
     before = s.t_start - BEFORE_S
     link = _events(f, ("link",), before, s.t_end)
-    closed = _events(f, ("sender-closed",), before, s.t_end + 0.5)
+    since = min([before, *(e.t_sent for e in pending)])    # it left while they waited
+    closed = _events(f, ("sender-closed",), since, s.t_end + 0.5)
     alarms = _events(f, ("alarm",), before, s.t_end)
-    lost = _events(f, ("overflow", "loss"), 0.0, s.t_end)
+    lost = _events(f, ("loss",), 0.0, s.t_end)        # proven on the wire, not a risk
+    risk = _events(f, ("overflow",), 0.0, s.t_end)
     noise = _events(f, ("noise",), before, s.t_end)
     holds = _events(f, ("hold", "full"), before, s.t_end)
     starved = _events(f, ("starved",), before, s.t_end)
@@ -225,7 +240,7 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         out.append(Cause(kind, min(conf, 0.99), s.t_start, s.t_end,
                          [f"stall {span}: the host sent no line for {gap:.3f} s", *evidence,
                           *(_ev(ev) for ev in used[:8])], ADVICE[kind], summary,
-                         sorted({e.n for e in pending} | {last.n})))
+                         sorted({e.n for e in pending} | {last.n}), s.at_end))
 
     if alarms:
         a = alarms[0]
@@ -235,8 +250,30 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     if real_link:
         add("link-lost", 0.92, f"The link was lost at {_fmt(real_link[0].t)}: "
             f"{real_link[0].text}.", [], link)
+    never = [e for e in pending if e.t_answer is None]
+    deaf = _events(f, ("deaf",), before, s.t_end)
+    if pending and not never and not real_link and not alarms and not holds and not deaf:
+        return out      # every line it waited on was answered: the unit was working, a wait
+    busy = _events(f, ("running",), s.t_start, s.t_end + 1e-6)
+    if never and busy and not real_link and not deaf and not alarms and \
+            busy[-1].t >= s.t_end - max(stall_threshold(f), 2.5):
+        add("unit-busy", 0.85, f"The unit said it was working ({busy[-1].text}) up to "
+            f"{_fmt(busy[-1].t)} and never answered {_line(never[0])}: it is busy, not lost.",
+            [f"{len(busy)} report(s) of the unit working in the stall, the last at "
+             f"{_fmt(busy[-1].t)}"], busy[-3:])
+        return out
+    if deaf and not real_link:
+        d = deaf[0]
+        if d.extra.get("back") is not None:
+            add("link-lost", 0.85, f"The link was down from {_fmt(d.t)}: the unit answered "
+                f"none of the host's polls until {_fmt(d.extra['back'])} and then answered "
+                "other traffic again; what was sent meanwhile was lost on the way.",
+                ["polls it answers at once whatever it does went unanswered"], deaf)
+        else:
+            add("unit-silent", 0.85, f"The unit went deaf at {_fmt(d.t)}: it answered none "
+                "of the host's polls from then on.", [], deaf)
     if pending:
-        first = pending[0]
+        first = never[0] if never else pending[0]
         answered_later = [e for e in ex[s.last + 1:] if e.t_answer is not None]
         if holds and unit_active and host_reads:
             add("deadlock", 0.8, f"Both sides waited on each other from {_fmt(s.t_start)}: "
@@ -244,23 +281,26 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                 f"({host_reads} reads) without sending.",
                 [f"{_line(first)} waits for its answer; the unit kept answering polls"],
                 holds)
-        if lost:
-            add("buffer-overflow", 0.88, f"Bytes were lost in a receive-buffer overflow "
-                f"(from {_fmt(lost[0].t)}), so {_line(first)} was never answered and the "
+        if lost and never:
+            kind = "buffer-overflow" if risk and risk[0].t <= lost[0].t else "lost-line"
+            add(kind, 0.88, ("Bytes were lost in a receive-buffer overflow" if risk else
+                             "A line or its answer was lost on the way")
+                + f" (proof: {lost[0].text}), so {_line(first)} was never answered and the "
                 f"host waited from {_fmt(s.t_start)}.",
-                [f"{len(pending)} line(s) without an answer"], lost)
+                [f"{len(never)} line(s) never answered in the capture"],
+                lost + risk[:2])
         if noise:
             add("noise", 0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
                 f"{_line(first)} unanswered.", [], noise)
         quiet, q_from = _longest_gap(f.unit_times, s.t_start, s.t_end)
         back = _any_between(f.unit_times, q_from + quiet, s.t_end + 1e-9)
-        if unit_active and back and quiet >= stall_threshold(f) and not real_link:
+        if unit_active and back and quiet >= stall_threshold(f) and not real_link and never:
             add("link-lost", 0.75, f"The unit went silent for {quiet:.3f} s from "
                 f"{_fmt(q_from)} and then answered other traffic again, never "
                 f"{_line(first)}: what was sent meanwhile was lost on the way.",
                 [f"no byte from the unit from {_fmt(q_from)} to {_fmt(q_from + quiet)}",
                  f"{len(pending)} line(s) never answered"], [])
-        if not unit_active and not s.at_end and answered_later and not real_link:
+        if not unit_active and not s.at_end and answered_later and not real_link and never:
             add("link-lost", 0.7, f"Both directions went dead from {_fmt(s.t_start)} for "
                 f"{gap:.3f} s: lines sent meanwhile were never answered, later ones were.",
                 [f"no byte from the unit from {_fmt(unit_quiet_from)} to {_fmt(s.t_end)}",
@@ -274,7 +314,7 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
             add("sender-stopped", 0.95 if closed else 0.85,
                 f"The sender stopped at {_fmt(t_line)} while it waited on answers: "
                 + ("it closed its port." if closed else "its polls stopped with its lines."),
-                [f"{len(pending)} line(s) still waiting; the host sent nothing after "
+                [f"{len(never)} line(s) still waiting; the host sent nothing after "
                  f"{_fmt(t_line)}"], closed)
         silent_conf = 0.8 if not unit_active else 0.6
         if answered_later and not unit_active:
@@ -288,10 +328,13 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         if host_gone and answered_in:
             silent_conf = min(silent_conf, 0.4)     # the unit went on answering a dead host
         add("unit-silent", silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
-            f"answer to {_line(first)}, which never came"
+            f"answer to {_line(first)}, which "
+            + (f"came only at {_fmt(first.t_answer)}" if first.t_answer is not None
+               else "never came")
             + (" (the unit answered nothing more)." if not unit_active else
                " (the unit still answered other traffic)."),
-            [f"{len(pending)} line(s) without an answer",
+            [f"{len(never)} line(s) never answered in the capture, {len(pending)} waiting "
+             "in the stall",
              "the unit sent nothing after " + _fmt(_last_before(f.unit_times, s.t_end))
              if not unit_active else
              "the unit sent bytes in the stall, none answering the line"], [])
@@ -340,8 +383,8 @@ def _bursts(events: list[Event]) -> list[list[Event]]:
 
 
 EVENT_CAUSE = {  # family event kind -> cause kind, base confidence, per-event step
-    "overflow": ("buffer-overflow", 0.6, 0.1),
-    "loss": ("buffer-overflow", 0.55, 0.1),
+    "overflow": ("overflow-risk", 0.5, 0.05),
+    "loss": ("lost-line", 0.6, 0.1),
     "noise": ("noise", 0.45, 0.08),
     "misuse": ("protocol-misuse", 0.45, 0.05),
     "starved": ("starvation", 0.55, 0.05),
@@ -351,8 +394,11 @@ EVENT_CAUSE = {  # family event kind -> cause kind, base confidence, per-event s
 }
 
 SUMMARY = {
-    "buffer-overflow": "More bytes were in flight than the unit's receive buffer holds, "
-                       "from {t}: bytes were lost.",
+    "buffer-overflow": "More bytes were in flight than the unit's receive buffer holds "
+                       "from {t}, and the wire shows bytes lost: {first}.",
+    "overflow-risk": "More bytes were in flight than the unit's receive buffer holds, from "
+                     "{t} ({n} times); no loss shows on the wire: {first}.",
+    "lost-line": "A line or its answer was lost on the way at {t} ({n} in all): {first}.",
     "noise": "A burst of damaged bytes from {t} ({n} events).",
     "protocol-misuse": "The sender broke the protocol from {t} ({n} times): {first}.",
     "starvation": "The unit's queue ran dry {n} time(s) from {t} while the host was slow.",
@@ -368,13 +414,16 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
         evs = [ev for ev in f.events if ev.kind == ev_kind and id(ev) not in claimed]
         if ev_kind == "link":
             evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
+        if ev_kind == "overflow" and any(ev.kind == "loss" for ev in f.events):
+            continue            # the proven loss's cause carries the risk that came before
         for burst in _bursts(evs):
             n = sum(int(ev.extra.get("count", 1)) for ev in burst)
             conf = base + step * min(n - 1, 4)
-            if kind == "buffer-overflow" and any(
-                    ev.kind in ("loss", "error-answer") and ev.t >= burst[0].t
-                    for ev in f.events if ev not in burst):
-                conf += 0.2          # something after it shows the loss
+            risk = [ev for ev in f.events if ev.kind == "overflow" and ev.t <= burst[0].t]
+            if kind == "lost-line" and risk:
+                kind = "buffer-overflow"     # a proven loss after bytes over the buffer
+                conf += 0.2
+                burst = risk[:1] + burst
             t1 = max(ev.t_end or ev.t for ev in burst)
             summary = SUMMARY[kind].format(t=_fmt(burst[0].t), n=n, first=burst[0].text)
             out.append(Cause(kind, min(conf, 0.95), burst[0].t, t1,
@@ -434,4 +483,6 @@ def rank(f: Facts) -> list[Cause]:
     for s in find_stalls(f):
         found += _stall_cause(f, s, claimed)
     found += _anomalies(f, claimed)
+    for c in found:
+        c.stall = any(x.startswith("stall ") for x in c.evidence[:1])
     return sorted(_merge(found), key=lambda c: (-c.confidence, c.t_start))

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from conform.jsondoc import JsonObject
+
 EVENT_KINDS = {
     "alarm": "the unit reported an alarm, an interrupt or a halt of its own",
     "error-answer": "the unit refused a line (an error answer)",
@@ -26,6 +28,12 @@ EVENT_KINDS = {
     "link": "the link dropped, failed or came back (a recorded link event)",
     "sender-closed": "the sender closed its port",
     "job-end": "the job's own end (a program end word)",
+    "halt": "the sender halted the unit itself (feed hold with reset, emergency stop, the "
+            "family's halt or reset command)",
+    "idle": "the unit reported itself idle or ready with nothing left to run",
+    "running": "the unit reported itself still running its work",
+    "deaf": "the unit answered none of the host's polls over a stretch (polls it always "
+            "answers at once, whatever it is doing)",
 }
 
 
@@ -54,9 +62,9 @@ class Event:
     rule: str = ""              # the clause or rule that fired
     t_end: float | None = None
     line: int | None = None     # the host line it concerns
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: JsonObject = field(default_factory=dict)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {k: v for k, v in asdict(self).items() if v not in (None, "", {})}
 
 
@@ -79,6 +87,8 @@ class Facts:
     answer_time: float = 0.5            # an answer later than this is a wait, not a reply
     notes: list[str] = field(default_factory=list)
     family_data: Any = None             # the family's own analysis, for its other hooks
+    damaged: str | None = None          # what is wrong with the capture file, when it is
+    lines_kept: bool = True             # False: too long, ``exchanges`` is empty
 
 
 @dataclass(slots=True)
@@ -98,7 +108,7 @@ class ParsedLine:
     why: str = ""
     echo: str | None = None     # what the unit echoed of it, where it echoes
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {k: v for k, v in asdict(self).items() if v is not None}
 
 
@@ -113,7 +123,7 @@ class ResumePoint:
     resume_from: int | None           # the host line to resume at
     command: str                      # how to resume
     evidence: list[str] = field(default_factory=list)
-    state: dict[str, Any] = field(default_factory=dict)    # the modal state, named
+    state: dict[str, object] = field(default_factory=dict)    # the modal state, named
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return asdict(self)

@@ -14,7 +14,12 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+if TYPE_CHECKING:
+    from rich.console import Console, RenderableType
+
+    from conform.capture.recorder import Recorder
 
 REFRESH_S = 0.25
 TAP_MAX = 200_000           # reads kept for the view; beyond, the oldest are let go
@@ -39,6 +44,16 @@ class LiveState:
     events: deque[str] = field(default_factory=lambda: deque(maxlen=8))
 
 
+class LiveMonitor(Protocol):
+    """A family's live monitor (``Family.live_monitor``): fed every read as it comes, it keeps
+    ``state`` current."""
+
+    state: LiveState
+
+    def feed(self, direction: str, data: bytes, t: float) -> None:
+        """Bytes read from ``direction`` (``host`` or ``unit``) at ``t``."""
+
+
 def so_far(s: LiveState, now: float) -> str:
     """The diagnosis so far, in one line, from the counters alone."""
     if any("ALARM" in e or "alarm" in e for e in s.events):
@@ -57,13 +72,13 @@ def so_far(s: LiveState, now: float) -> str:
 
 
 class LiveView:
-    def __init__(self, recorder: Any, variant: str | None, *, console: Any = None,
+    def __init__(self, recorder: Recorder, variant: str | None, *, console: Console | None = None,
                  title: str = "") -> None:
         self.recorder = recorder
         self.variant = variant
         self.title = title
         self.tap: deque[tuple[str, bytes, float]] = deque(maxlen=TAP_MAX)
-        self.monitor: Any = None
+        self.monitor: LiveMonitor | Literal[False] | None = None  # False: the family has none
         self.family = ""
         self._seen = {"host": bytearray(), "unit": bytearray()}
         self._held: list[tuple[str, bytes, float]] = []
@@ -87,7 +102,7 @@ class LiveView:
             chunk(direction, data, t, t_first)
             append((direction, data, t))
 
-        rec.chunk = tapped
+        rec.chunk = tapped  # type: ignore[method-assign]  # the view taps every chunk
 
     def _choose(self, direction: str, data: bytes, t: float) -> None:
         from conform.families import detect_family, family, family_for_variant
@@ -124,7 +139,7 @@ class LiveView:
             elif self.monitor is None:
                 self._choose(*item)
 
-    def renderable(self) -> Any:
+    def renderable(self) -> RenderableType:
         from rich.table import Table
 
         now = time.time()

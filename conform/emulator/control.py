@@ -10,13 +10,20 @@ from __future__ import annotations
 import queue
 import socket
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
+
+if TYPE_CHECKING:
+    from conform.link.faults import FaultInjector
 
 ControlHandler = Callable[[Any, str, float], str]
-"""(unit, request line, time) -> reply line; runs in the emulator's loop, which owns the unit."""
+"""(unit, request line, time) -> reply line; runs in the emulator's loop, which owns the unit
+(the family's own unit type: hence Any)."""
+
+UnitT = TypeVar("UnitT")
+"""The unit type of the family whose control requests a :class:`FaultControl` answers."""
 
 
-def no_commands(unit: Any, line: str, t: float) -> str:
+def no_commands(unit: object, line: str, t: float) -> str:
     """The reply of an emulator whose family has no control commands."""
     return "error: this emulator takes no control commands"
 
@@ -42,7 +49,7 @@ class LocalControl:
     ever touched by the thread that owns it."""
 
     def __init__(self) -> None:
-        self.requests: queue.SimpleQueue = queue.SimpleQueue()
+        self.requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]] = queue.SimpleQueue()
 
     def ask(self, line: str, timeout: float = 5.0) -> str:
         reply: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -53,7 +60,7 @@ class LocalControl:
             return "error: the emulator did not answer"
 
 
-class FaultControl:
+class FaultControl(Generic[UnitT]):
     """What every family's control requests share: ``help``, ``state`` (JSON), ``fault line
     SPEC`` (the link's noise), ``fault KIND N`` for the answer faults counted in ``counted``
     (each sets ``<kind>_next`` on the family's fault injector), ``fault unplug SECONDS``, and
@@ -66,24 +73,24 @@ class FaultControl:
     counted: tuple[str, ...] = ()
     """Answer faults taking a count: ``fault lose N`` sets ``faults.lose_next``."""
 
-    def __init__(self, faults: Any) -> None:
+    def __init__(self, faults: FaultInjector) -> None:
         self.faults = faults
 
-    def state(self, unit: Any) -> dict[str, Any]:
+    def state(self, unit: UnitT) -> dict[str, object]:
         return {}
 
-    def verb(self, unit: Any, cmd: str, args: list[str], t: float) -> str | None:
+    def verb(self, unit: UnitT, cmd: str, args: list[str], t: float) -> str | None:
         """A request of the family's own (``press door``, ``reset``); None: not one."""
         return None
 
-    def fault(self, unit: Any, kind: str, x: float, t: float) -> str | None:
+    def fault(self, unit: UnitT, kind: str, x: float, t: float) -> str | None:
         """A fault of the family's own taking one number; None: not one."""
         return None
 
-    def unplugged(self, unit: Any, t: float) -> None:
+    def unplugged(self, unit: UnitT, t: float) -> None:
         """What the unit does when its cable is pulled (default: nothing beyond the link)."""
 
-    def __call__(self, unit: Any, line: str, t: float) -> str:
+    def __call__(self, unit: UnitT, line: str, t: float) -> str:
         import json
 
         from conform.errors import UserError
@@ -108,7 +115,7 @@ class FaultControl:
             return f"error: {type(exc).__name__}: {exc}"
         return f"error: cannot parse {line.strip()[:80]!r}; {self.help_text}"
 
-    def _fault(self, unit: Any, kind: str, args: list[str], t: float) -> str:
+    def _fault(self, unit: UnitT, kind: str, args: list[str], t: float) -> str:
         from conform.link.faults import FaultConfig
 
         f = self.faults

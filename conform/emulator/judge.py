@@ -28,9 +28,13 @@ import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:
+    from conform.emulator.serve import SansIOUnit
+    from conform.families import Family
 
 GAP = 0.2
 """Seconds between events whose transcript line gives no time."""
@@ -241,7 +245,7 @@ def pacing(transcript: Transcript, is_answer: Callable[[str], bool] = _every_lin
     return paces
 
 
-def _follower(transcript: Transcript, follow: Callable[[Any, str], None] | None, unit: Any
+def _follower(transcript: Transcript, follow: Callable[[Any, str], None] | None, unit: SansIOUnit
               ) -> Callable[[Event], None]:
     """A function that, given host write ``e``, shows ``follow`` the recorded answer lines
     before the next host write (those not shown yet)."""
@@ -271,7 +275,7 @@ class _Player:
     """The reference unit driven through a recording's host writes, its answer lines counted
     as they come."""
 
-    def __init__(self, unit: Any, is_answer: Callable[[str], bool]) -> None:
+    def __init__(self, unit: SansIOUnit, is_answer: Callable[[str], bool]) -> None:
         self.unit = unit
         self.is_answer = is_answer
         self.out: list[tuple[float, bytes]] = []
@@ -305,7 +309,7 @@ class _Player:
         self.take(self.unit.poll(t))
 
 
-def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
+def play(unit: SansIOUnit, transcript: Transcript, settle: float = SETTLE,
          is_answer: Callable[[str], bool] = _every_line, played: list[float] | None = None,
          follow: Callable[[Any, str], None] | None = None) -> list[tuple[float, bytes]]:
     """Every host write played into ``unit`` as the recorded sender paced it; what the unit
@@ -341,7 +345,10 @@ def play(unit: Any, transcript: Transcript, settle: float = SETTLE,
         if pace.answered:
             need = pace.owed + slack
             bound = t_prev + gap * WAIT_FACTOR + WAIT_EXTRA
-            if player.until(bound, lambda need=need: player.owed <= need):
+            def answered(need: int = need) -> bool:
+                return player.owed <= need
+
+            if player.until(bound, answered):
                 slack = max(0, min(slack, player.owed - pace.owed))
                 t = max(t_prev + gap, player.answer_t + pace.since, player.unit.now)
             else:
@@ -384,7 +391,7 @@ class Verdict:
     def agrees(self) -> bool:
         return not self.differences
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"source": self.source, "variant": self.variant, "agrees": self.agrees,
                 "host_lines": self.host_lines, "recorded_lines": self.recorded_lines,
                 "reference_lines": self.reference_lines, "same": self.same,
@@ -437,7 +444,8 @@ def _opcodes(a: list[str], b: list[str], near: Callable[[str, str], bool] | None
              ) -> list[tuple[str, int, int, int, int]]:
     """difflib's opcodes of the two line lists, the differing blocks split further where
     ``near`` pairs their lines."""
-    ops = difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes()
+    ops: list[tuple[str, int, int, int, int]] = list(
+        difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes())
     if near is None:
         return ops
     out: list[tuple[str, int, int, int, int]] = []
@@ -483,7 +491,7 @@ def compare(transcript: Transcript, reference_out: Iterable[tuple[float, bytes]]
                    len(reference), same, diffs)
 
 
-def judge(transcript: Transcript, unit: Any, mask: Callable[[str], str], variant: str,
+def judge(transcript: Transcript, unit: SansIOUnit, mask: Callable[[str], str], variant: str,
           settle: float = SETTLE, *, is_answer: Callable[[str], bool] = _every_line,
           near: Callable[[str, str], bool] | None = None,
           follow: Callable[[Any, str], None] | None = None) -> Verdict:
@@ -492,7 +500,7 @@ def judge(transcript: Transcript, unit: Any, mask: Callable[[str], str], variant
     return compare(transcript, out, mask, variant, near, played)
 
 
-def foreign(transcript: Transcript, fam: Any) -> str | None:
+def foreign(transcript: Transcript, fam: Family) -> str | None:
     """Why the recording is another family's, or None when it may be ``fam``'s: another
     family's detector recognises its traffic better than ``fam``'s does, surely (0.5 or more)
     or where ``fam``'s recognises none of it."""
@@ -512,7 +520,7 @@ def foreign(transcript: Transcript, fam: Any) -> str | None:
             f"{other.name} variant ({names})")
 
 
-def judge_recording(transcript: Transcript, fam: Any, variant: str,
+def judge_recording(transcript: Transcript, fam: Family, variant: str,
                     settle: float = SETTLE) -> Verdict:
     """``conform emulate judge``: the recording played into ``fam``'s reference unit and
     compared with the family's ending, answers, mask and tolerance; a recording of another

@@ -10,12 +10,19 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from types import FrameType
+from typing import TYPE_CHECKING
 
 import click
 
 from conform.errors import UserError
+from conform.link.endpoint import Endpoint
 from conform.stops import STOP_SIGNALS
+
+if TYPE_CHECKING:
+    from conform.emulator.control import ControlHandler
+    from conform.emulator.serve import ControlServer, Emulator, SansIOUnit
+    from conform.link.faults import FaultInjector
 
 
 def check_pacing(baud: int | None, answer_delay: float) -> None:
@@ -26,7 +33,7 @@ def check_pacing(baud: int | None, answer_delay: float) -> None:
         raise UserError(f"--answer-delay {answer_delay}: expected 0..60 seconds")
 
 
-def control_server(control_path: str | None, endpoint: Any) -> Any:
+def control_server(control_path: str | None, endpoint: Endpoint) -> ControlServer:
     """The control socket (``--control PATH`` or a fresh private path); the endpoint is
     closed and a one-line error raised when it cannot listen."""
     from conform.emulator.serve import ControlServer
@@ -41,7 +48,7 @@ def control_server(control_path: str | None, endpoint: Any) -> Any:
         raise UserError(f"--control {where}: cannot listen: {exc.strerror or exc}") from None
 
 
-def fault_injector(faults: str | None, seed: int | None, t0: float) -> Any:
+def fault_injector(faults: str | None, seed: int | None, t0: float) -> FaultInjector | None:
     """The line faults asked for with --faults, or None when there are none."""
     from conform.link.faults import FaultConfig, FaultInjector
 
@@ -55,19 +62,19 @@ def report(msg: str) -> None:
     click.echo(f"conform emulate: {msg}", err=True)
 
 
-def announce(endpoint: Any, what: str) -> None:
+def announce(endpoint: Endpoint, what: str) -> None:
     """The device path alone on stdout's first line (what scripts read), then what is served."""
     click.echo(endpoint.name)
     sys.stdout.flush()
     report(what)
 
 
-def run_until_signal(emulator: Any, quiet: bool = False) -> None:
+def run_until_signal(emulator: Emulator, quiet: bool = False) -> None:
     """Serve until SIGINT, SIGTERM or SIGHUP, then put the previous handlers back; meanwhile
     the bytes each way are the progress display (none when ``quiet``)."""
     from conform.cli.progress import progress
 
-    def on_signal(signum: int, _frame: Any) -> None:
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         emulator.stop()
 
     old = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
@@ -81,7 +88,8 @@ def run_until_signal(emulator: Any, quiet: bool = False) -> None:
             signal.signal(s, handler)
 
 
-def open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any]:
+def open_endpoint(tcp_port: int | None, link_path: str | None
+                  ) -> tuple[Endpoint, Callable[[], Endpoint]]:
     if tcp_port is not None:
         from conform.link.tcp import TcpServerEndpoint
 
@@ -93,11 +101,11 @@ def open_endpoint(tcp_port: int | None, link_path: str | None) -> tuple[Any, Any
     from conform.link.pty import PtyEndpoint
 
     try:
-        endpoint = PtyEndpoint(link=link_path)
+        pty = PtyEndpoint(link=link_path)
     except OSError as exc:
         raise UserError(f"cannot create a pty{' at ' + link_path if link_path else ''}: "
                         f"{exc.strerror or exc}") from None
-    return endpoint, lambda: PtyEndpoint(link=link_path)
+    return pty, lambda: PtyEndpoint(link=link_path)
 
 
 @dataclass
@@ -106,15 +114,15 @@ class ServedUnit:
     it (a fault injector of its own, control requests, what a reconnect does to the unit,
     extra session metadata, what it reports and writes when stopped)."""
 
-    unit: Any
+    unit: SansIOUnit
     describe: str = ""                       # after "<variant> on <port>" in the announcement
-    injector: Any = None                     # None: the engine's, from --faults
-    control_handler: Any = None              # the family's control requests (None: refused)
-    wrap_reopen: Callable[[Callable[[], Any]], Callable[[], Any]] | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
+    injector: FaultInjector | None = None    # None: the engine's, from --faults
+    control_handler: ControlHandler | None = None   # the family's control requests (None: refused)
+    wrap_reopen: Callable[[Callable[[], Endpoint]], Callable[[], Endpoint]] | None = None
+    metadata: dict[str, object] = field(default_factory=dict)
     decode: bool = True                      # decode frames while recording (a live decoder)
     backdate: bool = True                    # recorder dates a chunk's first byte a wire time early
-    end_counts: Callable[[], dict[str, Any]] | None = None   # extra counts at the capture's end
+    end_counts: Callable[[], dict[str, object]] | None = None   # extra counts at the capture's end
     finish: Callable[[Callable[[str], None]], None] | None = None   # after stopping
     stopped_note: Callable[[], str] | None = None   # added to the "stopped (...)" line
 

@@ -25,7 +25,7 @@ from typing import Any, Protocol
 
 from conform.emulator.control import ControlHandler, no_commands
 from conform.errors import LinkError, UserError
-from conform.link.endpoint import PortGone
+from conform.link.endpoint import Endpoint, PortGone
 from conform.link.faults import FaultInjector
 
 MAX_WAIT = 0.02  # the loop wakes at least this often (control commands, stop requests)
@@ -47,6 +47,12 @@ class SansIOUnit(Protocol):
 
     def next_deadline(self) -> float | None:
         """When the unit next has something to do (None: only when bytes arrive)."""
+
+
+class ControlRequests(Protocol):
+    """Where an emulator's loop takes its control requests: (line, queue for the reply)."""
+
+    requests: queue.SimpleQueue[tuple[str, queue.SimpleQueue[str]]]
 
 
 class ControlServer:
@@ -175,13 +181,13 @@ class Emulator:
     def __init__(
         self,
         unit: SansIOUnit,
-        endpoint: Any,
+        endpoint: Endpoint,
         *,
         baud: int | None = None,
         injector: FaultInjector | None = None,
         recorder: Any = None,
-        control: ControlServer | None = None,
-        reopen: Callable[[], Any] | None = None,
+        control: ControlRequests | None = None,
+        reopen: Callable[[], Endpoint] | None = None,
         report: Callable[[str], None] | None = None,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,

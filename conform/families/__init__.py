@@ -4,7 +4,7 @@ The engine (spec tooling, emulator adapter, conformance results and reports, cap
 analysis, CLI) is shared; a family contributes its tables, a reference unit, its conformance
 checks graded in the engine's runner, its emulator and control commands, a live decoder for
 captures, check-sender's scenarios, a detector for its traffic and its analysis. Each family is
-one package (``conform.families.<name>``, its tables in ``<name>/spec/tables/``) registered in
+one package (``conform.families.<name>``, its tables in the top-level ``specs/<name>/``) registered in
 the ``conform.families`` entry point group. The engine reaches a family only through this
 registry (tests/test_family_boundary.py). See docs/architecture.md and
 docs/writing-a-family.md.
@@ -23,9 +23,26 @@ from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from importlib.resources import files
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from conform.errors import UserError
+
+if TYPE_CHECKING:  # the shapes of the hooks below; imported where they are used
+    import click
+    from rich.console import Console
+
+    from conform.analysis.rawread import RawCapture
+    from conform.capture.merge import HostLines
+    from conform.capture.session import Decoder
+    from conform.conformance.observed import ProbeHooks
+    from conform.conformance.plan import Permissions
+    from conform.conformance.runner import Check, Runner, RunOptions
+    from conform.conformance.target import Target
+    from conform.diagnosis.facts import Facts, ParsedLine, ResumePoint
+    from conform.diagnosis.live import LiveMonitor
+    from conform.emulator.serve import SansIOUnit
+    from conform.jsondoc import JsonObject
+    from conform.sendercheck.family import Family as SenderShapes
 
 
 @dataclass(frozen=True)
@@ -85,7 +102,7 @@ class AnalysisResult(Protocol):
     def write_tables(self, directory: str) -> dict[str, Path]:
         """Its tables as Parquet files in ``directory``; returns their paths."""
 
-    def fleet_row(self) -> dict[str, Any]:
+    def fleet_row(self) -> dict[str, object]:
         """Its row of a fleet summary: the engine's columns (``duration_s``, ``exchanges``,
         ``exchanges_per_s``, ``findings``, ``rtt_p50_ms``...) and the family's
         (``Family.fleet_columns``)."""
@@ -131,13 +148,21 @@ class Family:
     """The names of its table files (without ``.toml``): how ``spec check --specs DIR`` tells
     whose tables a folder holds."""
 
-    check_sender: Any = None
-    """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``), run
-    by the engine's supervisor (conform.sendercheck); None: this family judges no senders."""
+    characterize_about: str = ""
+    """What ``conform characterize`` asks of this family's units, in a sentence or two for its
+    help (what is probed, and whether it moves or writes anything); empty: not listed."""
+
+    @property
+    def check_sender(self) -> SenderShapes[Any, Any, Any] | None:
+        """check-sender's scenarios, rules and hooks (``conform.sendercheck.family.Family``),
+        run by the engine's supervisor (conform.sendercheck); None: this family judges no
+        senders. A family may override it with a property or a class attribute."""
+        return None
 
     # -- tables ---------------------------------------------------------------------------
-    def load_tables(self, root: str | None = None) -> Any:
-        """Its tables, validated (one-line ``UserError`` on a bad row)."""
+    def load_tables(self, root: str | None = None) -> object:
+        """Its tables, validated (one-line ``UserError`` on a bad row); their shape is the
+        family's own (the engine only asks that they load)."""
         raise self.lacks("tables")
 
     def variants(self) -> Sequence[VariantInfo]:
@@ -149,21 +174,22 @@ class Family:
         """The variant a command addresses when none is named: the first in the tables."""
         return self.variants()[0].id
 
-    def variant_table(self, pretty: bool = False) -> tuple[str, list[str], list[list[Any]]]:
+    def variant_table(self, pretty: bool = False
+                      ) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         """``conform spec list``'s table of this family: (title, columns, rows)."""
         return (f"{self.name} variants", ["variant", "title", "firmware", "axes", "buffers", "notes"],
                 [[v.id, v.title, v.firmware, v.axes, v.buffer, v.notes] for v in self.variants()])
 
-    def show_spec(self, variant: str, command: str | None, *, console: Any,
+    def show_spec(self, variant: str, command: str | None, *, console: Console,
                   as_json: bool = False) -> None:
         """``conform spec show``: a variant's commands (or one) from its tables."""
         raise self.lacks("`spec show`")
 
-    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+    def diff_variants(self, a: str, b: str) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         """``conform spec diff A B``: (title, columns, rows) of what differs from A to B."""
         raise self.lacks("`spec diff`")
 
-    def open_questions(self) -> tuple[str, list[str], list[tuple[Any, ...]]] | None:
+    def open_questions(self) -> tuple[str, Sequence[str], Sequence[Sequence[object]]] | None:
         """``conform spec questions``: (title, columns, rows) of the choices its sources leave
         open and the default assumed, or None when it has none."""
         return None
@@ -174,9 +200,10 @@ class Family:
         return f"ok: {self.name}: {len(self.variants())} variants"
 
     # -- the reference unit ------------------------------------------------------------------
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> SansIOUnit:
         """A sans-I/O reference unit: ``receive(bytes, t)``, ``poll(t)``, ``next_deadline()``,
-        ``now``."""
+        ``now`` (conform.emulator.serve.SansIOUnit). ``options``: the family's own (a mutant's
+        name, a dialect, a profile)."""
         raise self.lacks("a reference unit")
 
     def judge_mask(self, variant: str) -> Callable[[str], str]:
@@ -195,7 +222,7 @@ class Family:
         paces a recording's host writes by them. The default: every line does."""
         return _every_line
 
-    def judge_unit(self, variant: str) -> Any:
+    def judge_unit(self, variant: str) -> SansIOUnit:
         """The reference unit ``conform emulate judge`` plays a recording into: by default
         ``make_unit(variant)``; a family whose recordings come from firmware in a stated
         setting (a simulator with no switches wired, say) gives its unit that setting."""
@@ -225,8 +252,9 @@ class Family:
         raise self.lacks("an emulator")
 
     # -- conformance: what ``conform run``'s loop (conform.conformance.plan) asks -------------
-    def open_target(self, text: str, *, baud: int, permissions: Any,
-                    inputs_control: str | None = None, **family_values: Any) -> tuple[Any, str | None]:
+    def open_target(self, text: str, *, baud: int, permissions: Permissions | None,
+                    inputs_control: str | None = None, **family_values: Any
+                    ) -> tuple[Target, str | None]:
         """Open ``emu:VARIANT[:MUTANT]`` or a port; (the target, the variant its name implies).
         By default an emulator is this family's unit on the engine's virtual clock
         (``make_unit(variant, mutant=NAME)`` for a mutant) and a port is a plain link."""
@@ -239,31 +267,32 @@ class Family:
         if mutant is not None and mutant not in self.mutants():
             known = ", ".join(self.mutants()) or "none"
             raise UserError(f"target {text!r}: {self.name} has no mutant {mutant!r} (known: {known})")
-        options = {"mutant": mutant} if mutant else {}
-        return EmuTarget(lambda: self.make_unit(vid, **options), text if what else f"emu:{vid}",
+        return EmuTarget(lambda: self.make_unit(vid, mutant=mutant) if mutant else self.make_unit(vid),
+                         text if what else f"emu:{vid}",
                          baud=baud), vid
 
-    def identify(self, target: Any) -> tuple[str, str]:
+    def identify(self, target: Target) -> tuple[str, str]:
         """Ask an open unit which variant it is; (variant, how it was decided)."""
         return self.default_variant, f"assumed {self.default_variant} ({self.name} units are not asked)"
 
-    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
+    def plan_checks(self, variant: str, *, permissions: Permissions, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **family_values: Any
-                    ) -> list[Any]:
+                    ) -> Sequence[Check]:
         """The checks of ``variant`` for a run (each with ``id``, ``level``, ``clause``,
         ``title``), filtered by the globs ``patterns``; ``machine``: with the random
         sequences, where the family has them."""
         raise self.lacks("conformance checks")
 
-    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
-               **family_values: Any) -> Any:
+    def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
+               permissions: Permissions | None = None, **family_values: Any) -> Runner[Any]:
         """A ``conform.conformance.runner.Runner`` that grades this family's checks on
         ``target``: the engine's loop (ETA, link-loss abort, Ctrl-C, results) calls back for
         grading a check, keeping the unit in a check's starting state, halting the unit
-        (retried until acknowledged) and estimating a check's duration."""
+        (retried until acknowledged) and estimating a check's duration. Its type parameter is
+        the family's own check type (``Runner[ItsCheck]``), hence ``Any`` here."""
         raise self.lacks("conformance checks")
 
-    def permission_notes(self, permissions: Any) -> list[str]:
+    def permission_notes(self, permissions: Permissions) -> list[str]:
         """What a run on a real unit leaves out for want of an opt-in (the report says it)."""
         notes = []
         if not permissions.allow_motion:
@@ -276,7 +305,7 @@ class Family:
         return len(variants) * len(self.mutants())
 
     def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                    progress: Any = None) -> list[dict[str, Any]]:
+                    progress: Callable[[str], None] | None = None) -> list[dict[str, object]]:
         """Run the checks against every deviant unit: which checks caught each (FAIL)."""
         import time
 
@@ -284,7 +313,7 @@ class Family:
         from conform.conformance.results import Grade
         from conform.conformance.runner import RunAborted, RunOptions
 
-        report = []
+        report: list[dict[str, object]] = []
         perms = Permissions.of(True, True, None, True)
         for vid in variants:
             for name in self.mutants():
@@ -311,14 +340,14 @@ class Family:
         """What the deviant unit ``name`` does wrong, in a few words."""
         return name
 
-    def characterize_probes(self) -> Any:
+    def characterize_probes(self) -> ProbeHooks | None:
         """For the default ``characterize``: (probe(target, variant, out) appending
         ``conform.conformance.observed.Observation``s to ``out``, stop(target) halting the unit,
         the item names probed in order); None when the family has no probes."""
         return None
 
     def characterize(self, target: str, output: str, variant: str | None, *, baud: int = 115200,
-                     echo: Callable[[str], Any] = print, **options: Any) -> None:
+                     echo: Callable[[str], object] = print, **options: Any) -> None:
         """``conform characterize``: probe what the unit does where builds or the source leave
         a choice and write the profile. The default runs ``characterize_probes``."""
         hooks = self.characterize_probes()
@@ -332,7 +361,7 @@ class Family:
                             title=f"what this {self.name} build does, probed by conform "
                                   "characterize")
 
-    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, object, object]], str]:
         """``conform profile diff`` of two profiles of a shape the engine does not read (the
         engine compares ``[observed]`` profiles itself): (notes, rows (item, a, b) that differ,
         the line when none does)."""
@@ -364,18 +393,18 @@ class Family:
         raise self.lacks("reference sender (`conform send`)")
 
     # -- capture and analysis ------------------------------------------------------------------
-    def detect(self, host: bytes, unit: bytes, metadata: dict[str, Any]) -> Detection:
+    def detect(self, host: bytes, unit: bytes, metadata: JsonObject) -> Detection:
         """Does this traffic look like this family's?"""
         return Detection(self.name, 0.0, f"{self.name} does not detect traffic")
 
-    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Decoder | None:
         """A frame decoder for the capture recorder (``conform.capture.session.Decoder``), or
         None: the capture then holds the raw bytes only (decoded when analysed). Its ``fields``
         (``conform.capture.schemas.CaptureFields``) declare what its frames and exchanges
         record besides the engine's neutral fields."""
         return None
 
-    def host_lines(self) -> Any:
+    def host_lines(self) -> HostLines | None:
         """The sniffer's count of host lines owed an answer (a
         ``conform.capture.merge.HostLines``), or None: every line owes one answer."""
         return None
@@ -392,8 +421,8 @@ class Family:
     # -- the diagnosis (conform.diagnosis): optional; a family without them is diagnosed as
     # -- "not available" (the defaults below), the engine reaching them through getattr
 
-    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
-                        analysis: Any = None) -> Any:
+    def diagnosis_facts(self, raw: RawCapture, path: str, *, variant: str | None = None,
+                        analysis: AnalysisResult | None = None) -> Facts | None:
         """``conform diagnose``: a capture already read (``conform.analysis.rawread``) as
         neutral ``conform.diagnosis.facts.Facts`` — lines sent and answered, bytes in flight
         against the receive buffer, the unit's alarms, errors, noise, starvation, holds —
@@ -401,30 +430,31 @@ class Family:
         own analysis of the capture when the caller has it already (``conform analyze``)."""
         return None
 
-    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+    def reception(self, raw: RawCapture, *, variant: str | None = None) -> list[ParsedLine] | None:
         """The host's lines as the unit would have read them (its receive buffer, line
         assembly, length limits, checksums): a list of ``conform.diagnosis.facts.ParsedLine``
         for every line not read intact, or None when it has no model (the default)."""
         return None
 
-    def live_monitor(self, variant: str | None) -> Any:
+    def live_monitor(self, variant: str | None) -> LiveMonitor | None:
         """``conform proxy --live``: an object with ``feed(direction, data, t)`` and a
         ``state`` (``conform.diagnosis.live.LiveState``) kept current from the traffic, cheap
         enough for the recording's pace; None (the default): the view shows the bytes only."""
         return None
 
-    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+    def resume_state(self, raw: RawCapture, facts: Facts, *, variant: str | None = None
+                     ) -> ResumePoint | None:
         """Where a stopped job can resume: a ``conform.diagnosis.facts.ResumePoint`` (last line
         executed, last acknowledged, the uncertain ones, the modal preamble), or None (the
         default)."""
         return None
 
     # -- the command line ------------------------------------------------------------------------
-    def commands(self) -> Sequence[Any]:
+    def commands(self) -> Sequence[click.Command]:
         """Click commands this family adds to ``conform`` (e.g. its reference sender)."""
         return ()
 
-    def command_options(self, command: str) -> Sequence[Any]:
+    def command_options(self, command: str) -> Sequence[click.Option]:
         """Click options this family adds to the engine's ``command`` (``run``, ``emulate
         serve``, ...); their values reach this family's hook for that command and are refused
         when the command addresses another family's unit."""
@@ -451,13 +481,18 @@ SPECS_ENV = "CONFORM_SPECS"
 def table_folder(name: str, package: str) -> Path:
     """The folder of family ``name``'s tables: ``$CONFORM_SPECS/<name>/`` when that exists (a
     modified copy to try), else the tables shipped inside ``package`` (its ``tables/`` data
-    folder, found through importlib.resources so a wheel install finds them too)."""
+    folder, found through importlib.resources: a wheel carries the top-level ``specs/<name>/``
+    there, setup.py), else, in a source checkout or an editable install, ``specs/<name>/`` beside
+    the package's top-level folder."""
     env = os.environ.get(SPECS_ENV)
     if env:
         override = Path(env) / name
         if override.is_dir():
             return override
-    return Path(str(files(package).joinpath("tables")))
+    shipped = Path(str(files(package).joinpath("tables")))
+    if shipped.is_dir():
+        return shipped
+    return Path(str(files(package.partition(".")[0]))).parent / "specs" / name
 
 
 ENTRY_POINT_GROUP = "conform.families"
@@ -552,6 +587,23 @@ def identify_port(device: str, *, baud: int, timeout: float
     return None, ProbeAnswer(None, heard, "; ".join(tried) or "no family can probe"), tried
 
 
+def unit_on_port(device: str, *, baud: int, timeout: float = 0.5) -> tuple[Family, str]:
+    """The family and variant of the unit on ``device``, found with ``identify_port``'s
+    harmless questions (``conform run`` and ``characterize`` given no ``--variant``); a port
+    that cannot be opened or where no unit answers is one ``UserError`` line, before any
+    check or probe is sent."""
+    from conform.link.ports import open_port
+
+    open_port(device, baud).close()   # a port that cannot be opened says so in its own words
+    found, answer, _ = identify_port(device, baud=baud, timeout=timeout)
+    if found is None or answer.variant is None:
+        heard = f" (it sent {answer.answer[:40]!r})" if answer.answer else ""
+        raise UserError(f"{device}: no unit answered at {baud} Bd{heard}: is the unit on, "
+                        "on this port and at this baud rate (--baud)? "
+                        "`conform ports --probe` asks every port; --variant names the unit")
+    return found, answer.variant
+
+
 def family_of_tables(root: str | Path) -> Family:
     """Whose tables the folder ``root`` holds: the family most of whose table files are there
     (the default family when none is)."""
@@ -581,7 +633,7 @@ def unknown_variant(variant_id: str, family_name: str) -> str:
     return f"unknown variant {variant_id!r} (known: {known})"
 
 
-def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = None
+def detect_family(host: bytes, unit: bytes, metadata: dict[str, object] | None = None
                   ) -> Detection:
     """The family whose traffic this is: the capture's declared variant first, then the bytes.
 
@@ -607,7 +659,7 @@ def detect_family(host: bytes, unit: bytes, metadata: dict[str, Any] | None = No
 UNKNOWN_MIN_BYTES = 256   # less traffic than this stays with the default family's analyser
 
 
-def divert(host: bytes, unit: bytes, metadata: dict[str, Any], variant: str | None
+def divert(host: bytes, unit: bytes, metadata: dict[str, object], variant: str | None
            ) -> Detection | None:
     """Which family other than the default one should analyse this traffic (None: the default
     family's analyser, which also reads damaged or unrecognised captures).

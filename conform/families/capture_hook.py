@@ -90,7 +90,7 @@ def analyze_other_family(path: str, variant: str | None, report_dir: str | None,
     return a
 
 
-def _echo_json(doc: dict[str, Any]) -> None:
+def _echo_json(doc: dict[str, object]) -> None:
     from conform.cli.params import echo_json
 
     echo_json(doc)

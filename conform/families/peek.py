@@ -5,15 +5,16 @@ they read a capture whole)."""
 from __future__ import annotations
 
 import json
-from typing import Any
+from pathlib import Path
 
 from conform.families import Detection, divert
+from conform.jsondoc import JsonObject
 
 PEEK_BYTES = 65536
 
 
 def peek_capture(path: str, limit: int = PEEK_BYTES, *, bytes_too: bool = False
-                 ) -> tuple[bytes, bytes, dict[str, Any]]:
+                 ) -> tuple[bytes, bytes, JsonObject]:
     """The first ``limit`` bytes of each direction and the session metadata of a capture
     (only the metadata when it names a variant, unless ``bytes_too``)."""
     from conform.capture.batch import payload_bytes
@@ -22,7 +23,7 @@ def peek_capture(path: str, limit: int = PEEK_BYTES, *, bytes_too: bool = False
 
     topic_dir = {t: d for d, t in DIRECTION_TOPIC.items()}
     data = {"host": bytearray(), "unit": bytearray()}
-    status = ScanStatus(path)
+    status = ScanStatus(Path(path))
     seen = 0
     for channel, rec in iter_messages(status):
         if status.metadata.get("conform.session", {}).get("variant") and not bytes_too:
@@ -48,7 +49,7 @@ def detect_capture(path: str, variant: str | None) -> Detection | None:
     return peek_family(path, variant)[0]
 
 
-def peek_family(path: str, variant: str | None) -> tuple[Detection | None, dict[str, Any]]:
+def peek_family(path: str, variant: str | None) -> tuple[Detection | None, JsonObject]:
     """:func:`detect_capture` and the session metadata it saw (empty when it had none)."""
     if variant:
         return divert(b"", b"", {}, variant), {}
@@ -77,7 +78,7 @@ def detect_or_empty(path: str, variant: str | None) -> tuple[Detection | None, b
 def _intact(path: str) -> bool:
     from conform.capture.scan import ScanStatus, iter_messages
 
-    status = ScanStatus(path)
+    status = ScanStatus(Path(path))
     for _ in iter_messages(status):
         pass
     return status.clean

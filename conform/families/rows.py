@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from conform.errors import UserError
+from conform.jsondoc import JsonObject
 
 
 class Rows:
@@ -45,7 +46,7 @@ class Rows:
             raise self.fail(row, f"pattern {text!r} is not a regular expression: {exc}") from None
 
 
-def read_table(root: Path, name: str, needed: str = "") -> tuple[Rows, dict[str, Any]]:
+def read_table(root: Path, name: str, needed: str = "") -> tuple[Rows, JsonObject]:
     """``root/name.toml`` parsed; ``needed`` (the files the family's tables need) is named
     when the file is missing."""
     path = root / f"{name}.toml"
@@ -72,7 +73,7 @@ class LineTables:
     family in ``family_name``."""
 
     family_name = ""
-    variants: dict[str, Any]
+    variants: dict[str, Any]   # the family's rows, by id
     messages: dict[str, Any]
 
     def variant(self, vid: str) -> Any:

@@ -24,6 +24,7 @@ import random
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from conform.errors import UserError
 
@@ -60,7 +61,7 @@ class FaultConfig:
     @classmethod
     def parse(cls, text: str) -> FaultConfig:
         """Parse a fault spec (module docstring); a mistake is a one-line ``UserError``."""
-        per = {d: {} for d in DIRECTIONS}
+        per: dict[str, dict[str, Any]] = {d: {} for d in DIRECTIONS}  # float or (lo, hi)
         top: dict[str, float] = {}
         for item in filter(None, (p.strip() for p in text.split(","))):
             key, sep, value = item.partition("=")
@@ -68,7 +69,7 @@ class FaultConfig:
                 raise UserError(f"--faults: {item!r} is not key=value")
             key = key.strip().lower()
             prefix, dot, name = key.rpartition(".")
-            dirs = DIRECTIONS
+            dirs: tuple[str, ...] = DIRECTIONS
             if dot:
                 if prefix not in DIRECTIONS:
                     raise UserError(f"--faults: {key!r}: prefix must be host. or unit.")

@@ -90,7 +90,7 @@ def render_html(results: RunResults) -> str:
     deviations = view.deviations(results)
     return env.get_template("report.html.j2").render(
         results=results, runs=results.runs, head=view.headline(results),
-        skipped=view.not_verified(results), levels=view.LEVELS, grade_help=view.GRADES,
+        skipped=view.not_verified(results), levels=view.levels(results), grade_help=view.GRADES,
         not_applicable=sum(1 for c in results.checks if c.grade is Grade.NOT_APPLICABLE),
         problems=problems, n_problems=sum(len(s.checks) for s in problems),
         deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
@@ -154,7 +154,8 @@ def render_markdown(results: RunResults) -> str:
                        + (f" — enable with `{g.how}`" if g.how else ""))
     else:
         out.append("Nothing skipped: every check this profile holds was run.")
-    out += ["", f"MUST: {view.LEVELS[MUST]}. INFO: {view.LEVELS[INFO]}.", ""]
+    levels = view.levels(results)
+    out += ["", f"MUST: {levels[MUST]}. INFO: {levels[INFO]}.", ""]
     problems = view.problems(results)
     out += [f"## Failures ({sum(len(s.checks) for s in problems)})", ""]
     if not problems:

@@ -23,6 +23,23 @@ LEVELS = {
     INFO: "probes an open question (A1–A29) or random sequences: a FAIL counts (exit 1), but "
           "read the question before calling it a defect",
 }
+def levels(results: RunResults) -> dict[str, str]:
+    """What MUST and INFO mean in this run's report: INFO names the open questions (their
+    first and last id) of the families whose units were judged, where they have any
+    (``Family.open_questions``); a family without any is not given another's."""
+    from conform.families import family_for_variant
+
+    named = []
+    for fam in {family_for_variant(r.variant).name: family_for_variant(r.variant)
+                for r in results.runs}.values():
+        table = fam.open_questions()
+        if table and table[2]:
+            named.append(f"{table[2][0][0]}–{table[2][-1][0]}")
+    if not named:
+        return {MUST: LEVELS[MUST], INFO: LEVELS[INFO].replace(" (A1–A29)", "")}
+    return {MUST: LEVELS[MUST], INFO: LEVELS[INFO].replace("A1–A29", ", ".join(named))}
+
+
 GRADES = {
     "PASS": "as the tables and the reference model say",
     "FAIL": "differs from what the manual states",
@@ -208,6 +225,22 @@ EMULATED_SCOPE = (
     "unit; for that, run the same checks with --target on its serial port.")
 
 
+def _emulated_scope(results: RunResults, failing: int) -> str:
+    """What a run on emulators proves: with nothing failing, that the checks and the model
+    agree; with FAILs, where an emulator was judged as another variant (its differences) or
+    where the model and its tables disagree (a defect of conform) — never "they agree"."""
+    if not failing:
+        return EMULATED_SCOPE
+    other = sorted({f"{r.target} judged as {r.variant}" for r in results.runs
+                    if r.target != f"emu:{r.variant}"})
+    why = (f"{', '.join(other)}: the FAILs are where the emulated variant differs from the one "
+           "asked for (--variant), i.e. the variants' differences" if other else
+           "the FAILs and ERRORs are where the reference model disagrees with the tables it "
+           "was built from: a defect of conform itself, worth reporting")
+    return (f"Every target was an emulator (emu:): {why}. It says nothing about a real unit; "
+            "for that, run the same checks with --target on its serial port.")
+
+
 def headline(results: RunResults) -> Headline:
     counts = Counter(c.grade.value for c in results.checks)
     total = sum(counts.values())
@@ -223,7 +256,8 @@ def headline(results: RunResults) -> Headline:
         verdict = "ERROR"
     else:
         verdict = "PASS"
-    scope = EMULATED_SCOPE if results.runs and all(r.emulated for r in results.runs) else ""
+    scope = _emulated_scope(results, counts["FAIL"] + counts["ERROR"]) \
+        if results.runs and all(r.emulated for r in results.runs) else ""
     if any(r.target.count(":") > 1 for r in results.runs):
         scope = ""   # emu:VARIANT:MUTANT, a deviant unit: the run is about the checks' power
     return Headline(verdict, f"{shown or 'no check run'} — {where}", incomplete, scope)

@@ -18,16 +18,20 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import TYPE_CHECKING, Any
 
 from conform.conformance.results import CheckResult, TargetRun
 from conform.errors import UserError
 from conform.families import default_family as registered_default
 from conform.families import family_for_variant
-from conform.sendercheck.family import ERROR, FAIL, MUST, Family, Verdict
+from conform.sendercheck.family import ERROR, FAIL, MUST, Comparison, Family, Verdict
 from conform.sendercheck.options import require_program
 from conform.sendercheck.session import Session, run_session
-from conform.stops import interrupted_by
+from conform.stops import current, interrupted_by
+
+if TYPE_CHECKING:
+    from conform.families import Family as RegisteredFamily
 
 
 def default_family() -> Family:
@@ -40,18 +44,18 @@ def family_for(variant_id: str) -> Family:
     return _shapes(family_for_variant(variant_id))
 
 
-def _shapes(fam: Any) -> Family:
+def _shapes(fam: RegisteredFamily) -> Family[Any, Any, Any]:
     shapes = getattr(fam, "check_sender", None)
     if shapes is None:
         raise fam.lacks("check-sender scenarios")
     return shapes
 
 
-def comparison_json(c: Any) -> dict[str, Any] | None:
+def comparison_json(c: Comparison | None) -> dict[str, object] | None:
     """A family's comparison of the job with the truth, for results.json."""
     if c is None:
         return None
-    facts = dataclasses.asdict(c) if dataclasses.is_dataclass(c) else {}
+    facts: dict[str, object] = dataclasses.asdict(c) if dataclasses.is_dataclass(c) and not isinstance(c, type) else {}
     return {"summary": c.summary(), **facts}
 
 
@@ -61,9 +65,9 @@ class ScenarioResult:
     title: str
     verdicts: list[Verdict]
     session: Session
-    findings: list[dict[str, Any]] = field(default_factory=list)
+    findings: list[dict[str, object]] = field(default_factory=list)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         s = self.session
         return {
             "scenario": self.name, "title": self.title, "exit_code": s.exit_code,
@@ -91,7 +95,7 @@ class CheckResults:
         return [v for s in self.scenarios for v in s.verdicts]
 
     @property
-    def findings(self) -> list[dict[str, Any]]:
+    def findings(self) -> list[dict[str, object]]:
         return [f for s in self.scenarios for f in s.findings]
 
     @property
@@ -125,7 +129,7 @@ class CheckResults:
                          self.started, self.duration, self.checks(),
                          aborted=self.interrupted or None)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"command": shlex.join(self.command), "variant": self.variant,
                 "family": self.family, "duration_s": round(self.duration, 3),
                 "exit_code": self.exit_code, "counts": self.counts(),
@@ -136,7 +140,7 @@ class CheckResults:
                 "checks": [c.to_json() for c in self.checks()]}
 
 
-def session_findings(s: Session) -> list[dict[str, Any]]:
+def session_findings(s: Session) -> list[dict[str, object]]:
     """Every finding of a scenario: the analyser's (the wire) and the ground truth's."""
     out = []
     for f in s.findings:
@@ -169,12 +173,14 @@ def grade_session(family: Family, s: Session) -> list[Verdict]:
 
 @contextmanager
 def _interruptible() -> Iterator[None]:
-    """SIGTERM and SIGHUP end the run as Ctrl-C does (the finished scenarios are kept)."""
-    if threading.current_thread() is not threading.main_thread():
+    """SIGTERM and SIGHUP end the run as Ctrl-C does (the finished scenarios are kept).
+    Under ``conform`` (conform.stops.stop_signals installed) its handlers already do, and
+    record which signal came so the command exits 128 + N: they are left in place."""
+    if threading.current_thread() is not threading.main_thread() or current() is not None:
         yield
         return
 
-    def stop(signum: int, _frame: Any) -> None:
+    def stop(signum: int, _frame: FrameType | None) -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
     old = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}

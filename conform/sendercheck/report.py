@@ -4,7 +4,9 @@ with its kind, severity, clause and scenario)."""
 
 from __future__ import annotations
 
+import ast
 import json
+import re
 import shlex
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -12,7 +14,7 @@ from pathlib import Path
 import jinja2
 
 from conform.report.render import write_files
-from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN
+from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN, Verdict
 from conform.sendercheck.grade import CheckResults
 
 _HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender {{ verdict }}: {{ command }}</title>
@@ -26,39 +28,65 @@ td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
 <p>variant {{ r.variant }} ({{ r.family }}), {{ "%.1f"|format(r.duration) }} s, exit status
 {{ r.exit_code }}; {% for g, n in counts.items() %}{{ g }} {{ n }}{% if not loop.last %}, {% endif %}{% endfor %}</p>
 {% if r.interrupted %}<p class="abort"><b>INCOMPLETE:</b> {{ r.interrupted }}</p>{% endif %}
+{% if to_fix %}<h2>What to fix</h2><ul>{% for v in to_fix %}<li class="{{ v.grade }}"><b>{{ v.rule }}</b>
+({{ v.level }}, {{ v.clause }}) in <a href="#{{ v.scenario }}">{{ v.scenario }}</a>: {{ v.detail|plain }}</li>
+{% endfor %}</ul>{% endif %}
 <h2>Rules × scenarios</h2><table><tr><th>rule</th><th>level</th><th>clause</th>
 {% for s in r.scenarios %}<th>{{ s.name }}</th>{% endfor %}</tr>
 {% for rule, cells in matrix %}<tr><td>{{ rule.rule }}<br><small>{{ rule.title }}</small></td>
 <td>{{ rule.level }}</td><td>{{ rule.clause }}</td>
-{% for v in cells %}<td class="{{ v.grade }}" title="{{ v.detail }}">{{ v.grade }}</td>{% endfor %}</tr>
+{% for v in cells %}<td class="{{ v.grade }}" title="{{ v.detail|plain }}">{{ v.grade }}</td>{% endfor %}</tr>
 {% endfor %}</table>
 <h2>Scenarios</h2>{% for s in r.scenarios %}<h3 id="{{ s.name }}">{{ s.name }}: {{ s.title }}</h3>
 <p>{{ "%.2f"|format(s.session.duration) }} s, exit status {{ s.session.exit_code }}{% if s.session.hung %}
 (stopped at the {{ s.session.timeout }} s timeout){% endif %};
-{{ s.session.comparison.summary() if s.session.comparison else "" }};
+{% if s.session.comparison %}{{ s.session.comparison.summary() }}; {% endif %}
 capture <code>{{ s.session.capture }}</code></p>
 <ul>{% for v in s.verdicts if v.grade in shown %}<li class="{{ v.grade }}"><b>{{ v.grade }}</b>
-{{ v.rule }} ({{ v.clause }}): {{ v.detail }}
-{% for e in v.evidence %}<br><small>{{ e }}</small>{% endfor %}</li>{% endfor %}</ul>
+{{ v.rule }} ({{ v.clause }}): {{ v.detail|plain }}
+{% for e in v.evidence %}<br><small>{{ e|plain }}</small>{% endfor %}</li>{% endfor %}</ul>
 {% endfor %}
 <h2>Findings</h2><table><tr><th>scenario</th><th>kind</th><th>severity</th><th>clause</th><th>message</th></tr>
 {% for f in r.findings[:2000] %}<tr><td>{{ f.scenario }}</td><td>{{ f.kind }}</td><td>{{ f.severity }}</td>
-<td>{{ f.clause }}</td><td>{{ f.message }}</td></tr>{% endfor %}</table></body></html>
+<td>{{ f.clause }}</td><td>{{ f.message|plain }}</td></tr>{% endfor %}</table></body></html>
 """
 
 
 def _matrix(r: CheckResults) -> list:
-    rules = {}
+    rules: dict[str, list[Verdict]] = {}
     for s in r.scenarios:
         for v in s.verdicts:
             rules.setdefault(v.rule, []).append(v)
     return [(cells[0], cells) for cells in rules.values()]
 
 
+def plain(value: object) -> str:
+    """A value as a reader wants it on the page: a mapping as "key value" pairs, a list
+    joined, never Python's ``{'key': ...}``."""
+    if isinstance(value, dict):
+        return ", ".join(f"{str(k).replace('_', ' ')} {plain(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ", ".join(plain(v) for v in value)
+    return _MAPPING.sub(_words, str(value))   # a mapping already made text, in words
+
+
+_MAPPING = re.compile(r"\{'[^{}]*\}")
+
+
+def _words(m: re.Match[str]) -> str:
+    try:
+        return f"({plain(ast.literal_eval(m.group(0)))})"
+    except (ValueError, SyntaxError):
+        return m.group(0)
+
+
 def render_html(r: CheckResults) -> str:
     env = jinja2.Environment(autoescape=True)
+    env.filters["plain"] = plain
     counts = {g.value: r.counts().get(g.value, 0) for g in GRADES}
-    return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r),
+    to_fix = [v for v in r.verdicts if v.grade in (FAIL, ERROR) and v.level == "MUST"] or \
+        [v for v in r.verdicts if v.grade in (FAIL, ERROR)]
+    return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r), to_fix=to_fix,
                                          shown=(FAIL, ERROR, WARN, "PASS"), verdict=verdict(r),
                                          command=shlex.join(r.command))
 

@@ -21,17 +21,25 @@ import signal
 import subprocess
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.capture.session import wire_time
 from conform.emulator.control import LocalControl
 from conform.emulator.launch import open_endpoint
 from conform.errors import UserError
 from conform.link.faults import FaultConfig
-from conform.sendercheck.family import Family, Scenario
+from conform.sendercheck.family import Analysis, Comparison, Family, Scenario, Variant
 from conform.sendercheck.faults import ScriptedFaults
+
+if TYPE_CHECKING:
+    from conform.analysis.result import Finding
+    from conform.capture.recorder import Recorder
+    from conform.emulator.control import ControlHandler
+    from conform.emulator.serve import SansIOUnit
+    from conform.link.faults import FaultInjector
 
 POLL = 0.02  # how often the runner looks at the program and the scenario's triggers
 KILL_GRACE = 2.0  # seconds between SIGTERM and SIGKILL
@@ -42,29 +50,29 @@ class Session:
     """Everything the rules look at for one scenario (through the family's ``facts``)."""
 
     scenario: Scenario
-    family: Family
-    variant: Any
+    family: Family[Any, Any, Any]   # the family's own variant, context and truth types
+    variant: Variant
     command: list[str]
     directory: Path
     capture: Path
     job_lines: list[str]
-    job: list[Any]  # the job's units (the family's ``units`` of its lines)
+    job: Sequence[object]  # the job's units (the family's ``units`` of its lines)
     exit_code: int | None = None
     hung: bool = False
     duration: float = 0.0
     timeout: float = 0.0
-    truth: Any = field(default_factory=dict)  # the ground truth as written to truth.json
-    events: list[dict[str, Any]] = field(default_factory=list)  # the scenario's requests
-    analysis: Any = None
+    truth: object = field(default_factory=dict)  # the ground truth as written to truth.json
+    events: list[dict[str, object]] = field(default_factory=list)  # the scenario's requests
+    analysis: Analysis | None = None
     analysis_error: str = ""
-    comparison: Any = None  # the family's job-against-truth comparison (``summary()``)
+    comparison: Comparison | None = None  # the family's job against the truth
     faults: dict[str, int] = field(default_factory=dict)
     error: str = ""  # the harness failed (not the program)
     started: float = 0.0  # monotonic time the program was started
     port: str = ""  # the path the program was given
 
     @property
-    def findings(self) -> list[Any]:
+    def findings(self) -> list[Finding]:
         return list(self.analysis.findings) if self.analysis is not None else []
 
     def count(self, kind: str) -> int:
@@ -72,7 +80,7 @@ class Session:
             return 0
         return int(self.analysis.metrics.get("finding_counts", {}).get(kind, 0))
 
-    def of_kind(self, kind: str) -> list[Any]:
+    def of_kind(self, kind: str) -> list[Finding]:
         return [f for f in self.findings if f.kind == kind]
 
 
@@ -83,7 +91,7 @@ class PtyStamps:
     before the last chunk either way (an answer cannot begin before the command was read).
     With ``baud`` 0 every chunk is dated when it was read or written."""
 
-    def __init__(self, recorder: Any, baud: int) -> None:
+    def __init__(self, recorder: Recorder, baud: int) -> None:
         self.recorder = recorder
         self.baud = baud
         self._last = float("-inf")
@@ -130,12 +138,13 @@ class _Control:
     """The emulator's control handler for a session: ``link dead S`` / ``link back`` (the
     engine's dead line, recorded as a disconnect and a reconnect), else the family's."""
 
-    def __init__(self, family_handler: Any, faults: Any, recorder: Any) -> None:
+    def __init__(self, family_handler: ControlHandler | None, faults: FaultInjector,
+                 recorder: Recorder) -> None:
         self.family_handler = family_handler
         self.faults = faults
         self.recorder = recorder
 
-    def __call__(self, unit: Any, line: str, t: float) -> str:
+    def __call__(self, unit: SansIOUnit, line: str, t: float) -> str:
         words = line.split()
         if words[:2] == ["link", "dead"] and len(words) == 3:
             if not hasattr(self.faults, "kill_link"):
@@ -153,7 +162,7 @@ class _Control:
         return self.family_handler(unit, line, t)
 
 
-def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
+def run_session(family: Family[Any, Any, Any], scn: Scenario, variant: Variant, context: object,
                 command: list[str], directory: Path, *, timeout: float | None = None,
                 seed: int = 1, baud: int | None = None, job_lines: list[str] | None = None
                 ) -> Session:
@@ -243,7 +252,7 @@ def run_session(family: Family, scn: Scenario, variant: Any, context: Any,
     return s
 
 
-def _run_program(s: Session, recorder: Any, control: LocalControl, truth: Any,
+def _run_program(s: Session, recorder: Recorder, control: LocalControl, truth: object,
                  job_path: Path, baud: int) -> None:
     scn = s.scenario
     env = dict(os.environ, CONFORM_PORT=s.port, CONFORM_JOB=str(job_path),
@@ -288,7 +297,7 @@ def _run_program(s: Session, recorder: Any, control: LocalControl, truth: Any,
             s.duration = time.monotonic() - start
 
 
-def _ask(s: Session, control: LocalControl, recorder: Any, request: str, start: float) -> None:
+def _ask(s: Session, control: LocalControl, recorder: Recorder, request: str, start: float) -> None:
     reply = control.ask(request)
     s.events.append({"t": recorder.now(), "t_run": round(time.monotonic() - start, 3),
                      "request": request, "reply": reply})

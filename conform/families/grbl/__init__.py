@@ -1,7 +1,7 @@
-"""grbl 1.1f as a protocol family: tables in grbl/spec/tables/, a sans-I/O reference unit, the
+"""grbl 1.1f as a protocol family: tables in specs/grbl/, a sans-I/O reference unit, the
 conformance checks generated from the tables, traffic detection and capture analysis.
 
-Subpackages, as GVE's: ``spec`` (load and validate spec/tables), ``protocol`` (split a byte
+Subpackages, as GVE's: ``spec`` (load and validate specs/grbl), ``protocol`` (split a byte
 stream into lines and realtime bytes, classify what grbl sends; the g-code parser and its modal
 state), ``unit`` (the reference unit: model, planner, ``$`` commands, the text it sends, input
 pins, faults, control requests), ``conformance`` (checks, characterisation), ``analysis``
@@ -12,15 +12,36 @@ scenarios, sessions and rules); ``serve`` (the emulator on a pty/TCP), ``cli`` (
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.families import Detection, Family, FleetColumn, VariantInfo
+
+if TYPE_CHECKING:
+    import click
+    from rich.console import Console
+
+    from conform.analysis.rawread import RawCapture
+    from conform.capture.merge import HostLines
+    from conform.capture.session import Decoder
+    from conform.conformance.observed import ProbeHooks
+    from conform.conformance.plan import Permissions
+    from conform.conformance.runner import Check, Runner, RunOptions
+    from conform.conformance.target import Target
+    from conform.diagnosis.facts import Facts, ParsedLine, ResumePoint
+    from conform.diagnosis.live import LiveMonitor
+    from conform.emulator.serve import SansIOUnit
+    from conform.families import AnalysisResult, ProbeAnswer
+    from conform.sendercheck.family import Family as SenderShapes
 
 
 class GrblFamily(Family):
     name = "grbl"
     title = "grbl 1.1f"
     table_files = ("variants", "codes", "settings", "protocol", "status", "examples")
+    characterize_about = (
+        "the build's compile-time choices: version and build date, the $I options, receive "
+        "buffer and planner sizes, whether CR LF ends one line or two, the line-length limit. "
+        "Nothing moves, nothing is written to the EEPROM.")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.grbl.spec.load import load_grbl
@@ -59,7 +80,7 @@ class GrblFamily(Family):
         return near
 
     def make_unit(self, variant: str, *, t0: float = 0.0, mutant: str | None = None,
-                  **options: Any) -> Any:
+                  **options: Any) -> SansIOUnit:
         """The reference unit, or the deviant unit ``mutant`` (conformance/mutants.py)."""
         from conform.families.grbl.unit.model import GrblUnit
 
@@ -75,8 +96,9 @@ class GrblFamily(Family):
 
         return mutant(name).fault
 
-    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
-               allow_motion: bool = False, allow_eeprom: bool = False, **_: Any) -> Any:
+    def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
+               permissions: Permissions | None = None,
+               allow_motion: bool = False, allow_eeprom: bool = False, **_: Any) -> Runner[Any]:
         """grbl's checks in the engine's runner (checks.GrblRunner): fresh unit by soft reset,
         halt by feed hold then soft reset."""
         from conform.families.grbl.conformance.checks import GrblRunner
@@ -86,8 +108,8 @@ class GrblFamily(Family):
         return GrblRunner(target, variant, allow_motion=allow_motion, allow_eeprom=allow_eeprom,
                           options=options)
 
-    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
-                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
+    def plan_checks(self, variant: str, *, permissions: Permissions, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> Sequence[Check]:
         """The checks of the tables; ``machine=False`` leaves the random sequences out."""
         from conform.families.grbl.conformance.checks import SEQUENCES, generate, select
 
@@ -96,7 +118,7 @@ class GrblFamily(Family):
         return select(checks, patterns)
 
     def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                    progress: Any = None) -> list[dict[str, Any]]:
+                    progress: Callable[[str], None] | None = None) -> list[dict[str, object]]:
         """Every deviant unit through the checks, and whether a check meant for it caught it
         (conformance/mutants.py)."""
         from conform.families.grbl.conformance.checks import run_checks
@@ -114,10 +136,10 @@ class GrblFamily(Family):
             report += part
         return report
 
-    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Decoder | None:
         return None   # recorded raw; lines are paired when the capture is analysed
 
-    def host_lines(self) -> Any:
+    def host_lines(self) -> HostLines | None:
         return None  # every line gets exactly one ok or error: the engine's default count
 
     pytest_plugin = None
@@ -131,19 +153,19 @@ class GrblFamily(Family):
     )
 
     @property
-    def check_sender(self) -> Any:
+    def check_sender(self) -> SenderShapes[Any, Any, Any]:
         """check-sender's grbl scenarios, rules and hooks (sendercheck/family.py)."""
         from conform.families.grbl.sendercheck.family import GRBL
 
         return GRBL
 
-    def characterize_probes(self) -> Any:
+    def characterize_probes(self) -> ProbeHooks:
         from conform.families.grbl.conformance.characterize import ITEMS, characterize
         from conform.families.grbl.conformance.checks import stop_unit
 
         return characterize, stop_unit, ITEMS
 
-    def show_spec(self, variant: str, command: str | None, *, console: Any,
+    def show_spec(self, variant: str, command: str | None, *, console: Console,
                   as_json: bool = False) -> None:
         from conform.families.grbl.cli import show
 
@@ -155,7 +177,7 @@ class GrblFamily(Family):
                 f"{len(g.alarms)} alarm codes, {len(g.settings)} settings, "
                 f"{len(g.commands)} $ commands, {len(g.examples)} examples")
 
-    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+    def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         from conform.families.grbl.conformance.portprobe import probe
 
         return probe(device, baud=baud, timeout=timeout)
@@ -170,30 +192,31 @@ class GrblFamily(Family):
 
         return detect(host, unit)
 
-    def analyze(self, path: str, **options: Any) -> Any:
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
         from conform.families.grbl.analysis.analyze import analyze_capture
 
         return analyze_capture(path, **options)
 
-    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
-                        analysis: Any = None) -> Any:
+    def diagnosis_facts(self, raw: RawCapture, path: str, *, variant: str | None = None,
+                        analysis: AnalysisResult | None = None) -> Facts | None:
         from conform.families.grbl.diagnosis.facts import facts
 
         return facts(raw, path, variant=variant, analysis=analysis)
 
-    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+    def reception(self, raw: RawCapture, *, variant: str | None = None) -> list[ParsedLine] | None:
         """The receive ring (128 bytes, silent drops) and line reader replayed on the host's
         bytes, the answers as the clock (diagnosis.py)."""
         from conform.families.grbl.diagnosis.facts import reception
 
         return reception(raw, variant=variant)
 
-    def live_monitor(self, variant: str | None) -> Any:
+    def live_monitor(self, variant: str | None) -> LiveMonitor | None:
         from conform.families.grbl.diagnosis.live import live_monitor
 
         return live_monitor(variant)
 
-    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+    def resume_state(self, raw: RawCapture, facts: Facts, *, variant: str | None = None
+                     ) -> ResumePoint | None:
         from conform.families.grbl.diagnosis.facts import resume_state
 
         return resume_state(raw, facts, variant=variant)
@@ -204,7 +227,7 @@ class GrblFamily(Family):
 
         send_job(job, target, **options)
 
-    def command_options(self, command: str) -> Sequence[Any]:
+    def command_options(self, command: str) -> Sequence[click.Option]:
         if command == "send":
             from conform.families.grbl.sender.command import send_options
 

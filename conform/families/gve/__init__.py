@@ -8,11 +8,26 @@ conform.analysis)."""
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from conform.families import Detection, Family, FleetColumn, VariantInfo
 
+if TYPE_CHECKING:
+    import click
+    from rich.console import Console
+
+    from conform.analysis.rawread import RawCapture
+    from conform.capture.merge import HostLines
+    from conform.capture.session import Decoder
+    from conform.conformance.plan import Permissions
+    from conform.conformance.runner import Check, Runner, RunOptions
+    from conform.conformance.target import Target
+    from conform.diagnosis.facts import Facts, ParsedLine, ResumePoint
+    from conform.diagnosis.live import LiveMonitor
+    from conform.emulator.serve import SansIOUnit
+    from conform.families import AnalysisResult, ProbeAnswer
+    from conform.sendercheck.family import Family as SenderShapes
 # a GVE command line: '!', an address digit, a mnemonic (GVE64 §13.5); answers: a hex status
 # code, maybe with comma-separated fields, ended by CR (GVE64 §13.7)
 _HOST_LINE = re.compile(rb"![0-7][A-Z?$@>%*]")
@@ -25,6 +40,10 @@ class GveFamily(Family):
     needs_travel_bound = True   # checks size their moves within --max-steps pulses
     default_rank = 0   # the units conform was first written for: commands without a variant
     table_files = ("commands", "errors", "status", "eeprom", "variants", "questions", "examples")
+    characterize_about = (
+        "the open questions A1-A29 of the manuals (the protocol digest's register): which "
+        "alternative the unit follows on each, written as a [dialect] profile. Probes that "
+        "move need --allow-motion --max-steps N, the EEPROM probe (A18) --allow-eeprom.")
 
     def load_tables(self, root: str | None = None) -> Any:
         from conform.families.gve.spec import load_spec
@@ -36,15 +55,16 @@ class GveFamily(Family):
         return [VariantInfo(v.id, self.name, v.title, v.firmware, "".join(v.axes),
                             f"queue {v.queue}", v.base or "") for v in spec.variants.values()]
 
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> SansIOUnit:
         from conform.families.gve.unit.model import Unit
 
         spec = self.load_tables()
         dialect = options.pop("dialect", None) or spec.dialect()
         return Unit(spec.variant(variant), dialect, t0=t0, **options)
 
-    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
-               dialect_file: str | None = None, **kw: Any) -> Any:
+    def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
+               permissions: Permissions | None = None,
+               dialect_file: str | None = None, **kw: Any) -> Runner[Any]:
         """Grading against the reference unit, the state keeper, H, D, O0,FF
         (conformance/runner.py); ``dialect_file``: a characterised profile's dialect expected
         instead of the defaults; ``dialect``, ``unit_cls`` as the Runner takes them."""
@@ -59,9 +79,9 @@ class GveFamily(Family):
 
         return load_profile_dialect(self.load_tables(), dialect_file) if dialect_file else None
 
-    def open_target(self, text: str, *, baud: int, permissions: Any,
+    def open_target(self, text: str, *, baud: int, permissions: Permissions | None,
                     inputs_control: str | None = None, dialect_file: str | None = None,
-                    **_: Any) -> Any:
+                    **_: Any) -> tuple[Target, str | None]:
         from conform.families.gve.conformance.safety import Guard
         from conform.families.gve.conformance.target import open_target
 
@@ -72,13 +92,13 @@ class GveFamily(Family):
             target.inputs = inputs_control  # type: ignore[attr-defined]
         return target, implied
 
-    def identify(self, target: Any) -> tuple[str, str]:
+    def identify(self, target: Target) -> tuple[str, str]:
         from conform.families.gve.conformance.target import identify
 
         return identify(target, self.load_tables())
 
-    def plan_checks(self, variant: str, *, permissions: Any, profile: str = "quick",
-                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> list[Any]:
+    def plan_checks(self, variant: str, *, permissions: Permissions, profile: str = "quick",
+                    patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> Sequence[Check]:
         from conform.families.gve.conformance.safety import Guard
         from conform.families.gve.conformance.suite import suite
 
@@ -86,7 +106,7 @@ class GveFamily(Family):
         return suite(self.load_tables(), variant, patterns=patterns, guard=guard,
                      machine=machine, profile=profile)
 
-    def permission_notes(self, permissions: Any) -> list[str]:
+    def permission_notes(self, permissions: Permissions) -> list[str]:
         # EEPROM checks say their own reason when SKIPPED (conformance/safety.py)
         return [] if permissions.allow_motion else ["motion-bearing checks SKIPPED (no --allow-motion)"]
 
@@ -96,19 +116,19 @@ class GveFamily(Family):
         return len(list(mutant_targets(variants)))
 
     def run_mutants(self, variants: Sequence[str], *, profile: str = "quick", seed: int = 0,
-                    progress: Any = None) -> list[dict[str, Any]]:
+                    progress: Callable[[str], None] | None = None) -> list[dict[str, object]]:
         from conform.families.gve.conformance.suite import run_mutants
 
         report, _ = run_mutants(self.load_tables(), variants, profile=profile, seed=seed,
                                 progress=progress)
         return report
 
-    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Decoder | None:
         from conform.families.gve.decode import make_decoder
 
         return make_decoder(variant, baud=baud)
 
-    def host_lines(self) -> Any:
+    def host_lines(self) -> HostLines | None:
         from conform.families.gve.decode import PacketLines
 
         return PacketLines()
@@ -137,7 +157,7 @@ class GveFamily(Family):
 
         characterize(target, output, variant, **options)
 
-    def show_spec(self, variant: str, command: str | None, *, console: Any,
+    def show_spec(self, variant: str, command: str | None, *, console: Console,
                   as_json: bool = False) -> None:
         from conform.families.gve.cli import show_spec
 
@@ -147,17 +167,18 @@ class GveFamily(Family):
     def default_variant(self) -> str:
         return "gve64-v19"
 
-    def variant_table(self, pretty: bool = False) -> Any:
+    def variant_table(self, pretty: bool = False
+                      ) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         from conform.families.gve.cli import variant_table
 
         return variant_table(pretty)
 
-    def diff_variants(self, a: str, b: str) -> Any:
+    def diff_variants(self, a: str, b: str) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         from conform.families.gve.cli import diff_table
 
         return diff_table(a, b)
 
-    def open_questions(self) -> Any:
+    def open_questions(self) -> tuple[str, Sequence[str], Sequence[Sequence[object]]] | None:
         from conform.families.gve.cli import questions_table
 
         return questions_table()
@@ -167,12 +188,12 @@ class GveFamily(Family):
 
         return tables_summary(root)
 
-    def commands(self) -> Sequence[Any]:
+    def commands(self) -> Sequence[click.Command]:
         from conform.families.gve.cli import commands
 
         return commands()
 
-    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, Any, Any]], str]:
+    def diff_profiles(self, a: str, b: str) -> tuple[list[str], list[tuple[str, object, object]], str]:
         from conform.families.gve.conformance.profile_command import diff
 
         return diff(a, b)
@@ -183,14 +204,14 @@ class GveFamily(Family):
 
         send_job(job, target, **options)
 
-    def command_options(self, command: str) -> Sequence[Any]:
+    def command_options(self, command: str) -> Sequence[click.Option]:
         from conform.families.gve.cli import command_options
 
         return command_options(command)
 
     probe_rank = 200   # '!' opens every GVE line; other protocols may act on it at once
 
-    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+    def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         from conform.families.gve.conformance.portprobe import probe
 
         return probe(device, baud=baud, timeout=timeout)
@@ -201,7 +222,7 @@ class GveFamily(Family):
         return list(MUTANTS)
 
     @property
-    def check_sender(self) -> Any:
+    def check_sender(self) -> SenderShapes[Any, Any, Any]:
         """check-sender's GVE scenarios, rules and hooks (sendercheck/family.py)."""
         from conform.families.gve.sendercheck.family import GVE
 
@@ -223,32 +244,33 @@ class GveFamily(Family):
 
         serve(variant, **options)
 
-    def analyze(self, path: str, **options: Any) -> Any:
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
         from conform.families.gve.analysis import analyze
 
         return analyze(path, **options)
 
-    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
-                        analysis: Any = None) -> Any:
+    def diagnosis_facts(self, raw: RawCapture, path: str, *, variant: str | None = None,
+                        analysis: AnalysisResult | None = None) -> Facts | None:
         from conform.families.gve.diagnosis.facts import analysis_facts, facts
 
         if analysis is not None:
             return analysis_facts(analysis, path)
         return facts(raw, path, variant=variant)
 
-    def reception(self, raw: Any, *, variant: str | None = None) -> Any:
+    def reception(self, raw: RawCapture, *, variant: str | None = None) -> list[ParsedLine] | None:
         """Line assembly, the A13 watchdog, checksum mode and the `>` echoes
         (diagnosis/reception.py)."""
         from conform.families.gve.diagnosis.reception import reception
 
         return reception(raw, variant=variant)
 
-    def live_monitor(self, variant: str | None) -> Any:
+    def live_monitor(self, variant: str | None) -> LiveMonitor | None:
         from conform.families.gve.diagnosis.live import live_monitor
 
         return live_monitor(variant)
 
-    def resume_state(self, raw: Any, facts: Any, *, variant: str | None = None) -> Any:
+    def resume_state(self, raw: RawCapture, facts: Facts, *, variant: str | None = None
+                     ) -> ResumePoint | None:
         """From the queue replay and position read-backs (diagnosis/resume.py)."""
         from conform.families.gve.diagnosis.resume import resume_state
 

@@ -42,6 +42,8 @@ def characterize(target: str, output: str, variant: str | None, *, baud: int = 1
     tgt, implied = open_target(target, spec, baud=baud, guard=guard)
     try:
         vid = variant or implied
+        if not tgt.emulated:   # a dead port must not read as a unit that matches the manual
+            _answers(tgt, target)
         if vid is None:
             vid, how = identify(tgt, spec)
             echo(f"variant: {how}", err=True)
@@ -56,9 +58,11 @@ def characterize(target: str, output: str, variant: str | None, *, baud: int = 1
         findings: dict[str, Any] = {}
 
         def partial(how: str) -> str:
-            """The questions answered before the stop, marked partial (the rest listed)."""
-            n = len(findings)
-            write_profile(to_profile(spec, None, findings, target=target, variant=vid,
+            """The questions answered before the stop, marked partial (the rest listed): a
+            question counts once the unit answered its probe, not when it was skipped."""
+            answered = {q: f for q, f in findings.items() if f.answers}
+            n = len(answered)
+            write_profile(to_profile(spec, None, answered, target=target, variant=vid,
                                      interrupted=f"{how} after {n} of "
                                                  f"{len(spec.questions)} questions"), output)
             return f"partial profile {output}: {n} of {len(spec.questions)} questions answered"
@@ -82,6 +86,23 @@ def characterize(target: str, output: str, variant: str | None, *, baud: int = 1
     changed = dialect.changed()
     echo(f"{output}: {len(changed)} answer(s) differ from the defaults"
          + (": " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else ""))
+
+
+def _answers(tgt: Any, target: str) -> None:
+    """The unit on ``tgt`` answers ``?`` (it only reads the firmware string, GVE64 §13.5.1),
+    in either checksum framing; else one line, before any probe and before a profile of
+    defaults could be written."""
+    from conform.conformance.target import HarnessError
+
+    for checksum in (False, True):
+        try:
+            reply = tgt.exchange(tgt.frame("!0?", checksum=checksum), timeout=1.0)
+        except HarnessError:
+            continue
+        if reply.lines:
+            return
+    raise UserError(f"{target}: no answer to '?' within 1 s: is the unit on, on this port and "
+                    "at this baud rate (--baud)? Nothing was written")
 
 
 def show_spec(variant: str, command: str | None, *, console: Any, as_json: bool) -> None:

@@ -1,4 +1,4 @@
-"""Marlin 2.1 as a protocol family: tables in marlin/spec/tables/, a sans-I/O reference unit,
+"""Marlin 2.1 as a protocol family: tables in specs/marlin/, a sans-I/O reference unit,
 conformance checks graded per clause, traffic detection and capture analysis, check-sender.
 
 Rooms: ``spec`` (tables and their loader), ``protocol`` (checksums, framing, reading lines,
@@ -10,9 +10,21 @@ detection), ``unit`` (the reference unit, its faults, control requests and ``ser
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from conform.families import Detection, Family, VariantInfo
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from conform.capture.session import Decoder
+    from conform.conformance.observed import ProbeHooks
+    from conform.conformance.plan import Permissions
+    from conform.conformance.runner import Check, Runner, RunOptions
+    from conform.conformance.target import Target
+    from conform.emulator.serve import SansIOUnit
+    from conform.families import AnalysisResult, ProbeAnswer
+    from conform.sendercheck.family import Family as SenderShapes
 
 REAL_BOARD_NOTES = [
     "settings checks set M92/M201/M203-M206/M301/M304/M220/M221/M111 and put back what "
@@ -24,14 +36,18 @@ REAL_BOARD_NOTES = [
 
 
 class MarlinFamily(Family):
-    """Marlin's hooks. It answers both the engine's older hook set (``run_targets``) and the
-    Family base class's (``plan_checks``, ``runner(options=, permissions=)``,
-    ``diff_variants``), so it plugs into either."""
+    """Marlin's hooks (the Family base class's: ``plan_checks``, ``runner``, ``mutants``,
+    ``diff_variants``, ...)."""
 
     name = "marlin"
     title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
     default_rank = 300
     table_files = ("variants", "messages", "commands", "caps")
+    characterize_about = (
+        "the build's configuration: firmware and protocol version, the M115 capabilities, "
+        "ADVANCED_OK with the planner and command-queue sizes, MAX_CMD_SIZE, the host "
+        "keepalive, the emergency parser, how a repeated line number is treated. No motion, "
+        "no heat, no EEPROM write.")
     pytest_plugin = None
 
     @property
@@ -50,7 +66,7 @@ class MarlinFamily(Family):
                             ", ".join(k for k in ("ADVANCED_OK", "EMERGENCY_PARSER") if v.on(k))
                             or "ok, no emergency parser") for v in spec.variants.values()]
 
-    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> Any:
+    def make_unit(self, variant: str, *, t0: float = 0.0, **options: Any) -> SansIOUnit:
         from conform.families.marlin.conformance.mutants import make
 
         spec = self.load_tables()
@@ -79,8 +95,9 @@ class MarlinFamily(Family):
         v = self.load_tables().variant(variant)
         return partial(near_position, steps=v.steps_per_mm[:3])
 
-    def runner(self, target: Any, variant: str, *, options: Any = None, permissions: Any = None,
-               **family_values: Any) -> Any:
+    def runner(self, target: Target, variant: str, *, options: RunOptions | None = None,
+               permissions: Permissions | None = None,
+               **family_values: Any) -> Runner[Any]:
         from conform.families.marlin.conformance.checks import MarlinRunner
 
         motion = bool(permissions.allow_motion) if permissions is not None else \
@@ -107,14 +124,14 @@ class MarlinFamily(Family):
                 f"checks without {HEATERS_ENV}=1; {settings} settings checks put back what "
                 "M503, M220 and M221 read before each")
 
-    def plan_checks(self, variant: str, *, permissions: Any = None, profile: str = "quick",
+    def plan_checks(self, variant: str, *, permissions: Permissions | None = None, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_values: Any
-                    ) -> list[Any]:
+                    ) -> Sequence[Check]:
         from conform.families.marlin.conformance.checks import generate, select
 
         return select(generate(self.load_tables(), variant, profile), patterns)
 
-    def permission_notes(self, permissions: Any) -> list[str]:
+    def permission_notes(self, permissions: Permissions) -> list[str]:
         from conform.families.marlin.conformance.checks import HEATERS_ENV
 
         notes = [] if permissions.allow_motion else [
@@ -128,7 +145,7 @@ class MarlinFamily(Family):
 
         return (MUTANTS[name].__doc__ or name).strip()
 
-    def diff_variants(self, a: str, b: str) -> tuple[str, list[str], list[tuple[Any, ...]]]:
+    def diff_variants(self, a: str, b: str) -> tuple[str, Sequence[str], Sequence[Sequence[object]]]:
         from conform.families.marlin.spec import diff
 
         spec = self.load_tables()
@@ -136,33 +153,23 @@ class MarlinFamily(Family):
         rows = diff(va, vb)
         return (f"{a} → {b}: {len(rows)} differences", ["what", a, b, "source"], rows)
 
-    def run_conformance(self, target: Any, variant: str, **options: Any) -> Any:
-        from conform.families.marlin.conformance.checks import run_checks
-
-        return run_checks(target, variant, **options)
-
-    def run_targets(self, targets: list[str], variant: str | None, **options: Any) -> Any:
-        from conform.families.marlin.conformance.checks import run_targets
-
-        return run_targets(targets, variant, **options)
-
-    def live_decoder(self, variant: str, *, baud: int | None = None) -> Any:
+    def live_decoder(self, variant: str, *, baud: int | None = None) -> Decoder | None:
         return None   # recorded raw; lines are paired when the capture is analysed
 
     @property
-    def check_sender(self) -> Any:
+    def check_sender(self) -> SenderShapes[Any, Any, Any]:
         """check-sender's Marlin scenarios, rules and hooks (sendercheck/family.py)."""
         from conform.families.marlin.sendercheck.family import MARLIN
 
         return MARLIN
 
-    def characterize_probes(self) -> Any:
+    def characterize_probes(self) -> ProbeHooks:
         from conform.families.marlin.conformance.characterize import ITEMS, characterize
         from conform.families.marlin.conformance.checks import halt
 
         return characterize, halt, ITEMS
 
-    def show_spec(self, variant: str, command: str | None, *, console: Any,
+    def show_spec(self, variant: str, command: str | None, *, console: Console,
                   as_json: bool = False) -> None:
         from conform.families.marlin.show import show
 
@@ -183,12 +190,19 @@ class MarlinFamily(Family):
 
         return detect(host, unit)
 
-    def analyze(self, path: str, **options: Any) -> Any:
+    def analyze(self, path: str, **options: Any) -> AnalysisResult:
         from conform.families.marlin.analysis.analyze import analyze_capture
 
         return analyze_capture(path, **options)
 
-    def probe(self, device: str, *, baud: int, timeout: float) -> Any:
+    def diagnosis_facts(self, raw: Any, path: str, *, variant: str | None = None,
+                        analysis: Any = None) -> Any:
+        """``conform diagnose``: the analysis as neutral facts (diagnosis/facts.py)."""
+        from conform.families.marlin.diagnosis.facts import facts
+
+        return facts(raw, path, variant=variant, analysis=analysis)
+
+    def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         """M115, the capability report (conformance/portprobe.py)."""
         from conform.families.marlin.conformance.portprobe import probe
 

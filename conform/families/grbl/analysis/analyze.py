@@ -159,12 +159,22 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                  for i, ln in enumerate(lines)]
     answers = [(ut[u.end], u) for u in ulines if u.kind in ("ok", "error", "banner")]
     k = 0
+    flushed: list[Exchange] = []   # lines the last banner seemed to flush, not yet answered
     for t_ans, u in answers:
         if u.kind == "banner":
             # a reset empties grbl's buffers: what was sent before it is never answered
+            flushed = []
             while k < len(exchanges) and exchanges[k].t_sent < t_ans:
                 exchanges[k].t_gone = t_ans
+                flushed.append(exchanges[k])
                 k += 1
+            continue
+        if flushed and flushed[0].t_sent <= t_ans and (
+                k >= len(exchanges) or exchanges[k].t_sent > t_ans + 1e-9):
+            # an answer no later line can have: the banner was on its way (a slow link)
+            # while the line went out, so grbl took the line after it started
+            e = flushed.pop(0)
+            e.t_gone, e.answer, e.t_answer = None, u.text, t_ans
             continue
         if k >= len(exchanges):
             out.add("unsolicited-answer", rel(t_ans), "warning",

@@ -1,11 +1,11 @@
-"""grbl conformance checks, generated from grbl/spec/tables and graded per clause.
+"""grbl conformance checks, generated from specs/grbl and graded per clause.
 
 The checks produce the engine's own result objects (:class:`CheckResult` in a
 :class:`TargetRun`), so ``conform run`` writes the same reports (results.json, index.html,
 summary.md, junit.xml) for grbl as for GVE. A check id reads
 ``<variant>/<source>/<group>/<name>``, e.g. ``grbl-1.1f/error_codes/error/22``.
 
-Groups: ``example`` (the documented exchanges, grbl/spec/tables/examples.toml), ``error`` (every
+Groups: ``example`` (the documented exchanges, specs/grbl/examples.toml), ``error`` (every
 code with a provoking line in codes.toml), ``alarm``, ``setting`` (every $x at each
 documented edge: lo, lo-1, hi, hi+1, a fraction, a stray letter, no number;
 :func:`setting_edges`), ``realtime`` (status, hold/resume, reset, overrides, jog cancel),
@@ -57,6 +57,7 @@ class Session:
         self.v = v
         self.original: dict[int, str] | None = None   # a real unit's settings before the run
         self.dirty = False
+        self.options = RunOptions()   # the run's profile, seed and budgets (the runner's)
 
     def settings(self) -> dict[int, str]:
         out = {}
@@ -279,8 +280,21 @@ def _rt_status_no_ok(s: Session) -> Outcome:
     return kinds == ["status"], "one status report, no ok", " | ".join(got.lines) or "(silence)"
 
 
+def _far_x(s: Session) -> bytes:
+    """An X in machine coordinates (G53) at least 10 mm from where the machine stands: grbl
+    keeps its position across the soft reset before a check, so a fixed target may be
+    where an earlier check left it (and a move there moves nothing)."""
+    report = _status_has(s)
+    mpos = next((f[5:] for f in report.strip("<>").split("|") if f.startswith("MPos:")), "0")
+    try:
+        x = float(mpos.split(",")[0])
+    except ValueError:
+        x = 0.0
+    return b"G53X-20" if x > -10.0 else b"G53X0"
+
+
 def _rt_hold_resume(s: Session) -> Outcome:
-    s.talk(b"G1X-20F300\n")
+    s.talk(b"G1" + _far_x(s) + b"F300\n")
     s.wait(0.3)
     s.talk(b"!", status=0, linger=0.0)
     s.wait(1.5)
@@ -294,7 +308,7 @@ def _rt_hold_resume(s: Session) -> Outcome:
 
 
 def _rt_reset_banner_in_motion(s: Session) -> Outcome:
-    s.talk(b"G1X-20F300\n")
+    s.talk(b"G1" + _far_x(s) + b"F300\n")
     s.wait(0.3)
     got = s.talk(b"\x18", linger=0.1)
     want = ["ALARM:3", "", s.v.banner, "[MSG:'$H'|'$X' to unlock]"]
@@ -312,7 +326,7 @@ def _rt_feed_override(s: Session) -> Outcome:
 
 
 def _rt_jog_cancel(s: Session) -> Outcome:
-    s.talk(b"$J=X-20F300\n")
+    s.talk(b"$J=" + _far_x(s) + b"F300\n")
     s.wait(0.3)
     s.target.send(b"\x85")
     s.wait(1.5)
@@ -397,9 +411,11 @@ def _alarm_soft_limit(s: Session) -> Outcome:
 
 def _alarm_probe(s: Session) -> Outcome:
     """ALARM:5, then (after report.c's 0.5 s) [PRB:…:0] with the last probe position kept
-    (motion_control.c mc_probe_cycle, MESSAGE_PROBE_COORDINATES), then the line's ok."""
+    (motion_control.c mc_probe_cycle, MESSAGE_PROBE_COORDINATES), then the line's ok. The
+    probe moves 1 mm down from wherever the machine stands (G91): grbl keeps its position
+    across the soft reset before the check, and a target it already stands at is error:33."""
     before = next((x for x in s.talk(b"$#\n").lines if x.startswith("[PRB:")), "(no PRB)")
-    got = s.talk(b"G38.2Z-1F100\n", timeout=3.0 + ALARM_DELAY)
+    got = s.talk(b"G91G38.2Z-1F100\n", timeout=3.0 + ALARM_DELAY)
     kept = before[:-3] + ":0]" if before.startswith("[PRB:") else "[PRB:…:0]"
     want = ["ALARM:5", kept, "ok"]
     return got.lines == want, " | ".join(want), " | ".join(got.lines)
@@ -409,19 +425,28 @@ def _sequences(s: Session) -> Outcome:
     """Random sequences drawn from the tables, on the target and on the reference unit side
     by side (:mod:`.machine`); a difference is shrunk and given as its replay."""
     from conform.conformance.target import EmuTarget
-    from conform.families.grbl.conformance.machine import replay_text, run_sequences
+    from conform.families.grbl.conformance.machine import link_budget, replay_text, run_sequences
     from conform.families.grbl.unit.model import GrblUnit
 
-    reference = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}")
+    opts = s.options
+    budget = None if s.target.emulated else link_budget(opts)
+    reference = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}", baud=s.target.baud)
     try:
         out = run_sequences(s, Session(reference, s.spec, s.v), s.spec, s.v,
-                            emulated=s.target.emulated)
+                            emulated=s.target.emulated, profile=opts.profile, seed=opts.seed,
+                            budget=budget)
     finally:
         reference.close()
     want = "every answer as the reference unit's"
+    notes = out.note
+    if out.cut:
+        notes += f"; {out.cut} examples left out by the link's time budget of {budget:g} s"
+    if out.unconfirmed:
+        notes += (f"; {len(out.unconfirmed)} differences not seen again on a replay, the first: "
+                  f"{out.unconfirmed[0]}")
     if not out.steps:
-        return True, want, f"{out.examples} random sequences agreed"
-    return False, want, f"{out.why}; replay: {replay_text(out.steps)}"
+        return True, want, f"{out.examples} random sequences agreed (seed {opts.seed}){notes}"
+    return False, want, f"{out.why}; replay: {replay_text(out.steps)} (seed {opts.seed}){notes}"
 
 
 def _crlf(s: Session) -> Outcome:
@@ -522,12 +547,16 @@ class GrblRunner(Runner):
         super().__init__(target, vid, options)
         self.spec = spec or load_grbl()
         self.session = Session(target, self.spec, self.spec.variant(vid))
+        self.session.options = self.options
         self.motion_ok = allow_motion or target.emulated
         self.eeprom_ok = allow_eeprom or target.emulated
 
     def run_check(self, check: GrblCheck) -> CheckResult:
         result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
         result.variant, result.target = self.variant_id, self.target.name
+        if check.id.endswith(SEQUENCES):
+            result.seed = self.options.seed
+            result.replay = f"{check.id}@{self.options.seed}"
         return result
 
     def halt(self, after_silence: bool = False) -> str:
@@ -535,6 +564,12 @@ class GrblRunner(Runner):
 
     def stop_at_end(self) -> bool:
         return not self.target.emulated and self.motion_ok
+
+    def machine_budget(self) -> float | None:
+        """Wall time of the random sequences' examples on a link (None: in-process)."""
+        from conform.families.grbl.conformance.machine import link_budget
+
+        return None if self.target.emulated else link_budget(self.options)
 
     def estimate_run(self, checks: Sequence[GrblCheck]) -> Estimate:
         """Each check as long as it takes the reference unit on its virtual clock at the
@@ -548,7 +583,9 @@ class GrblRunner(Runner):
         est = Estimate()
         for c in checks:
             cost = 0.0
-            if not (c.motion and not self.motion_ok) and not (c.eeprom and not self.eeprom_ok):
+            if c.id.endswith(SEQUENCES) and self.motion_ok and self.eeprom_ok:
+                cost = (self.machine_budget() or 0.0) + RESET_COST
+            elif not (c.motion and not self.motion_ok) and not (c.eeprom and not self.eeprom_ok):
                 s.fresh()
                 t0 = sim.now()
                 try:
@@ -565,16 +602,17 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                allow_motion: bool = False, allow_eeprom: bool = False, notes: list[str] | None = None,
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
-               announce: Callable[[str], None] | None = None, sequences: bool = True
-               ) -> TargetRun:
+               announce: Callable[[str], None] | None = None, sequences: bool = True,
+               seed: int = 1) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
     interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
-    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's)."""
+    ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's); ``seed``
+    draws them (the command line's default, 1)."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
                         allow_eeprom=allow_eeprom,
-                        options=RunOptions(profile=profile, notes=list(notes or []),
+                        options=RunOptions(profile=profile, seed=seed, notes=list(notes or []),
                                            announce=announce))
     try:
         checks = [c for c in generate(runner.spec, vid)

@@ -1,7 +1,12 @@
-"""Random sequences for grbl: a hypothesis ``RuleBasedStateMachine`` that drives the target
-and the reference unit side by side with g-code lines, ``$`` commands, setting writes and
-realtime bytes drawn from the tables, compares every answer, shrinks a difference to the
-shortest sequence that still shows it and prints that sequence as the replay.
+"""Random sequences for grbl: hypothesis draws each example whole (g-code lines, ``$``
+commands, setting writes and realtime bytes from the tables), then it is sent to the target
+and to the reference unit side by side and every answer compared; a difference is shrunk to
+the shortest sequence that still shows it and printed as the replay.
+
+Nothing drawn depends on what the target answers, so an example replays the same on any
+target, a serial port too. Every example starts from a soft reset, with the reference put in
+the state the target is really in (its position, offsets, modal state and settings read back:
+:class:`Pair`), and a difference counts only when a replay shows it again.
 
 The lines are made of words grbl knows and some it does not (codes.toml's provoking lines,
 G/M codes with and without fractions, value words with edge values), so the parser's order
@@ -12,18 +17,27 @@ feeds there follow real time), on an emulated one exactly.
 
 from __future__ import annotations
 
-import random
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from hypothesis import HealthCheck, Phase, settings
+import hypothesis
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from hypothesis.stateful import RuleBasedStateMachine, rule, run_state_machine_as_test
+from hypothesis.errors import HypothesisException
 
+from conform.conformance.target import HarnessError
+from conform.families.grbl.conformance.readback import read_eeprom, read_state
 from conform.families.grbl.spec.load import GrblSpec, Variant
+from conform.families.grbl.unit.adopt import UnitState, start_from
 
 PROFILES = {"quick": (60, 15), "full": (300, 30)}   # examples, steps per example
+LINK_BUDGET = {"quick": 45.0, "full": 900.0}      # s of examples on a link
+SHRINK_SECONDS = {"quick": 25.0, "full": 120.0}    # s of shrinking a difference on a link
+SETTLE = 0.25       # s: on a link, no step goes out this close before a change the reference
+SETTLE_GAP = 0.05   # expects; the wait runs this far past the change
+SETTLE_MAX = 2.0    # s of settling at most before one step
 SAFE_COMMANDS = ("$", "$$", "$#", "$G", "$I", "$N", "$C", "$X")
 G_WORDS = ("0", "1", "2", "3", "4", "10", "17", "18", "19", "20", "21", "28", "28.1", "28.2",
            "30", "38.2", "38.3", "40", "43", "43.1", "49", "53", "54", "55", "59", "59.1",
@@ -63,6 +77,10 @@ class Outcome:
     steps: list[bytes] = field(default_factory=list)   # the shortest failing sequence
     why: str = ""
     examples: int = 0
+    cut: int = 0                                        # examples left out by the time budget
+    unconfirmed: list[str] = field(default_factory=list)   # differences no replay showed again
+    error: HarnessError | None = None                   # the link failed: the run stops
+    note: str = ""                                      # what the run left changed on the unit
 
 
 def compare_step(target_session: Any, reference_session: Any, data: bytes,
@@ -70,98 +88,163 @@ def compare_step(target_session: Any, reference_session: Any, data: bytes,
     """Send ``data`` to both; how their answers differ ("" when they agree)."""
     lines = data.count(b"\n")
     status = data.count(b"?") if not lines else 0
-    got = [normalize(s.talk(data, answers=lines, status=status, timeout=3.0, linger=0.05).lines)
-           for s in (target_session, reference_session)]
+    # the reference says how many answers to wait for: a held unit (feed hold, M0) answers its
+    # lines only after '~', which then answers them all, so waiting for one answer per line
+    # sent would cost the target's whole timeout at every step of a hold
+    ref = reference_session.talk(data, answers=lines, status=status, timeout=3.0, linger=0.05)
+    answers = sum(1 for x in ref.lines if x == "ok" or x.startswith("error:"))
+    tgt = target_session.talk(data, answers=answers, status=status, timeout=3.0, linger=0.05)
+    got = [normalize(tgt.lines), normalize(ref.lines)]
     if got[0] == got[1]:
         return ""
     return (f"after {data!r}: the target answered {' | '.join(got[0]) or '-'}, "
             f"the reference {' | '.join(got[1]) or '-'}")
 
 
-def _replay(target_session: Any, reference_session: Any, steps: list[bytes],
-            normalize: Callable[[list[str]], list[str]]) -> str:
-    for s in (target_session, reference_session):
-        s.fresh()
-    for data in steps:
-        why = compare_step(target_session, reference_session, data, normalize)
-        if why:
-            return why
-    return ""
+class Pair:
+    """The target and the reference unit side by side. Each example starts with both reset
+    and the reference put in the state the target is really in (:mod:`.readback`: position,
+    offsets, modal state, settings — a grbl keeps its position across a soft reset); on a link
+    the reference then keeps the target's clock, and no step is sent just before a change the
+    reference expects (a block's end, a dwell's, an alarm's delay), where the wall clock's
+    jitter would decide which side of it each unit answers from."""
+
+    def __init__(self, target_session: Any, reference_session: Any,
+                 normalize: Callable[[list[str]], list[str]]) -> None:
+        self.t, self.r, self.normalize = target_session, reference_session, normalize
+        self.linked = not target_session.target.emulated
+        self.known: UnitState | None = None
+        self.first: UnitState | None = None   # the target's state before the first example
+        self.offset = 0.0
+
+    def start(self) -> None:
+        """Both fresh, the reference in the target's state (HarnessError when it cannot be)."""
+        t, r = self.t, self.r
+        dirty = t.dirty
+        t.restore()   # a real unit keeps an example's setting writes (EEPROM): undo them
+        t.fresh()
+        if self.known is None or dirty:
+            self.known = read_eeprom(t)
+            t.dirty = False
+        state, said = read_state(t, self.known)
+        if self.first is None:
+            self.first = state
+        r.fresh()
+        start_from(r.target.unit, state)
+        for data, lines in said:   # the same questions: the reference took the state, and its
+            theirs = r.talk(data, status=data.count(b"?")).lines   # report counters match
+            if self.normalize(theirs) != self.normalize(lines):
+                raise HarnessError(
+                    f"the reference could not start from the target's state: after {data!r} "
+                    f"the target answered {' | '.join(lines)}, the reference {' | '.join(theirs)}")
+        self.offset = t.target.now() - r.target.now()
+
+    def put_back(self) -> str:
+        """A unit behind a link keeps the G54-G59 offsets the examples wrote (EEPROM): write
+        the first ones back (G10 L2). G28/G30 can be stored only where the machine stands
+        (G28.1/G30.1): changed ones are said, not moved to."""
+        if not self.linked or self.first is None:
+            return ""
+        t = self.t
+        t.restore()   # the settings first: $13 decides how $# reads
+        t.fresh()
+        now, _said = read_state(t, self.known or UnitState())
+        for i, (was, got) in enumerate(zip(self.first.coords, now.coords, strict=True)):
+            if was != got:
+                words = "".join(f"{a}{x:.4f}" for a, x in zip("XYZ", was, strict=True))
+                t.talk(f"G10L2P{i + 1}{words}\n".encode())
+        moved = [f"{name} {', '.join(f'{x:.3f}' for x in getattr(now, name.lower()))} (was "
+                 f"{', '.join(f'{x:.3f}' for x in getattr(self.first, name.lower()))})"
+                 for name in ("G28", "G30")
+                 if getattr(now, name.lower()) != getattr(self.first, name.lower())]
+        return "; the examples left stored positions changed: " + ", ".join(moved) if moved \
+            else ""
+
+    def _catch_up(self) -> None:
+        lag = self.t.target.now() - self.offset - self.r.target.now()
+        if lag > 0:
+            self.r.target.wait(lag)
+
+    def _settle(self) -> None:
+        """Wait on both while the reference expects a change within SETTLE seconds."""
+        waited = 0.0
+        while waited < SETTLE_MAX:
+            self._catch_up()
+            ref = self.r.target
+            due = ref.unit.next_deadline()
+            if due is None or due - ref.now() > SETTLE:
+                return
+            d = max(0.0, due - ref.now()) + SETTLE_GAP
+            self.t.target.wait(d)
+            waited += d
+        self._catch_up()
+
+    def run(self, steps: Sequence[bytes]) -> tuple[str, int]:
+        """Start, then send ``steps``: the first difference and its step ("", -1 if none)."""
+        self.start()
+        for i, data in enumerate(steps):
+            if self.linked:
+                self._settle()
+            why = compare_step(self.t, self.r, data, self.normalize)
+            if why:
+                return why, i
+        return "", -1
 
 
-def _minimize(target_session: Any, reference_session: Any, out: Outcome,
-              normalize: Callable[[list[str]], list[str]]) -> None:
+def _minimize(pair: Pair, out: Outcome, until: float | None) -> None:
     """Drop steps one at a time while the difference stays (after hypothesis's shrinking,
     which keeps steps a deletion would not have changed)."""
     i = 0
     while i < len(out.steps) and len(out.steps) > 1:
+        if until is not None and time.perf_counter() > until:
+            return
         trial = out.steps[:i] + out.steps[i + 1:]
-        why = _replay(target_session, reference_session, trial, normalize)
+        why, n = pair.run(trial)
         if why:
-            out.steps, out.why = trial, why
+            out.steps, out.why = trial[:n + 1], why
         else:
             i += 1
 
 
-def build_machine(target_session: Any, reference_session: Any, spec: GrblSpec, v: Variant,
-                  normalize: Callable[[list[str]], list[str]], out: Outcome) -> type:
+def step_strategy(spec: GrblSpec, v: Variant) -> st.SearchStrategy[bytes]:
+    """One step: a g-code line, one modal word, a safe ``$`` command, a jog, a setting write
+    or a realtime byte (never a reset: each example starts from one)."""
     provoking = tuple(c.send.decode("latin-1").strip() for c in spec.errors.values()
                       if c.send is not None and not c.setup and not c.send.startswith(b"$"))
-    settings_rows = [(n, s) for n, s in spec.settings.items()]
+    settings_rows = sorted(spec.settings)
     realtime = tuple(b for b, r in spec.realtime.items() if r.effect != "reset")
+    modal = st.tuples(st.one_of(st.sampled_from([f"G{g}" for g in G_WORDS]),
+                                st.sampled_from([f"M{m}" for m in M_WORDS])),
+                      st.sampled_from(("", "T5", "F100", "S200", "N5", "P0.1")))
+    jog = st.tuples(st.sampled_from(("", "G91", "G90", "G20", "G53", "G2", "M3")),
+                    st.sampled_from(("X-1", "Y-0.5", "Z-1", "")),
+                    st.sampled_from(("F100", "F0", "", "S100", "T1")))
+    setting = st.tuples(st.sampled_from(settings_rows),
+                        st.sampled_from(("-1", "0", "1", "2", "3", "2.5", "255", "256", "5x",
+                                         "x")))
+    return st.one_of(
+        gcode_lines(provoking).map(lambda line: line.encode("latin-1") + b"\n"),
+        modal.map(lambda wv: f"{wv[0]}{wv[1]}\n".encode()),
+        st.sampled_from(SAFE_COMMANDS).map(lambda cmd: cmd.encode() + b"\n"),
+        jog.map(lambda j: ("$J=" + "".join(j)).encode() + b"\n"),
+        setting.map(lambda nv: f"${nv[0]}={nv[1]}\n".encode()),
+        st.sampled_from(realtime).map(lambda b: bytes([b])),
+    )
 
-    class GrblSequences(RuleBasedStateMachine):
-        def __init__(self) -> None:
-            super().__init__()
-            self.steps: list[bytes] = []
-            for s in (target_session, reference_session):
-                s.restore()   # a real unit keeps an example's setting writes (EEPROM): undo them
-                s.fresh()
-            out.examples += 1
 
-        def _both(self, data: bytes) -> None:
-            self.steps.append(data)
-            why = compare_step(target_session, reference_session, data, normalize)
-            if why:
-                out.steps, out.why = list(self.steps), why
-                raise AssertionError(why)
-
-        @rule(line=gcode_lines(provoking))
-        def gcode(self, line: str) -> None:
-            self._both(line.encode("latin-1") + b"\n")
-
-        @rule(word=st.one_of(st.sampled_from([f"G{g}" for g in G_WORDS]),
-                             st.sampled_from([f"M{m}" for m in M_WORDS])),
-              value=st.sampled_from(("", "T5", "F100", "S200", "N5", "P0.1")))
-        def modal(self, word: str, value: str) -> None:
-            """One G or M word, perhaps with one value word: mostly lines grbl takes."""
-            self._both(f"{word}{value}\n".encode())
-
-        @rule(cmd=st.sampled_from(SAFE_COMMANDS))
-        def command(self, cmd: str) -> None:
-            self._both(cmd.encode() + b"\n")
-
-        @rule(jog=st.tuples(st.sampled_from(("", "G91", "G90", "G20", "G53", "G2", "M3")),
-                            st.sampled_from(("X-1", "Y-0.5", "Z-1", "")),
-                            st.sampled_from(("F100", "F0", "", "S100", "T1"))))
-        def jog(self, jog: tuple[str, str, str]) -> None:
-            self._both(("$J=" + "".join(jog)).encode() + b"\n")
-
-        @rule(row=st.sampled_from(settings_rows),
-              value=st.sampled_from(("-1", "0", "1", "2", "3", "2.5", "255", "256", "5x", "x")))
-        def setting(self, row: tuple[int, Any], value: str) -> None:
-            self._both(f"${row[0]}={value}\n".encode())
-
-        @rule(byte=st.sampled_from(realtime))
-        def realtime_byte(self, byte: int) -> None:
-            self._both(bytes([byte]))
-
-    return GrblSequences
+def link_budget(options: Any) -> float:
+    """Wall seconds of examples on a link: the run's own budget, else its profile's."""
+    return options.machine_budget or LINK_BUDGET.get(options.profile, LINK_BUDGET["quick"])
 
 
 def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v: Variant, *,
-                  emulated: bool, profile: str = "quick", seed: int = 0) -> Outcome:
-    """Run the machine; an Outcome whose ``steps`` is empty when every example agreed."""
+                  emulated: bool, profile: str = "quick", seed: int = 0,
+                  budget: float | None = None) -> Outcome:
+    """Random examples, each drawn whole before it is sent (what the target answers never
+    changes what is drawn, so hypothesis can replay and shrink an example against any
+    target); an Outcome whose ``steps`` is empty when every example agreed. A difference
+    counts only when a replay of the example shows it again. ``budget``: wall seconds for the
+    examples (a link); those left out are counted in ``cut``."""
     examples, steps = PROFILES.get(profile, PROFILES["quick"])
     out = Outcome()
 
@@ -170,19 +253,64 @@ def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v
             return lines
         return [x.split("|", 1)[0] + ">" if x.startswith("<") else x for x in lines]
 
-    machine = build_machine(target_session, reference_session, spec, v, normalize, out)
-    machine.TestCase.settings = settings(
-        max_examples=examples, stateful_step_count=steps, deadline=None, database=None,
-        derandomize=True, suppress_health_check=list(HealthCheck),
-        phases=(Phase.generate, Phase.shrink), print_blob=False)
-    random.seed(seed)
+    pair = Pair(target_session, reference_session, normalize)
+    verdicts: dict[tuple[bytes, ...], str] = {}
+    t0 = time.perf_counter()
+    ends = {"examples": None if budget is None else t0 + budget, "shrink": None}
+
+    def example(seq: list[bytes]) -> None:
+        key = tuple(seq)
+        if key not in verdicts:
+            end = ends["shrink"] if out.steps else ends["examples"]
+            if out.error is not None or (end is not None and time.perf_counter() > end):
+                out.cut += 0 if out.steps or out.error else 1
+                return
+            verdicts[key] = _judge(pair, seq, out)
+            if verdicts[key] and ends["shrink"] is None and not emulated:
+                ends["shrink"] = time.perf_counter() + SHRINK_SECONDS.get(profile, 20.0)
+        if verdicts[key]:
+            raise AssertionError(verdicts[key])
+
+    test = given(st.lists(step_strategy(spec, v), min_size=1, max_size=steps))(example)
+    test = settings(max_examples=examples, deadline=None, database=None, derandomize=False,
+                    suppress_health_check=list(HealthCheck), report_multiple_bugs=False,
+                    phases=(Phase.generate, Phase.shrink), print_blob=False)(test)
+    test = hypothesis.seed(seed)(test)
     try:
-        run_state_machine_as_test(machine, settings=machine.TestCase.settings)
-    except AssertionError:
-        pass                     # out holds the shrunk sequence (the last failing run)
+        test()
+    except (AssertionError, HypothesisException):
+        pass                     # out holds the shortest confirmed failing sequence
+    if out.error is not None:
+        raise out.error
     if out.steps:
-        _minimize(target_session, reference_session, out, normalize)
+        found = list(out.steps), out.why
+        _minimize(pair, out, ends["shrink"])
+        why, n = pair.run(out.steps)   # the log shows the sequence reported
+        if why:
+            out.steps, out.why = out.steps[:n + 1], why
+        else:
+            out.steps, out.why = found
+    out.note = pair.put_back()
     return out
+
+
+def _judge(pair: Pair, seq: list[bytes], out: Outcome) -> str:
+    """Run one example; a difference that a replay shows again ("" otherwise)."""
+    try:
+        out.examples += 1
+        why, n = pair.run(seq)
+        if not why:
+            return ""
+        again, m = pair.run(seq[:n + 1])
+    except HarnessError as exc:
+        out.error = exc
+        return ""
+    if not again:
+        out.unconfirmed.append(why)
+        return ""
+    if not out.steps or m + 1 < len(out.steps):
+        out.steps, out.why = list(seq[:m + 1]), again
+    return again
 
 
 def replay_text(steps: list[bytes]) -> str:

@@ -30,7 +30,10 @@ EVENT_OF = {  # analysis finding kind -> neutral event kind
     "planner-starved": "starved", "unsolicited-answer": "noise",
 }
 HOLD_STATES = ("Hold", "Door")
+RUN_STATES = ("Run", "Jog", "Home")
 END_WORD = ("M2", "M30")
+SOFT_RESET = 0x18
+STATE_ERRORS = (8, 9)   # refused for the machine's state ($ while moving, locked): not damage
 
 
 def _chunks(d: Any) -> list[tuple[float, float, bytes]]:
@@ -64,8 +67,10 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
         kind = EVENT_OF.get(f.kind)
         if f.kind == "reset":
             kind = "reset"
-        elif f.kind == "streaming-method":
-            kind = "misuse" if "without" in f.message else None
+        elif f.kind == "streaming-method":    # a misuse only where the buffer overflowed
+            kind = "misuse" if "without" in f.message and \
+                a.metrics.get("max_bytes_in_flight", 0) > a.metrics.get("rx_buffer", 1 << 30) \
+                else None
         if kind is None:
             continue
         events.append(Event(f.t, kind, f.message, f.clause,
@@ -75,10 +80,27 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
     for t_abs, text in a.reports:
         state = text.strip("<>").split("|")[0].split(":")[0]
         t = t_abs - t0
-        if state in HOLD_STATES and any(
-                e.t_sent <= t and (e.t_answer is None or e.t_answer > t) for e in ex):
+        waiting = any(e.t_sent <= t and (e.t_answer is None or e.t_answer > t) for e in ex)
+        if state in HOLD_STATES and waiting:
             events.append(Event(t, "hold", f"the unit reports {text} with lines waiting "
                                 "for their answer", "interface.md §Machine State"))
+        elif state == "Idle":
+            events.append(Event(t, "idle", f"the unit reports {text}",
+                                "interface.md §Machine State (Idle: nothing to run)"))
+        elif state in RUN_STATES:
+            events.append(Event(t, "running", f"the unit reports {text}",
+                                "interface.md §Machine State"))
+    # the host's own soft reset: it stops the job and empties the planner (protocol.c
+    # protocol_exec_rt_system, mc_reset)
+    for t_abs, byte in a.realtime:
+        if byte == SOFT_RESET:
+            events.append(Event(t_abs - t0, "halt", "the host sent a soft reset (Ctrl-X)"
+                                + (" after a feed hold (!)" if any(
+                                    b == 0x21 and 0 <= t_abs - u < 5.0
+                                    for u, b in a.realtime) else ""),
+                                "interface.md §Realtime commands (0x18 soft reset)"))
+    events += _refused_valid(ex, load_grbl().variant(vid))
+    events += _deaf(a, t0)
     for e in ex:
         words = {w for w in _words(e.text)}
         if words & set(END_WORD) and e.accepted:
@@ -88,6 +110,69 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
     return Facts("grbl", vid, path, a.metrics["duration_s"], ex, events, t0=t0,
                  rx_capacity=v.rx_buffer, queue_capacity=v.planner_blocks,
                  queue_unit="planner blocks", answer_time=0.5, notes=list(a.notes))
+
+
+DEAF_MIN = 3            # unanswered polls in a row that make a deaf stretch
+POLL_ANSWER_S = 0.25    # a status report answers a ``?`` within this
+
+
+def _deaf(a: Any, t0: float) -> list[Event]:
+    """Stretches where ``?`` polls got no status report: grbl answers ``?`` from its main
+    loop within milliseconds whatever it is doing, a full planner included (protocol.c
+    protocol_exec_rt_system, called while the planner waits for room), so polls without
+    reports mean nothing reached it or nothing came back: the link."""
+    polls = [t for t, b in a.realtime if b == 0x3F]
+    reports = sorted(t for t, _ in a.reports)
+    import bisect
+
+    out: list[Event] = []
+    run: list[float] = []
+    for t in [*polls, None]:
+        if t is not None:
+            k = bisect.bisect_left(reports, t)
+            if k >= len(reports) or reports[k] - t > POLL_ANSWER_S:
+                run.append(t)
+                continue
+            if not run:
+                continue
+        if len(run) >= DEAF_MIN and run[-1] - run[0] >= 0.5:
+            k = bisect.bisect_right(reports, run[-1])
+            back = reports[k] - t0 if k < len(reports) else None
+            out.append(Event(run[0] - t0, "deaf", f"{len(run)} status polls from "
+                             f"{run[0] - t0:.3f} s to {run[-1] - t0:.3f} s got no report"
+                             + (f"; reports came back at {back:.3f} s" if back is not None
+                                else "; none came back"),
+                             "protocol.c protocol_exec_rt_system (answers ? at once)",
+                             t_end=run[-1] - t0, extra={"back": back}))
+        run = []
+    return out
+
+
+def _refused_valid(ex: list[Exchange], v: Any) -> list[Event]:
+    """Proof of a loss on the wire: an ``error:N`` to a line grbl's parser takes as sent (in
+    the modal state the lines before it left): only damage on the way explains it. Lines
+    refused for the machine's state (alarm lock, ``$`` while moving) prove nothing."""
+    out: list[Event] = []
+    state: tuple[Any, Any] = (Modal(), [0.0, 0.0, 0.0])
+    for e in ex:
+        text = strip_line(e.text.encode("latin-1"))[0]
+        valid, _why = _check(text, *state, v)
+        if e.accepted and valid:
+            state = valid
+        if e.accepted is False and valid and text and not text.startswith("$") and \
+                _code(e.answer) not in STATE_ERRORS and e.t_answer is not None:
+            out.append(Event(e.t_answer, "loss", f"line {e.n + 1} `{e.text}` answered "
+                             f"`{e.answer}` though grbl's parser takes it as sent: it arrived "
+                             "damaged", "protocol.c: error:N only for a line it cannot take",
+                             line=e.n, extra={"proof": "refused though valid"}))
+    return out
+
+
+def _code(answer: str | None) -> int | None:
+    try:
+        return int((answer or "").split(":", 1)[1])
+    except (IndexError, ValueError):
+        return None
 
 
 def _words(text: str) -> list[str]:

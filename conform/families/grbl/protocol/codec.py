@@ -1,6 +1,6 @@
 """Sans-I/O framing of grbl traffic.
 
-Host side: realtime bytes (grbl/spec/tables/protocol.toml [realtime], and any byte above 0x7F) are
+Host side: realtime bytes (specs/grbl/protocol.toml [realtime], and any byte above 0x7F) are
 out of band — they never enter grbl's receive buffer — and everything else forms lines ended by
 LF or CR. :class:`HostSplitter` separates the two as bytes come, keeping each byte's offset.
 Unit side: lines ended by CR LF, classified by the message table (ok, error:N, ALARM:N, the

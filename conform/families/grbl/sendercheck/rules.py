@@ -65,6 +65,27 @@ def program(lines: list[str]) -> list[str]:
     return [b for x in lines for b in blocks(x)]
 
 
+def numbered(job: list[str]) -> list[tuple[int, str]]:
+    """The job's canonical blocks, each with the number (from 1) of the job line it is in."""
+    return [(n, b) for n, x in enumerate(job, 1) for b in blocks(x)]
+
+
+def job_line(job: list[str], line: str) -> str:
+    """The job line that holds ``line`` (a block, or a line as sent or as grbl took it), named
+    by its number and text; "not a job line" when none does."""
+    want = blocks(line)
+    for n, x in enumerate(job, 1):
+        have = blocks(x)
+        if want and (want == have or (len(want) == 1 and want[0] in have)):
+            return f"job line {n} {x.strip()!r}"
+    return "not a job line"
+
+
+def on_wire(e: Any, job: list[str]) -> str:
+    """An exchange named as the wire has it (its line number there, from 1) and as the job."""
+    return f"wire line {e.line + 1} {e.text!r} ({job_line(job, e.text)})"
+
+
 @dataclass
 class Truth:
     """The job against what the unit executed (lines answered ok, '$' commands left out)."""
@@ -123,6 +144,9 @@ def nothing_lost(r: Any) -> Result:
     ok = r.lost == 0 and (_answer_faults(r) or m["answered"] + tail == m["lines"])
     note = (f" ({tail} sent before the alarm were still in grbl's buffer when the program "
             "stopped: grbl answers nothing for 0.5 s after ALARM:N, report.c)") if tail else ""
+    silent = [e for e in r.analysis.exchanges if e.answer is None]
+    if not ok and silent:
+        note += f"; the first without an answer: {on_wire(silent[0], r.job)}"
     return ("PASS" if ok else "FAIL", want,
             f"{r.lost} bytes lost, {m['answered']} of {m['lines']} lines answered on the wire"
             + note)
@@ -147,6 +171,9 @@ def within_buffer(r: Any) -> Result:
         return ("PASS" if r.lost == 0 else "FAIL", f"at most {m['rx_buffer']} bytes in grbl's "
                 "buffer (ground truth: no byte dropped)", f"{r.lost} bytes dropped; {wire}")
     ok = m["max_bytes_in_flight"] <= m["rx_buffer"]
+    if not ok and r.analysis.exchanges:
+        worst = max(r.analysis.exchanges, key=lambda e: e.bytes_in_flight)
+        wire += f", the most when {on_wire(worst, r.job)} went out"
     return "PASS" if ok else "FAIL", f"at most {m['rx_buffer']} bytes in flight", wire
 
 
@@ -167,22 +194,44 @@ def realtime_not_lines(r: Any) -> Result:
 def in_order(r: Any) -> Result:
     """The job's lines go out once each, in order; where the sender may stop early a prefix
     is right. Lines that are not the job's ($G polls and the like) are left out."""
-    jobn = program(r.job)
-    known = set(jobn)
-    sent = [b for e in r.analysis.exchanges for b in blocks(e.text) if b in known]
+    jobn = numbered(r.job)
+    known = {b for _n, b in jobn}
+    sent = [(e, b) for e in r.analysis.exchanges for b in blocks(e.text) if b in known]
+    want_blocks, got = [b for _n, b in jobn], [b for _e, b in sent]
     whole = "may-stop" not in r.scenario.tags and "answers" not in r.scenario.tags
-    ok = sent == jobn if whole else sent == jobn[:len(sent)]
+    ok = got == want_blocks if whole else got == want_blocks[:len(got)]
     want = "the whole job, in order" if whole else "a prefix of the job, in order"
-    return ("PASS" if ok else "FAIL", want, f"{len(sent)} of the job's {len(jobn)} lines sent"
-            + ("" if ok else ", not in the job's order (a line skipped or sent again)"))
+    said = f"{len(got)} of the job's {len(jobn)} lines sent"
+    return "PASS" if ok else "FAIL", want, said + ("" if ok else "; " + _first_out_of_order(
+        r.job, jobn, sent))
+
+
+def _first_out_of_order(job: list[str], jobn: list[tuple[int, str]],
+                        sent: list[tuple[Any, str]]) -> str:
+    """Where the wire first leaves the job: the job line due there and what was sent instead."""
+    d = next((i for i, (a, b) in enumerate(zip(jobn, sent, strict=False))
+              if a[1] != b[1]),
+             min(len(jobn), len(sent)))
+    if d >= len(jobn):
+        return (f"after the job's last line {on_wire(sent[d][0], job)} was sent again "
+                "(a line sent again)")
+    n, _b = jobn[d]
+    due = f"job line {n} {job[n - 1].strip()!r}"
+    if d >= len(sent):
+        rest = len({m for m, _ in jobn[d:]}) - 1
+        return f"{due} never went on the wire" + (f", nor the {rest} after it" if rest else "")
+    e, block = sent[d]
+    if block in {b for _m, b in jobn[d + 1:]}:
+        return f"{due} was skipped: in its place the wire had {on_wire(e, job)}"
+    return f"{due} was due, but the wire had {on_wire(e, job)} again (a line sent again)"
 
 
 def executed_once(r: Any) -> Result:
     tr = compare(r.job, r.taken)
     if tr.doubles:
         return ("FAIL", "every job line executed at most once (ground truth)",
-                f"{tr.summary()}: {tr.doubles[0]!r} ran twice (a line sent again after its "
-                "answer was lost moves the machine twice)")
+                f"{tr.summary()}: {job_line(r.job, tr.doubles[0])} ran twice (a line sent "
+                "again after its answer was lost moves the machine twice)")
     return "PASS", "every job line executed at most once (ground truth)", tr.summary()
 
 
@@ -194,8 +243,10 @@ def honest_exit(r: Any) -> Result:
         return "PASS", "exit status 0 only when the whole job ran", \
             f"{tr.summary()}; exit status {r.returncode}"
     ok = r.returncode != 0
+    first = (f" (the first never executed: {job_line(r.job, tr.missing[0])})" if tr.missing else
+             f" ({job_line(r.job, tr.doubles[0])} ran twice)" if tr.doubles else "")
     return ("PASS" if ok else "FAIL", "a non-zero exit status when the job did not run whole",
-            f"{tr.summary()}; exit status {r.returncode}")
+            f"{tr.summary()}{first}; exit status {r.returncode}")
 
 
 def after_error(r: Any) -> Result:
@@ -203,8 +254,12 @@ def after_error(r: Any) -> Result:
     if not errs:
         return "NOT-APPLICABLE", "", "no error:N in this run"
     went_on = "went on" in errs[0].message
-    return ("FAIL" if went_on else "PASS", "stop (or let the user decide) after error:N",
-            errs[0].message)
+    rejected = next((e for e in r.analysis.exchanges if (e.answer or "").startswith("error:")),
+                    None)
+    said = errs[0].message
+    if rejected is not None:   # the finding names the wire's line; name the job's too
+        said = f"{on_wire(rejected, r.job)}: {said.split(': ', 1)[-1]}"
+    return ("FAIL" if went_on else "PASS", "stop (or let the user decide) after error:N", said)
 
 
 def after_alarm(r: Any) -> Result:
@@ -215,8 +270,8 @@ def after_alarm(r: Any) -> Result:
     # lines already on their way when the alarm came are not the sender's fault
     locked = [e for e in r.analysis.exchanges if e.answer == "error:9" and e.t_sent > seen]
     return ("FAIL" if locked else "PASS", "no g-code sent after the alarm arrived",
-            f"{len(locked)} lines sent after {alarms[0].message} were answered error:9" if locked
-            else alarms[0].message)
+            f"{len(locked)} lines sent after {alarms[0].message} were answered error:9, the "
+            f"first {on_wire(locked[0], r.job)}" if locked else alarms[0].message)
 
 
 def restart_stops(r: Any) -> Result:
@@ -226,8 +281,9 @@ def restart_stops(r: Any) -> Result:
     after = [t for t, code in r.taken[r.restarts[0]:] if code == 0 and t in known]
     if after:
         return ("FAIL", "no job line run after grbl restarted",
-                f"{len(after)} job lines executed after the restart, the first {after[0]!r}: "
-                "the job went on from a machine that had lost its state and position")
+                f"{len(after)} job lines executed after the restart, the first "
+                f"{job_line(r.job, after[0])}: the job went on from a machine that had lost "
+                "its state and position")
     return "PASS", "no job line run after grbl restarted", "the sender stopped the job"
 
 

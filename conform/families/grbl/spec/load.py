@@ -1,4 +1,4 @@
-"""Load ``grbl/spec/tables/*.toml`` into typed tables, validating every row.
+"""Load ``specs/grbl/*.toml`` into typed tables, validating every row.
 
 A mistake in a table is one ``UserError`` line naming the file, the row and the field, so a
 new grbl variant or a corrected code is a data change that either loads or says what is wrong.

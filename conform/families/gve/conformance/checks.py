@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from conform.conformance.results import INFO, MUST
+from conform.families.gve.conformance.from_state import from_held_checks, from_state_checks
 from conform.families.gve.conformance.motion_free import (
     SETTLE_S,
     motion_free_checks,
@@ -290,6 +291,8 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
         else:
             _absent_checks(b, cid)
     _semantic_checks(b)
+    from_state_checks(b, {cid: _valid_form(b, cid) for cid in universe if cid in v.commands})
+    from_held_checks(b)
     motion_free_checks(b)
     question_checks(b)
     _example_checks(b)
@@ -299,8 +302,8 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
 def _command_checks(b: _Builder, cid: str) -> None:
     cmd = b.v.commands[cid]
     # valid form (with its own setup where a bare command would say little)
-    setup, intent = _valid_setup(b, cid)
-    valid = [RESET, *setup, *_valid_steps(b, cid)]
+    form, intent = _valid_form(b, cid)
+    valid = [RESET, *form]
     b.add(cid, "valid", f"{cid} in a valid form is accepted", valid, intent=intent,
           questions=_valid_questions(cid))
     # the same with checksums on, and with a wrong one (GVE64 §13.3.2)
@@ -348,6 +351,12 @@ def _command_checks(b: _Builder, cid: str) -> None:
               [RESET, b.cmd_step(cid, b.valid_args(cid), address=b.v.spindle_address)],
               clause=f"{b.clause(cid)}", questions=("A19",) if b.manual == "GVE124" else (),
               intent=None)
+
+
+def _valid_form(b: _Builder, cid: str) -> tuple[list[Step], int | None]:
+    """A command's valid form after its own setup, and the answer it intends."""
+    setup, intent = _valid_setup(b, cid)
+    return [*setup, *_valid_steps(b, cid)], intent
 
 
 def _valid_questions(cid: str) -> tuple[str, ...]:

@@ -203,6 +203,24 @@ def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loo
     return None
 
 
+def answers_differ(step: Step, default: Reply | None, other: Reply | None) -> bool:
+    """Does an open question's alternative change the answer to ``step`` at all? Only then may
+    it explain a target's different answer there: an alternative excuses the behaviour its
+    question is about, never a value it leaves as the default has it."""
+    if default is None or other is None:
+        return default is not other
+    if (default.lines, default.partial, default.stray, _trailing(default)) != (
+            other.lines, other.partial, other.stray, _trailing(other)):
+        return True
+    if default.moving != other.moving:
+        return True
+    if step.tolerance is not None and None not in (default.t_rx, other.t_rx):
+        d_e = default.t_rx - default.t_tx  # type: ignore[operator]
+        d_o = other.t_rx - other.t_tx  # type: ignore[operator]
+        return abs(d_e - d_o) > step.tolerance
+    return False
+
+
 def first_mismatch(script: Script, expected: Sequence[Reply | None], actual: Sequence[Reply | None],
                    loose: bool, tol_of: Callable[[Reply | None, Reply | None], float]
                    ) -> tuple[int, str] | None:
@@ -259,6 +277,8 @@ def judge(ref: Reference, script: Script, actual: Sequence[Reply | None], *, loo
             if alt == ref.dialect[q]:
                 continue
             other = ref.transcript(script, ref.with_choice(q, alt))
+            if not answers_differ(step, expected[index], other[index] if index < len(other) else None):
+                continue
             if first_mismatch(script, other, actual, loose, tol_of) is None:
                 meaning = ref.spec.questions[q].alternatives[alt]
                 return Verdict("DEVIATION", index, exp_text, act_text,

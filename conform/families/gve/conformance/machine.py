@@ -26,7 +26,7 @@ from conform.conformance.results import INFO, CheckResult, Grade, LogEntry
 from conform.conformance.target import HarnessError, Reply
 from conform.errors import LinkError
 from conform.families.gve.conformance.checks import Check, answer_kind, answer_shape, clause_number
-from conform.families.gve.conformance.expect import first_mismatch, reply_mismatch, show
+from conform.families.gve.conformance.expect import answers_differ, first_mismatch, reply_mismatch, show
 from conform.families.gve.conformance.safety import SafetyRefusal, hazards
 from conform.families.gve.conformance.script import ENVIRONMENT, Step
 from conform.families.gve.conformance.target import POLL_LINE, GveEmuTarget
@@ -210,6 +210,8 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
                         continue
                     d = spec.dialect(base.changed() | {q: alt})
                     other = ref.transcript(script, d)
+                    if not answers_differ(script[index], e, other[index] if index < len(other) else None):
+                        continue  # the alternative leaves this answer as it is: not its question's
                     if first_mismatch(script, other, self.actual, loose, tol_of) is None:
                         shared.dialect = d
                         shared.deviations.setdefault((q, alt), [s.describe() for s in script])
@@ -361,7 +363,9 @@ def run_machine(runner: Any, check: Check) -> CheckResult:
                            duration=time.perf_counter() - t0,
                            **(base | {"clause": clause}))
     except (HarnessError, LinkError, HypothesisException) as exc:
-        return CheckResult(grade=Grade.ERROR, detail=f"{type(exc).__name__}: {exc}",
+        from conform.families.gve.conformance.runner import could_not
+
+        return CheckResult(grade=Grade.ERROR, detail=could_not(exc),
                            log=list(runner.target.log), duration=time.perf_counter() - t0,
                            **base)
     summary = (f"{shared.examples} sequences, {shared.steps} commands "

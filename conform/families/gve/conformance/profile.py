@@ -81,7 +81,8 @@ def load_profile(path: str | Path) -> Profile:
     data = load_user_file(p, tomllib.loads, max_bytes=MAX_PROFILE_BYTES, what="profile")
     dialect = data.get("dialect")
     if not isinstance(dialect, dict):
-        raise UserError(f"{p}: no [dialect] table")
+        raise UserError(f"{p}: {_whose(data) or 'no [dialect] table'}: a GVE dialect profile "
+                        "is what `conform characterize` writes for a GVE unit")
     for k, v in dialect.items():
         if not isinstance(v, str):
             raise UserError(f"{p}: [dialect] {k} must be a string, not {type(v).__name__}")
@@ -132,3 +133,18 @@ def diff_profiles(a: Profile, b: Profile, defaults: dict[str, str] | None = None
     db = base | b.dialect | dict.fromkeys(unanswered(b), NOT_ANSWERED)
     keys = sorted(set(da) | set(db), key=lambda k: _qkey((k, None)))
     return [(k, da.get(k), db.get(k)) for k in keys if da.get(k) != db.get(k)]
+
+
+def _whose(data: dict) -> str:
+    """What the file is when it is another family's profile (it names its variant), else
+    nothing."""
+    from conform.families import family_for_variant
+
+    meta = data.get("meta")
+    variant = data.get("variant") or (meta.get("variant") if isinstance(meta, dict) else None)
+    if not isinstance(variant, str) or not variant:
+        return ""
+    fam = family_for_variant(variant)
+    known = any(v.id == variant for v in fam.variants())
+    return f"a {fam.name} profile ({variant}), not a GVE one" if known and fam.name != "gve" else ""
+

@@ -85,8 +85,9 @@ def power_up(tg: Target, stats: StateStats, ready_after: float, quiet: bool = Fa
                 reply.stray = b""
                 return reply
         if not refused:
-            raise LinkSilent(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after J "
-                             "(link lost or unit not resetting)")
+            raise LinkSilent(f"{tg.name}: no answer {ready_after + READY_MARGIN:.1f} s after "
+                             "J, the reset command (GVE64 §13.4): the link is lost or the "
+                             "unit did not reset; check the cable and power, then run again")
         tg.checksum_on = not framing
         tg.resync()
     raise HarnessError(f"{tg.name}: J refused in both checksum framings")

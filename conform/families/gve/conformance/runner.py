@@ -104,7 +104,7 @@ class Runner(BaseRunner):
             finally:
                 self._release_inputs(check)
         except (HarnessError, LinkError, SafetyRefusal, OSError) as exc:
-            detail = f"{type(exc).__name__}: {exc}"
+            detail = could_not(exc)
             if not self.target.emulated:  # after seconds of silence H needs no deaf-time retries
                 detail += f"; {self.halt(after_silence=isinstance(exc, LinkSilent))}"
             if keeper is not None:
@@ -145,3 +145,15 @@ class Runner(BaseRunner):
                             detail=verdict.detail, question=verdict.question,
                             alternative=verdict.alternative, sequence=sequence,
                             log=list(self.target.log), duration=time.perf_counter() - t0)
+
+
+def could_not(exc: BaseException) -> str:
+    """Why a check could not be run, in words (not the exception's class name)."""
+    if isinstance(exc, LinkSilent):
+        return f"the unit stopped answering: {exc}"
+    if isinstance(exc, SafetyRefusal):
+        return f"not sent, for safety: {exc}"
+    if isinstance(exc, LinkError | OSError):
+        return f"the link failed: {exc}"
+    return f"could not be run: {exc}"
+

@@ -18,13 +18,13 @@ MAX_DIGITS = 40
 widest field is 32 bits); it is answered as out of range without converting it, so that no
 length of a number (Python refuses int() of more than 4 300 digits) can raise."""
 
-# error codes (gve/spec/tables/errors.toml)
+# error codes (specs/gve/errors.toml)
 OK, QUEUE_FULL, WATCHDOG, UNKNOWN, SYNTAX, RANGE, NOTHING_TO_GO, RUNNING = range(8)
 
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """A well-formed command: ``name`` is the row id in gve/spec/tables/commands.toml."""
+    """A well-formed command: ``name`` is the row id in specs/gve/commands.toml."""
 
     address: int
     name: str

@@ -2,8 +2,8 @@
 answer to a line may look like, so that a fuzzer or a test can judge a unit's answers without
 asking the unit.
 
-An answer line is one hex digit (bit 3 INTA, bits 2..0 the error code of gve/spec/tables/errors.toml), then
-``,field`` for each field of the command's ``answer`` row (gve/spec/tables/commands.toml) when the code is
+An answer line is one hex digit (bit 3 INTA, bits 2..0 the error code of specs/gve/errors.toml), then
+``,field`` for each field of the command's ``answer`` row (specs/gve/commands.toml) when the code is
 0, then ``,XX`` (GVE64 §13.3.2) while checksums are on, then CR. ``>`` may send the repeated line
 before its answer (A9), ``J`` answers ``0`` or nothing (A17), ``*S`` nothing, ``*E`` ``code,count``
 (GVE64 §13.3.3).
@@ -104,7 +104,7 @@ class AnswerGrammar:
             pattern = _ANY_FIELDS if got == 0 else _COUNT
         else:
             if got not in self.codes[name]:
-                return f"{line!r}: code {got} is not one {name} answers (gve/spec/tables/errors.toml)"
+                return f"{line!r}: code {got} is not one {name} answers (specs/gve/errors.toml)"
             pattern = self.fields[name] if got == 0 or name == "*E" else _NONE
         if pattern.match(rest) is None:
             return f"{line!r}: fields do not fit the answer of {name or 'any command'}"

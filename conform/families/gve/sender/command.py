@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
+from typing import Any
 
 import click
 
@@ -51,20 +53,31 @@ def _check_number(name: str, value: float, lo: float, hi: float = math.inf,
 
 
 class Progress:
-    """A line on stderr at most every ``every`` seconds of wall time while streaming."""
+    """A line on stderr at most every ``every`` seconds of wall time while streaming: 1 s on
+    a terminal, else the interval every command's progress keeps off one (5 s,
+    ``CONFORM_PROGRESS_SECONDS``)."""
 
-    def __init__(self, sender: object, every: float = 1.0) -> None:
+    def __init__(self, sender: object, every: float | None = None) -> None:
+        import sys
+
+        from conform.cli.progress import _interval
+
         self.sender = sender
-        self.every = every
+        self.every = every if every is not None else 1.0 if sys.stderr.isatty() else _interval()
         self.next = time.monotonic()  # a first line at once, then one per ``every`` s
         self.shown = False
+        self.said: object = None   # what the last line said: the same is not said again
 
     def __call__(self, _t: float) -> None:
         now = time.monotonic()
         if now < self.next:
             return
         self.next = now + self.every
-        self.show()
+        st = self.sender.stats  # type: ignore[attr-defined]
+        now_said = (self.sender.progress, st.timeouts, st.garbled, st.queue_full)  # type: ignore[attr-defined]
+        if now_said != self.said:   # motion ending after the last line: no repeated lines
+            self.said = now_said
+            self.show()
 
     def show(self) -> None:
         done, total = self.sender.progress  # type: ignore[attr-defined]
@@ -150,12 +163,12 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
     spm = _floats(steps_per_mm)
     gopts = {"steps_per_mm": spm if len(spm) > 1 else spm * 3, "feed": feed, "accel": accel,
              "lenient": lenient}
-    if not emu and (record or noise or corrupt_command or corrupt_answer):
-        raise UserError("--record, --noise and --corrupt-* work with emu: targets only "
-                        "(record a real port with `conform proxy`)")
+    if not emu and (noise or corrupt_command or corrupt_answer):
+        raise UserError("--noise and --corrupt-* simulate a bad line to an emu: target; a "
+                        "real port's line is what it is")
     if not emu:
         _send_port(job, gopts, spec, variant, target, baud, checksums, packet, policy,
-                   latency, timeout_ms, allow_motion, quiet)
+                   latency, timeout_ms, allow_motion, quiet, record)
         return
     items = load_job(job, var, dialect, **gopts)
     from conform.families.gve.sender.links import LinkModel
@@ -188,8 +201,10 @@ def send_job(job: str, target: str, *, variant: str | None, baud: int, allow_mot
 
 def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target: str,
                baud: int, checksums: bool, packet: int, policy: str, latency: float,
-               timeout: float, allow_motion: bool, quiet: bool) -> None:
-    """A real port (or any pyserial URL): ``?`` first (variant, checksum mode), then stream."""
+               timeout: float, allow_motion: bool, quiet: bool, record: str | None = None
+               ) -> None:
+    """A real port (or any pyserial URL): ``?`` first (variant, checksum mode), then stream;
+    ``record``: the stream's bytes also go to this capture, as the host end of the cable."""
     import serial
 
     from conform.families.gve.conformance.target import variant_for_firmware
@@ -219,9 +234,70 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
                                              if found.checksum_was_on else ""), err=True)
         var = spec.variant(vid)  # type: ignore[attr-defined]
         items = load_job(job, var, spec.dialect(), **gopts)  # type: ignore[attr-defined]
+        if record:
+            port = TapedPort.open(port, record, {"variant": vid, "baud": baud, "target": target,
+                                                 "job": Path(job).name})
         _stream(items, var, port, target, checksums, packet, policy, latency, timeout, quiet)
     finally:
         port.close()
+        if record:
+            click.echo(f"capture: {record}")
+
+
+class TapedPort:
+    """A pyserial port whose bytes also go to a capture (``send --record`` to a real port):
+    host bytes when written, unit bytes when read, on the wall clock."""
+
+    def __init__(self, port: Any, recorder: Any) -> None:
+        self.port, self.recorder = port, recorder
+
+    @classmethod
+    def open(cls, port: Any, path: str, metadata: dict[str, Any]) -> TapedPort:
+        from conform.capture.recorder import Recorder
+        from conform.conformance.recorded import TAP
+
+        # dated as written and read (a real unit's answer may come faster than the baud
+        # rate would suggest from a converter's buffer: nothing is backdated)
+        return cls(port, Recorder(path, {"tap": TAP, "capture_method": "conform send",
+                                         **metadata}, backdate=False))
+
+    @property
+    def timeout(self) -> Any:
+        return self.port.timeout
+
+    @timeout.setter
+    def timeout(self, value: Any) -> None:
+        self.port.timeout = value
+
+    @property
+    def in_waiting(self) -> int:
+        return self.port.in_waiting
+
+    def write(self, data: bytes) -> Any:
+        t0 = self.recorder.clock()
+        n = self.port.write(data)
+        self.recorder.chunk("host", bytes(data), self.recorder.clock(), t0)
+        return n
+
+    def _read(self, data: bytes) -> bytes:
+        if data:
+            self.recorder.chunk("unit", data)
+        return data
+
+    def read(self, size: int = 1) -> bytes:
+        return self._read(self.port.read(size))
+
+    def read_until(self, expected: bytes = b"\n", size: int | None = None) -> bytes:
+        return self._read(self.port.read_until(expected, size))
+
+    def close(self) -> None:
+        from conform.stops import shield
+
+        with shield():   # the capture is finished however the send ended
+            try:
+                self.recorder.close()
+            finally:
+                self.port.close()
 
 
 def _stream(items: list, var: object, port: object, target: str, checksums: bool, packet: int,
@@ -244,8 +320,11 @@ def _stream(items: list, var: object, port: object, target: str, checksums: bool
         shown = ", ".join(a.decode("ascii", "replace").strip() or "(none)" for a in answers)
         raise UserError(f"interrupted ({interrupted_by(exc)}): sent H and D to leave the unit "
                         f"halted (answers: {shown})", exit_code=130) from None
-    except (serial.SerialException, OSError) as exc:
-        raise LinkError(f"{target}: {exc}") from None
+    except (serial.SerialException, OSError):
+        done, total = sender.progress
+        raise LinkError(f"{target}: link lost after {done} of {total} job lines acknowledged "
+                        "(the port went away: cable, power, or another program on the port); "
+                        "the unit may still run what it took", exit_code=1) from None
     if progress.shown:
         progress.show()
     s = sender.stats

@@ -1,4 +1,4 @@
-"""Load ``gve/spec/tables/*.toml`` into the typed model, validating every row."""
+"""Load ``specs/gve/*.toml`` into the typed model, validating every row."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Typed, immutable model of the spec tables (what ``gve/spec/tables/*.toml`` say, resolved per variant)."""
+"""Typed, immutable model of the spec tables (what ``specs/gve/*.toml`` say, resolved per variant)."""
 
 from __future__ import annotations
 

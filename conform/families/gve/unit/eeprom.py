@@ -1,6 +1,6 @@
 """The unit's 256-byte EEPROM (GVE64 §11-12, §13.5.10; GVE124 §11, §12.5.9).
 
-Byte, float and uint32 access; multi-byte cells are little-endian (gve/spec/tables/eeprom.toml). The
+Byte, float and uint32 access; multi-byte cells are little-endian (specs/gve/eeprom.toml). The
 EEPROM is non-volatile: it survives ``J`` and lives as long as the emulated unit.
 """
 

@@ -1,4 +1,4 @@
-"""Bring a reference unit into the state a worked example names (gve/spec/tables/examples.toml `given`).
+"""Bring a reference unit into the state a worked example names (specs/gve/examples.toml `given`).
 
 Only protocol commands are used (no reaching into the model), so the same steps describe
 what a test must send to any target: ``checksum-on`` -> ``%+``; ``st<n>=<hex>`` -> ``SWn,x``;

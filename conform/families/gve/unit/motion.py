@@ -55,7 +55,7 @@ class MotionParams:
     ``b`` B brake speed in pulses/s; ``short`` the ``$`` threshold in dominant-axis pulses;
     ``pause`` T in seconds; ``vk`` True for VK (Euclidean path speed), False for VN;
     ``vl`` per-axis limits in pulses/s or None. Defaults follow the GVE64 reset state
-    (``gve/spec/tables/variants.toml``: A20 V1000 $512 B35000 T5 VN).
+    (``specs/gve/variants.toml``: A20 V1000 $512 B35000 T5 VN).
     """
 
     v: float = 1000.0

@@ -55,6 +55,12 @@ class ReadbackCommands(UnitState):
         return self._exec.queue_len > 0 or self._mpg_run
 
     @property
+    def moving(self) -> bool:
+        """Axes under way or braking: the only time a position read may differ from the one
+        a moment later. RUN alone is not motion (A14's reset-blocks sets it at rest)."""
+        return self._exec.running
+
+    @property
     def index(self) -> int:
         return self._index
 

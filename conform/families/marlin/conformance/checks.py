@@ -2,7 +2,7 @@
 
 A check id reads ``<variant>/<source file>/<group>/<name>``, e.g.
 ``marlin-2.1/queue.cpp/checksum/comment-before-star``; its clause is the function of Marlin's
-source (spec/tables) whose behaviour it holds the unit to. Groups: ``line`` (numbers, M110,
+source (specs/marlin) whose behaviour it holds the unit to. Groups: ``line`` (numbers, M110,
 repeats), ``checksum``, ``reply`` (ok, unknown command), ``report`` (M105, M114, M115, M155),
 ``keepalive``, ``buffer`` (MAX_CMD_SIZE, the receive buffer emptied on an error, ADVANCED_OK),
 ``halt`` (M112 and the emergency parser), ``reset``, ``motion``.
@@ -26,7 +26,6 @@ from typing import Any
 from conform.conformance.results import INFO, CheckResult, Grade, TargetRun
 from conform.conformance.runner import RunAborted, Runner, RunOptions
 from conform.conformance.target import HarnessError
-from conform.errors import UserError
 from conform.families.marlin.conformance.check import MarlinCheck, Outcome, ok_kind
 from conform.families.marlin.conformance.session import Session, Talk
 from conform.families.marlin.spec import MarlinSpec, load_marlin
@@ -758,71 +757,4 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
         return runner.run(select(generate(runner.spec, vid), patterns), progress)
     except RunAborted as exc:
         return exc.run
-
-
-def _emu(vid: str, mutant: str | None, baud: int) -> Any:
-    from conform.conformance.target import EmuTarget
-    from conform.families import family
-
-    fam = family("marlin")
-    name = f"emu:{vid}" + (f":{mutant}" if mutant else "")
-    return EmuTarget(lambda: fam.make_unit(vid, mutant=mutant), name, baud=baud)
-
-
-def run_targets(plan: Sequence[str], variant: str | None, *, baud: int = 115200,
-                patterns: Sequence[str] = (), profile: str = "quick", allow_motion: bool = False,
-                list_only: bool = False, mutants: bool = False,
-                echo: Callable[[str], None] = print, announce: Callable[[str], None] | None = None,
-                **_ignored: Any) -> tuple[list[TargetRun], list[dict[str, Any]]] | None:
-    """``conform run`` for Marlin targets: ``emu:marlin-…[:MUTANT]`` or a port / URL; with
-    ``mutants`` every deviant unit is run too and the kill report returned."""
-    from conform.conformance.target import open_link, parse_target
-
-    spec = load_marlin()
-    runs: list[TargetRun] = []
-    vid_default = variant or next(iter(spec.variants))
-    for text in plan or [f"emu:{vid_default}"]:
-        kind, what, mutant = parse_target(text)
-        if kind == "emu" and what and what not in spec.variants:
-            raise UserError(f"target {text!r} is not a Marlin unit: run each family's targets "
-                            "separately")
-        vid = variant or (what if kind == "emu" else None) or vid_default
-        spec.variant(vid)
-        checks = select(generate(spec, vid), patterns)
-        if not checks:
-            raise UserError(f"no check of {vid} matches {' '.join(patterns)} (see --list)")
-        if list_only:
-            for c in checks:
-                echo(f"{c.id}\t{c.level}\t{c.clause}\t{c.title}")
-            continue
-        target = _emu(vid, mutant, baud) if kind == "emu" else open_link(text, baud=baud)
-        notes = []
-        if not target.emulated and not allow_motion:
-            notes.append("checks that move or halt the unit SKIPPED (no --allow-motion)")
-        try:
-            runs.append(run_checks(target, vid, patterns=patterns, profile=profile,
-                                   allow_motion=allow_motion, notes=notes, spec=spec,
-                                   announce=announce))
-        finally:
-            target.close()
-        if runs[-1].aborted:
-            break
-    if list_only:
-        return None
-    report = mutant_report(runs[0].variant, patterns, baud) if mutants and runs else []
-    return runs, report
-
-
-def mutant_report(vid: str, patterns: Sequence[str] = (), baud: int = 115200
-                  ) -> list[dict[str, Any]]:
-    """Every deviant unit run through the checks: killed when some check FAILs on it."""
-    from conform.families.marlin.conformance.mutants import MUTANTS
-
-    out = []
-    for name, cls in MUTANTS.items():
-        run = run_checks(_emu(vid, name, baud), vid, patterns=patterns)
-        killers = [c.id for c in run.checks if c.grade in (Grade.FAIL, Grade.DEVIATION)]
-        out.append({"name": name, "variant": vid, "fault": (cls.__doc__ or "").strip(),
-                    "killed": bool(killers), "caught_by": killers[:5]})
-    return out
 

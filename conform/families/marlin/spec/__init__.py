@@ -1,4 +1,4 @@
-"""Marlin's tables (``spec/tables/*.toml``), loaded and validated: a bad row is one
+"""Marlin's tables (``specs/marlin/*.toml``), loaded and validated: a bad row is one
 ``UserError`` line naming the file, the row and the field.
 
 Variants are deltas on one base, as GVE's are: a variant with ``base = "..."`` takes every

@@ -1,5 +1,5 @@
 """The Marlin reference unit: sans-I/O (bytes and time in, bytes out when due), on a virtual
-clock, modelling what Marlin 2.1.2.4's source does (spec/tables cite the functions).
+clock, modelling what Marlin 2.1.2.4's source does (specs/marlin cite the functions).
 
 Its main loop is MarlinCore's: it reads the serial receive buffer into the command queue
 (queue.cpp ``get_serial_commands``: line numbers, checksums, errors and ``Resend:``), then runs

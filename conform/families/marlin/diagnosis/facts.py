@@ -1,0 +1,130 @@
+"""The Marlin analysis of a capture as the diagnosis's neutral facts.
+
+Every host line is one exchange, answered by the ``ok`` the analysis paired with it (queue.cpp
+answers each line it takes, in order), or refused (``Error:`` + ``Resend:``, the line sent
+again later under its number: a later try answers it). What the findings become:
+
+* a resend storm (many ``Resend:`` requests, few lines taken) and checksum errors: damaged
+  bytes (``noise``);
+* a numbered line never taken though the session went on: a proven loss (``loss``);
+* lines run twice, numbers skipped or repeated without a request: the host's ``misuse``;
+* ``Error:Printer halted. kill() called!``: the unit's own kill (``alarm``) unless the host
+  sent M112 just before (its emergency stop: ``halt``, as is M410 quickstop);
+* a number sent again that the unit did not take is no answered line: it was dropped silently;
+  when the first copy was taken and its ``ok`` never came, that silence proves the ``ok`` lost;
+* ``echo:busy:`` keepalives: the unit says it is working (``running``); ``M400`` answered
+  ``ok``: every move has ended (gcode M400 ``planner.synchronize()``): ``idle``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from conform.diagnosis.facts import Event, Exchange, Facts
+
+MOTION = ("G0", "G1", "G2", "G3", "G5", "G28")
+HALTS = ("M112", "M410")
+KILL_AFTER_HALT_S = 2.0     # a kill this soon after the host's M112 is that M112's
+EVENT_OF = {"resend-storm": "noise", "never-ran": "loss", "ran-twice": "misuse",
+            "number-gap": "misuse", "repeat-unasked": "misuse", "reset": "reset"}
+
+
+def _word(text: str) -> str:
+    head = text.split()[0] if text.split() else ""
+    return head.upper()
+
+
+def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = None) -> Facts:
+    from conform.families.marlin.analysis.analyze import analyze_capture
+    from conform.families.marlin.spec import load_marlin
+
+    a = analysis if analysis is not None and getattr(analysis, "lines_kept", False) else \
+        analyze_capture(path, variant=variant, keep_lines=True)
+    firsts = [float(d.t_read[0]) for d in (raw.host, raw.unit) if len(d.t_read)]
+    t0 = min(firsts, default=0.0)
+    ex: list[Exchange] = []
+    events: list[Event] = []
+    for x in a.lines:
+        word = _word(x.text)
+        # refused: answered by Error/Resend; a number sent again that it did not take was
+        # ignored without a word (queue.cpp: the last numbers again are dropped silently)
+        answered = x.t_ok is not None or (not x.accepted and not x.repeat)
+        e = Exchange(x.seq, x.text if x.n is None else f"N{x.n} {x.text}", x.t - t0,
+                     None if not answered else ((x.t_ok or x.t) - t0),
+                     None if not answered else ("ok" if x.accepted else "Resend"),
+                     None if not answered else bool(x.accepted), word in MOTION)
+        ex.append(e)
+        if word in HALTS:
+            events.append(Event(e.t_sent, "halt", f"the host sent `{x.text}` ("
+                                + ("emergency stop: kill()" if word == "M112" else
+                                   "quickstop: the planner emptied") + ")",
+                                "gcode/control M112 kill(), M410 quickstop_stepper",
+                                line=e.n))
+        if word == "M400" and x.t_ok is not None:
+            events.append(Event(x.t_ok - t0, "idle", "`M400` answered ok: every move has "
+                                "ended", "gcode M400 planner.synchronize()", line=e.n))
+    events += _lost_oks(a.lines, ex)
+    halts = [ev.t for ev in events if ev.kind == "halt"]
+    offset = (a.lines[0].t - t0) if a.lines else 0.0     # findings count from the first line
+    for f in a.findings:
+        t = float(f.t) + offset
+        if f.kind == "halted":
+            by_host = any(0 <= t - h <= KILL_AFTER_HALT_S for h in halts)
+            if not by_host:
+                events.append(Event(t, "alarm", "the unit halted: kill() called, it answers "
+                                    "nothing until reset", f.clause))
+            continue
+        if f.kind == "never-ran" and not f.extra.get("confirmed"):
+            continue        # the capture ends first: not proven
+        kind = EVENT_OF.get(f.kind)
+        if kind is None:
+            continue
+        extra = {"proof": "never taken"} if kind == "loss" else {}
+        if f.kind == "resend-storm":
+            extra = {"count": int(f.extra.get("requests", 1))}
+        t_end = float(f.extra["end"]) + offset if "end" in f.extra else None
+        events.append(Event(t, kind, f.message, f.clause, t_end=t_end, extra=extra))
+    events += _busy(raw, t0)
+    spec = load_marlin()
+    v = spec.variant(a.variant)
+    return Facts("marlin", a.variant, path, float(a.metrics["duration_s"]) + offset, ex,
+                 events, t0=t0, rx_capacity=v.rx_buffer, queue_capacity=v.bufsize,
+                 queue_unit="commands", answer_time=0.5, notes=list(a.notes))
+
+
+def _lost_oks(lines: list[Any], ex: list[Exchange]) -> list[Event]:
+    """Proof of a lost ``ok``: a number the unit took, whose ``ok`` never came, sent again and
+    met with silence. queue.cpp drops a number it has already taken without a word, so the
+    silence says the unit had the line: its answer was lost on the way back."""
+    out: list[Event] = []
+    first: dict[tuple[int, int], Any] = {}
+    for x, e in zip(lines, ex, strict=True):
+        if x.n is None:
+            continue
+        key = (x.epoch, x.n)
+        if key not in first:
+            first[key] = x
+            continue
+        orig = first[key]
+        if x.repeat and not x.accepted and x.t_ok is None and orig.accepted and \
+                orig.t_ok is None:
+            out.append(Event(e.t_sent, "loss", f"N{x.n} sent again got no answer: the unit "
+                             "had taken it (it drops a number it has taken silently), so its "
+                             "`ok` was lost on the way back", "queue.cpp get_serial_commands",
+                             line=e.n, extra={"proof": "ok lost"}))
+            first[key] = x          # one proof per number
+    return out
+
+
+def _busy(raw: Any, t0: float) -> list[Event]:
+    """``echo:busy:`` keepalives (gcode.cpp host_keepalive, every 2 s while a command blocks):
+    the unit is working. One event per keepalive."""
+    from conform.families.marlin.analysis.records import iter_lines
+
+    data = raw.unit.data.tobytes()
+    chunks = ((float(r), data[s:s + n]) for s, n, r in
+              zip(raw.unit.start.tolist(), raw.unit.length.tolist(), raw.unit.t_read.tolist(),
+                  strict=True))
+    return [Event(t - t0, "running", f"the unit says `{line.decode('latin-1').strip()}`",
+                  "gcode.cpp host_keepalive") for t, line in iter_lines(chunks)
+            if line.startswith(b"echo:busy:")]

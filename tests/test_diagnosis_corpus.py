@@ -1,0 +1,144 @@
+"""The diagnosis held to a labelled corpus (tests/diag_corpus.py): sessions that ran to their
+end lead with no stop cause and claim no loss and no unanswered line; sessions with an
+injected fault lead with that fault; the sender's own halt is the sender stopping. Each wrong
+diagnosis once given to a real session has its case here."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from diag_corpus import REPO, fast, judge, matrix, proxied, samples, varied
+
+from conform.diagnosis import diagnose
+
+
+def _check(rows: list[dict]) -> None:
+    wrong = [(r["name"], r["label"], r["got"], r["headline"]) for r in rows
+             if r["got"] != r["label"]]
+    assert not wrong, wrong
+    claims = [(r["name"], r["false_claims"]) for r in rows if r["false_claims"]]
+    assert not claims, claims
+    # a job that finished is offered no resume point
+    assert not [r["name"] for r in rows if r["got"] == "completed" and r["resume"]]
+
+
+def test_in_process_corpus(tmp_path):
+    rows = judge(fast(tmp_path))
+    _check(rows)
+    m = matrix(rows)
+    assert m["completed"] == {"completed": 5} and m["ended"] == {"ended": 4}
+    for family in ("grbl", "gve", "marlin"):
+        assert any(r["family"] == family and r["label"] != "completed" for r in rows)
+
+
+@pytest.mark.slow
+def test_held_out_variations(tmp_path):
+    """The same kinds of session with parameters drawn at random (seeded): when the fault
+    strikes, for how long, job lengths, polling."""
+    rows = judge(varied(tmp_path, 2, seed=3))
+    wrong = [r for r in rows if r["got"] != r["label"] or r["false_claims"]]
+    assert len(wrong) <= len(rows) // 20, [(r["name"], r["got"], r["headline"]) for r in wrong]
+
+
+def test_samples_and_real_firmware_recordings_are_completed():
+    rows = judge(samples())
+    names = {r["name"] for r in rows}
+    assert {"grbl-counting", "grbl-send-response", "good-rs232"} <= names
+    _check(rows)
+
+
+def test_a_completed_grbl_job_with_a_full_planner_is_no_lost_link(tmp_path):
+    """The unit silent while its planner is full, then answering: a wait, not a lost link
+    (once diagnosed "link-lost ... never line 20" though line 20 was answered)."""
+    rows = judge([r for r in fast(tmp_path) if r[0] == "grbl-counting"])
+    assert rows[0]["got"] == "completed" and "link-lost" not in rows[0]["headline"]
+
+
+def test_overflow_risk_is_a_hazard_not_a_loss(tmp_path):
+    """More bytes in flight than the buffer with every line answered: a hazard, never "bytes
+    were lost" (once said of grbl-streamer's default mode, 324/324 ok)."""
+    from diag_sessions import drive, grbl_job, grbl_sender, grbl_unit, record
+
+    # counting against 140 bytes: over grbl's 128, though the unit keeps up at this pace
+    ses = drive(grbl_unit(), grbl_job(40), grbl_sender(window=140, gap=0.1,
+                                                       poll=(0.2, b"?")), tail=1.5)
+    assert ses.unit_model.lost == 0                 # ground truth: nothing was dropped
+    doc = diagnose(str(record(tmp_path / "risk.mcap", ses, "grbl-1.1f"))).to_json()
+    assert doc["outcome"]["kind"] == "completed" and doc["causes"] == []
+    assert "overflow-risk" in [h["kind"] for h in doc["hazards"]]
+    said = " ".join([doc["headline"], *(h["summary"] for h in doc["hazards"])])
+    assert "were lost" not in said and "never answered" not in said
+    assert doc["resume"] is None
+
+
+def test_an_overflow_that_drops_bytes_is_proven_on_the_wire(tmp_path):
+    from diag_sessions import drive, grbl_job, grbl_sender, grbl_unit, record
+
+    ses = drive(grbl_unit(), grbl_job(40), grbl_sender(window=160, gap=0.05,
+                                                       poll=(0.2, b"?")), tail=1.5)
+    assert ses.unit_model.lost > 0                  # ground truth: the ring dropped bytes
+    doc = diagnose(str(record(tmp_path / "lost.mcap", ses, "grbl-1.1f"))).to_json()
+    c = doc["causes"][0]
+    assert c["kind"] == "buffer-overflow" and "proof:" in c["summary"]
+
+
+def test_wrong_variant_is_refused_in_one_line(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "conform", "diagnose",
+                        str(REPO / "captures" / "good-rs232.mcap"), "--variant", "grbl-1.1f"],
+                       capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert p.returncode != 0 and "Traceback" not in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "not grbl traffic" in p.stderr
+
+
+def test_truncated_capture_says_so_first(tmp_path):
+    data = (REPO / "captures" / "grbl-counting.mcap").read_bytes()
+    cut = tmp_path / "trunc.mcap"
+    cut.write_bytes(data[:len(data) * 2 // 3])
+    doc = diagnose(str(cut)).to_json()
+    assert doc["outcome"]["kind"] == "capture-damaged"
+    assert doc["headline"].startswith("Capture damaged") and "ran to its end" not in \
+        doc["headline"]
+    assert doc["causes"] == []
+
+
+def test_bundle_of_a_file_that_is_not_a_capture_fails(tmp_path):
+    bad = tmp_path / "notes.mcap"
+    bad.write_text("hello\n")
+    p = subprocess.run([sys.executable, "-m", "conform", "bundle", str(bad), "-o",
+                        str(tmp_path / "b.zip")], capture_output=True, text=True, timeout=120,
+                       cwd=REPO)
+    assert p.returncode != 0 and "Traceback" not in p.stderr
+    assert not (tmp_path / "b.zip").exists()
+
+
+def test_marlin_diagnoses_its_own_halt_and_kill(tmp_path):
+    """Marlin has a diagnosis: M112 from the host is the sender's stop."""
+    from diag_sessions import Faults, Sender, drive, record
+
+    from conform.families import family
+
+    unit = family("marlin").make_unit("marlin-2.1")
+    job = [b"G90\n"] + [b"G1 X%d Y%d F3000\n" % (i % 10, i % 7) for i in range(20)] + \
+        [b"M112\n"]
+    s = Sender(b"\n", lambda a: a.startswith(b"ok"))
+    ses = drive(unit, job, s, Faults(), tail=2.0)
+    doc = diagnose(str(record(tmp_path / "m112.mcap", ses, "marlin-2.1",
+                              sender_closed=ses.host[-1][0] + 0.5))).to_json()
+    assert doc["family"] == "marlin"
+    assert doc["outcome"]["kind"] == "stopped" and doc["outcome"]["by"] == "sender", doc
+    assert doc["causes"][0]["kind"] == "sender-stopped" and "M112" in doc["causes"][0]["summary"]
+
+
+@pytest.mark.slow
+def test_real_senders_through_the_proxy(tmp_path):
+    """conform send (grbl both methods, GVE, Marlin), grbl-streamer both modes, a stream.py
+    like sender, printcore: completed; conform send stopped by SIGTERM: stopped by the
+    sender (once "link-lost")."""
+    rows = judge(proxied(tmp_path))
+    print(json.dumps(matrix(rows)))
+    _check(rows)
+    halt = next(r for r in rows if r["name"] == "grbl-conform-send-sigterm")
+    assert halt["headline"].startswith("Stopped by the sender")
