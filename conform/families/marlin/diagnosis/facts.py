@@ -24,8 +24,8 @@ from conform.diagnosis.facts import Event, Exchange, Facts
 
 MOTION = ("G0", "G1", "G2", "G3", "G5", "G28")
 HALTS = ("M112", "M410")
-KILL_AFTER_HALT_S = 2.0
-ALONGSIDE_MAX = 200_000     # host lines up to which `conform analyze` also diagnoses     # a kill this soon after the host's M112 is that M112's
+KILL_AFTER_HALT_S = 2.0     # a kill this soon after the host's M112 is that M112's
+ALONGSIDE_MAX = 200_000     # host lines up to which `conform analyze` also diagnoses
 EVENT_OF = {"resend-storm": "noise", "never-ran": "loss", "ran-twice": "misuse",
             "number-gap": "misuse", "repeat-unasked": "misuse", "reset": "reset"}
 
