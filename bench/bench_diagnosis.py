@@ -73,10 +73,13 @@ def main() -> None:
     ap.add_argument("--varied", type=int, default=3,
                     help="held-out variations of each kind, parameters drawn at random")
     ap.add_argument("--seed", type=int, default=7, help="seed of the variations")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="timed runs of each, alternating (the median is compared)")
+    ap.add_argument("--no-matrix", action="store_true", help="the timing only")
     ns = ap.parse_args()
     from diag_corpus import CLEAN
 
-    rows = corpus(ns.proxied, ns.varied, ns.seed)
+    rows = [] if ns.no_matrix else corpus(ns.proxied, ns.varied, ns.seed)
     labels = sorted({r["label"] for r in rows}, key=lambda x: (x not in CLEAN, x))
     got = sorted({r["got"] for r in rows}, key=lambda x: (x not in CLEAN, x))
     cells: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
@@ -115,19 +118,25 @@ def main() -> None:
             from bench_analysis import make_capture
 
             make_capture(path, ns.exchanges)
-        a_cpu, a_rss = _child(["analyze", str(path)])
-        d_cpu, d_rss = _child(["diagnose", str(path)])
+        runs: dict[str, list[tuple[float, float]]] = {"analyze": [], "diagnose": []}
+        for _ in range(max(1, ns.repeat)):
+            for what in runs:
+                runs[what].append(_child([what, str(path)]))
+        med = {k: sorted(v)[len(v) // 2] for k, v in runs.items()}
+        (a_cpu, a_rss), (d_cpu, d_rss) = med["analyze"], med["diagnose"]
         ratio = d_cpu / a_cpu if a_cpu else float("inf")
         print()
         print(f"long capture {path.name} ({ns.exchanges if not ns.capture else '?'} exchanges)")
-        print(f"  analyze alone: {a_cpu:7.2f} s CPU, {a_rss:7.0f} MB peak")
-        print(f"  diagnose:      {d_cpu:7.2f} s CPU, {d_rss:7.0f} MB peak")
+        for what, v in runs.items():
+            print(f"  {what + ':':9} " + ", ".join(f"{c:.2f}" for c, _ in v) + " s CPU; median "
+                  f"{med[what][0]:.2f} s, {med[what][1]:.0f} MB peak")
         print(f"  ratio {ratio:.2f} (target at most {RATIO_TARGET:g}); memory ratio "
               f"{d_rss / a_rss:.2f}")
         timing = {"exchanges": ns.exchanges if not ns.capture else None,
                   "analyze_cpu_s": round(a_cpu, 3), "diagnose_cpu_s": round(d_cpu, 3),
                   "analyze_peak_mb": round(a_rss), "diagnose_peak_mb": round(d_rss),
-                  "cpu_ratio": round(ratio, 3), "cpu_ratio_target": RATIO_TARGET}
+                  "cpu_ratio": round(ratio, 3), "cpu_ratio_target": RATIO_TARGET,
+                  "runs": {k: [round(c, 3) for c, _ in v] for k, v in runs.items()}}
     print(json.dumps({"sessions": len(rows), "varied": ns.varied, "seed": ns.seed,
                       "proxied": ns.proxied, "matrix": {k: dict(v) for k, v in cells.items()},
                       "families": per_family, "wrong": wrong, "timing": timing}))

@@ -142,3 +142,17 @@ def test_real_senders_through_the_proxy(tmp_path):
     _check(rows)
     halt = next(r for r in rows if r["name"] == "grbl-conform-send-sigterm")
     assert halt["headline"].startswith("Stopped by the sender")
+
+
+@pytest.mark.slow
+def test_bench_prints_the_matrix_and_ends_with_json():
+    r = subprocess.run([sys.executable, str(REPO / "bench" / "bench_diagnosis.py"), "--varied",
+                        "0", "--exchanges", "2000", "--repeat", "1"], capture_output=True,
+                       text=True, timeout=600, cwd=REPO)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = r.stdout.strip().splitlines()
+    assert lines[0].startswith("confusion matrix")
+    doc = json.loads(lines[-1])
+    assert doc["wrong"] == [] and doc["sessions"] >= 30
+    assert {"grbl", "gve", "marlin"} <= set(doc["families"])
+    assert doc["timing"]["analyze_cpu_s"] > 0 and doc["timing"]["diagnose_cpu_s"] > 0

@@ -29,9 +29,14 @@ def cli(files: tuple[str, ...], variant: str | None, as_json: bool) -> None:
     """
     from conform.diagnosis import diagnose
     from conform.diagnosis.render import text_lines
+    from conform.errors import UserError
+    from conform.families.capture_hook import not_this_family
 
     docs = []
     for file in files:
+        wrong = not_this_family(file, variant) if variant else None
+        if wrong:       # refused as `conform analyze` refuses it
+            raise UserError(f"{file}: {wrong}")
         d = diagnose(file, variant=variant)
         if as_json:
             docs.append(d.to_json())

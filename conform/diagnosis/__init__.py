@@ -141,12 +141,6 @@ def diagnose(path: str, *, variant: str | None = None, analysis: AnalysisResult 
     from conform.analysis.stream import read_raw
     from conform.families import family as family_named
 
-    if variant and not family:
-        from conform.families.capture_hook import not_this_family
-
-        wrong = not_this_family(path, variant)
-        if wrong:
-            raise UserError(f"{path}: {wrong}")
     fam = family_named(family) if family else _family_of(path, variant)
     facts_hook = getattr(fam, "diagnosis_facts", None)
     raw = read_raw(path)

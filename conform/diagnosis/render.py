@@ -26,11 +26,24 @@ def text_lines(d: Any) -> list[str]:
     out = [d.headline(), ""]
     out.append(f"{d.path}: {f.family} {f.variant}, {len(f.exchanges)} lines in "
                f"{f.duration:.3f} s")
+    o = getattr(d, "outcome", None)
+    if o is not None:
+        out.append(f"outcome: {o.kind}" + (f" (by the {o.by})" if o.by else ""))
+        out += [f"  - {e}" for e in o.evidence[:4]]
     for k, c in enumerate(d.causes, 1):
         out.append(f"{k}. {c.kind} ({c.confidence:.2f}) {c.t_start:.3f}-{c.t_end:.3f} s: "
                    f"{c.summary}")
         out += [f"     - {e}" for e in c.evidence[:6]]
         out.append(f"     next: {c.advice}")
+    hazards = getattr(d, "hazards", [])
+    if hazards:
+        out += ["", "hazards on the way (not what ended the session):"]
+    for c in hazards[:8]:
+        out.append(f"  {c.kind} ({c.confidence:.2f}) {c.t_start:.3f}-{c.t_end:.3f} s: "
+                   f"{c.summary}")
+        out += [f"     - {e}" for e in c.evidence[:3]]
+    if len(hazards) > 8:
+        out.append(f"  … and {len(hazards) - 8} more")
     if d.reception:
         out += ["", "as the unit read it (host line -> what the unit parsed), what ran wrong "
                     "first:"]

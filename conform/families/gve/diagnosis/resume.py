@@ -37,9 +37,9 @@ def resume_state(a: Any, f: Facts) -> ResumePoint | None:
     cum = np.cumsum(d, axis=0)
     end = a.t0 + f.duration
     q = a.queue
-    done = set(q.done_rows[q.ends <= end + 1e-9].tolist())
-    k_exec = max((i for i, r in enumerate(vec.tolist()) if r in done), default=-1)
-    n_done = sum(1 for r in vec.tolist() if r in done)
+    is_done = np.isin(vec, q.done_rows[q.ends <= end + 1e-9])
+    k_exec = int(np.flatnonzero(is_done)[-1]) if is_done.any() else -1
+    n_done = int(is_done.sum())
     evidence = [f"the queue replay completes {n_done} of {len(vec)} accepted vectors by "
                 f"the end of the capture ({f.duration:.3f} s)"]
     # a position read-back overrules the model where it matches a vector's end
@@ -50,8 +50,11 @@ def resume_state(a: Any, f: Facts) -> ResumePoint | None:
             pos = [int(x) for x in fields]
         except ValueError:
             continue
-        before = [i for i in range(len(vec)) if t_cmd[vec[i]] < t_cmd[r]]
-        match = [i for i in before if list(cum[i][:len(pos)]) == pos]
+        before = int(np.searchsorted(t_cmd[vec], t_cmd[r], side="left"))   # sent before it
+        width = min(len(pos), cum.shape[1])
+        hits = np.flatnonzero((cum[:before, :width] == np.array(pos[:width])).all(axis=1)) \
+            if len(pos) <= cum.shape[1] else np.zeros(0, np.int64)
+        match = hits.tolist()
         if match:
             k_exec = match[-1]
             evidence.append(f"position read-back `{a.host_text(int(frame[r]))}` -> "
@@ -60,7 +63,7 @@ def resume_state(a: Any, f: Facts) -> ResumePoint | None:
         break
     modal: dict[str, str] = {}
     checksums = False
-    for r in np.flatnonzero(ok).tolist():
+    for r in np.flatnonzero(ok & np.isin(name, (*MODAL, "%", "J"))).tolist():
         text = a.host_text(int(frame[r])).rstrip("\\r").rstrip("\r")
         if name[r] in MODAL:
             modal[str(name[r])] = split_checksum(text.encode("latin-1"))[0].decode("latin-1")

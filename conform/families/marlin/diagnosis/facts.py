@@ -25,6 +25,7 @@ from conform.diagnosis.facts import Event, Exchange, Facts
 MOTION = ("G0", "G1", "G2", "G3", "G5", "G28")
 HALTS = ("M112", "M410")
 KILL_AFTER_HALT_S = 2.0     # a kill this soon after the host's M112 is that M112's
+ALONGSIDE_MAX = 200_000     # host lines up to which `conform analyze` also diagnoses
 EVENT_OF = {"resend-storm": "noise", "never-ran": "loss", "ran-twice": "misuse",
             "number-gap": "misuse", "repeat-unasked": "misuse", "reset": "reset"}
 
@@ -38,6 +39,14 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
     from conform.families.marlin.analysis.analyze import analyze_capture
     from conform.families.marlin.spec import load_marlin
 
+    if analysis is not None and not getattr(analysis, "lines_kept", False) and \
+            int(analysis.metrics.get("host_lines", 0)) > ALONGSIDE_MAX:
+        from conform.errors import UserError
+
+        # `conform analyze` streamed it in bounded memory: keeping every line now would undo
+        # that; `conform diagnose` reads it whole on its own
+        raise UserError(f"not made alongside the analysis of a capture this long "
+                        f"(`conform diagnose {path}`)")
     a = analysis if analysis is not None and getattr(analysis, "lines_kept", False) else \
         analyze_capture(path, variant=variant, keep_lines=True)
     firsts = [float(d.t_read[0]) for d in (raw.host, raw.unit) if len(d.t_read)]
