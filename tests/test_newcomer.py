@@ -231,7 +231,7 @@ def test_a_cut_short_capture_is_not_said_to_have_run_to_its_end(tmp_path, capsys
 
 def test_a_check_that_could_not_run_says_why_in_words():
     from conform.conformance.target import HarnessError, LinkSilent
-    from conform.families.gve.conformance.runner import could_not
+    from conform.families.gve.conformance.target import could_not
 
     said = could_not(LinkSilent("/dev/ttyUSB0: no answer 5.0 s after J, the reset command"))
     assert said.startswith("the unit stopped answering: ") and "LinkSilent" not in said

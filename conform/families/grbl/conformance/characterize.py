@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from conform.conformance.observed import Observation
-from conform.families.grbl.conformance.checks import Session
+from conform.families.grbl.conformance.session import Session
 from conform.families.grbl.spec.load import load_grbl
 
 #: what is probed, in order (a partial profile lists those it did not reach)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from conform.conformance.target import EmuTarget
-from conform.families.grbl.conformance.checks import GrblCheck, Outcome, Session
+from conform.families.grbl.conformance.session import GrblCheck, Outcome, Session
 from conform.families.grbl.spec.load import GrblSpec
 
 if TYPE_CHECKING:

@@ -21,6 +21,7 @@ from conform.families.gve.conformance.motion_free import queue_edge_steps
 from conform.families.gve.conformance.profile import Profile
 from conform.families.gve.conformance.script import ENVIRONMENT, Script, Step, run_script, skip_reason
 from conform.families.gve.conformance.target import GveTarget as Target
+from conform.families.gve.conformance.target import leave_checksums
 from conform.families.gve.protocol.checksum import append_checksum
 
 RESET = Step(reset=True)
@@ -161,18 +162,6 @@ def characterize(spec: Any, target: Target, variant_id: str, *,
                              {} if findings is None else findings, probing)
     finally:
         leave_checksums(target, checksums_before)
-
-
-def leave_checksums(target: Target, on: bool, tries: int = 3) -> None:
-    """Put the checksum mode back as it was found (probes for A11/A29 turn it on), so that a
-    sender that follows does not meet a unit answering 4 to every plain line (GVE64 §13.3.2)."""
-    for _ in range(tries):
-        if target.checksum_on == on:
-            return
-        try:
-            target.exchange(target.frame("!0%+" if on else "!0%-", checksum=target.checksum_on))
-        except HarnessError:
-            return
 
 
 def _characterize(spec: Any, target: Target, variant_id: str,

@@ -363,7 +363,7 @@ def run_machine(runner: Any, check: Check) -> CheckResult:
                            duration=time.perf_counter() - t0,
                            **(base | {"clause": clause}))
     except (HarnessError, LinkError, HypothesisException) as exc:
-        from conform.families.gve.conformance.runner import could_not
+        from conform.families.gve.conformance.target import could_not
 
         return CheckResult(grade=Grade.ERROR, detail=could_not(exc),
                            log=list(runner.target.log), duration=time.perf_counter() - t0,

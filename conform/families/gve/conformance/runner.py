@@ -21,7 +21,7 @@ from conform.families.gve.conformance.expect import Reference, judge
 from conform.families.gve.conformance.safety import SafetyRefusal, not_verified
 from conform.families.gve.conformance.script import run_script, skip_reason
 from conform.families.gve.conformance.state import StateKeeper
-from conform.families.gve.conformance.target import GveTarget
+from conform.families.gve.conformance.target import GveTarget, could_not
 
 # the state machine's wall-time budget on a link, per profile (s): what fits the run targets
 # (quick ≤ 5 min, full ≤ 20 min at 115 200 Bd) next to the directed checks
@@ -145,15 +145,3 @@ class Runner(BaseRunner):
                             detail=verdict.detail, question=verdict.question,
                             alternative=verdict.alternative, sequence=sequence,
                             log=list(self.target.log), duration=time.perf_counter() - t0)
-
-
-def could_not(exc: BaseException) -> str:
-    """Why a check could not be run, in words (not the exception's class name)."""
-    if isinstance(exc, LinkSilent):
-        return f"the unit stopped answering: {exc}"
-    if isinstance(exc, SafetyRefusal):
-        return f"not sent, for safety: {exc}"
-    if isinstance(exc, LinkError | OSError):
-        return f"the link failed: {exc}"
-    return f"could not be run: {exc}"
-

@@ -15,6 +15,7 @@ from conform.conformance.target import (
     DEFAULT_TIMEOUT,
     EmuTarget,
     HarnessError,
+    LinkSilent,
     LinkTarget,
     Reply,
     Target,
@@ -22,7 +23,7 @@ from conform.conformance.target import (
 )
 from conform.errors import LinkError, UserError
 from conform.families.gve.conformance.readiness import POLL_LINE, QUIET_MARGIN, StateStats, power_up
-from conform.families.gve.conformance.safety import STOP_SEQUENCE, Guard
+from conform.families.gve.conformance.safety import STOP_SEQUENCE, Guard, SafetyRefusal
 from conform.families.gve.protocol.checksum import append_checksum
 
 DEFAULT_VARIANT = "gve64-v19"
@@ -123,8 +124,6 @@ class GveTarget(Target):
             except (LinkError, OSError, HarnessError) as exc:
                 sent.append(f"{body} → not sent ({exc})")
         if self.checksum_on:   # a run stopped mid-way leaves the unit as a sender expects it
-            from conform.families.gve.conformance.characterize import leave_checksums
-
             leave_checksums(self, False)
             sent.append("%- → " + ("checksums off" if not self.checksum_on else
                                    "not acknowledged: checksums may still be on"))
@@ -381,3 +380,27 @@ def variant_for_firmware(spec: Any, firmware: str) -> tuple[str, str]:
     if best is not None:
         return best.id, f"firmware {fw!r} is closest to {best.id}"
     return DEFAULT_VARIANT, f"firmware {fw!r} is not in the tables; assumed {DEFAULT_VARIANT}"
+
+
+def leave_checksums(target: GveTarget, on: bool, tries: int = 3) -> None:
+    """Put the checksum mode back as it was found (probes for A11/A29 turn it on), so that a
+    sender that follows does not meet a unit answering 4 to every plain line (GVE64 §13.3.2)."""
+    for _ in range(tries):
+        if target.checksum_on == on:
+            return
+        try:
+            target.exchange(target.frame("!0%+" if on else "!0%-", checksum=target.checksum_on))
+        except HarnessError:
+            return
+
+
+def could_not(exc: BaseException) -> str:
+    """Why a check could not be run, in words (not the exception's class name)."""
+    if isinstance(exc, LinkSilent):
+        return f"the unit stopped answering: {exc}"
+    if isinstance(exc, SafetyRefusal):
+        return f"not sent, for safety: {exc}"
+    if isinstance(exc, LinkError | OSError):
+        return f"the link failed: {exc}"
+    return f"could not be run: {exc}"
+
