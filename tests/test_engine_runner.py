@@ -55,7 +55,9 @@ def test_link_run_announces_the_estimate_and_the_eta(emulator):
     skipped = [i for i, g in grades.items() if g is Grade.SKIPPED]
     assert all(runner.estimate.per_check[i] == 0 for i in skipped)
     assert said[0].startswith(f"{path} ({VID}): {len(checks)} checks, estimate ")
-    assert "state machine" not in said[0]                   # grbl has no open-ended checks
+    # grbl's random sequences are open-ended on a link: their time budget is announced
+    assert run.machine_budget_s == runner.machine_budget() and run.machine_budget_s
+    assert f"state machine budget 0:{int(run.machine_budget_s):02d}" in said[0]
     assert run.estimate_s is not None and run.estimate_s > 0
     assert any(", ETA " in s for s in said[1:])
 

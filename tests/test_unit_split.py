@@ -271,7 +271,7 @@ def record(path: Path = FIXTURE, seed: int = 13) -> None:
 
 # ------------------------------------------------------------------------------ the tests
 PUBLIC = ("checksum_on", "deaf", "eeprom", "encode", "exchange", "executor", "index",
-          "input_level", "inta", "last_exchange", "modal", "mpg", "next_deadline", "now",
+          "input_level", "inta", "last_exchange", "modal", "moving", "mpg", "next_deadline", "now",
           "outputs", "poll", "position", "queue_len", "receive", "run", "set_input", "set_level",
           "spindle", "status")
 """``Unit``'s public names before the split (``docs/unit-model.md``, API)."""

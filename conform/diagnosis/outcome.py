@@ -112,15 +112,16 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
         return Outcome("findings-only", "The capture is too long to follow line by line: its "
                        "ending is not judged; what its analysis found is listed.",
                        ["the family's analysis kept no line table for it"])
+    answered, waiting = settled(f)
+    at_end = [c for c in causes if getattr(c, "at_end", False)]
+    if f.damaged:   # said first, whatever the intact part holds
+        return Outcome("capture-damaged", f"The capture is damaged ({f.damaged}): it is cut "
+                       f"short, so how the session ended is not known; judged up to "
+                       f"{_fmt(f.duration)}: {len(ex)} lines sent, {len(answered)} answered.",
+                       [f"capture: {f.damaged}"])
     if not ex:
         return Outcome("no-job", "The host sent no line in the capture.",
                        [f"{len(f.host_times)} host read(s), no complete line"])
-    answered, waiting = settled(f)
-    at_end = [c for c in causes if getattr(c, "at_end", False)]
-    if f.damaged:
-        return Outcome("capture-damaged", f"The capture is damaged ({f.damaged}): its end is "
-                       f"not in the file; judged up to {_fmt(f.duration)}: {len(ex)} lines "
-                       f"sent, {len(answered)} answered.", [f"capture: {f.damaged}"])
     halts = _terminal(f, "halt")
     alarms = _terminal(f, "alarm")
     if halts and (not alarms or halts[0].t <= alarms[0].t + 1e-6):

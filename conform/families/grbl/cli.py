@@ -18,7 +18,8 @@ def one(g: Any, what: str) -> list[tuple[str, str]] | None:
     """One row of the tables by its name: a command (``$H``), a setting (``$110``), an error
     (``error:9``), an alarm (``ALARM:1``) or a realtime byte (``?``, ``0x18``)."""
     key = what.strip()
-    cmd = next((c for c in g.commands.values() if c.name.upper() == key.upper()), None)
+    cmd = next((c for c in g.commands.values() if c.name.upper() == key.upper()), None) or \
+        next((c for c in g.commands.values() if c.syntax.match(key.upper())), None)
     if cmd is not None:
         return [("command", cmd.name), ("allowed in", cmd.states),
                 ("prints", ", ".join(cmd.prints) or "ok only"), ("meaning", cmd.meaning),

@@ -47,8 +47,9 @@ def rows(variant: str, part: str) -> tuple[str, tuple[str, ...], list[tuple[str,
                 list(diff(spec.variant(v.base), v)))
     if re.fullmatch(r"[gmt]\d+", part):
         return command(spec, v, part.upper())
-    raise UserError(f"{v.id}: nothing called {part!r} (one of: {', '.join(PARTS)}, or a "
-                    "command such as M115)")
+    raise UserError(f"{v.id}: nothing called {part!r}: a part ({', '.join(PARTS)}) or a "
+                    f"command of {v.id} (e.g. M115; `conform spec show {v.id} commands` "
+                    "lists them)")
 
 
 def command(spec: Any, v: Any, code: str) -> tuple[str, tuple[str, ...], list[tuple[str, ...]]]:
