@@ -17,6 +17,7 @@ from conform.cli.main import main
 from conform.conformance.results import Grade
 from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate, select
+from conform.families.gve.conformance.readiness import READY_MARGIN
 from conform.families.gve.conformance.runner import Runner
 from conform.families.gve.conformance.safety import Guard, not_verified
 from conform.families.gve.conformance.state import StateKeeper
@@ -84,7 +85,9 @@ def test_link_grades_equal_in_process(spec, variant, extra, tmp_path):
     state = link.state
     # most checks start from commands; J only where the reference says a check needs it
     assert state["tidy"] >= 8 and 1 <= state["resets"] + state["quiet_resets"] <= 6, state
-    assert 1.9 < state["readiness_s"] < 3.5
+    # deaf ~2 s after J; on a loaded machine the first answer may come later, as long as it
+    # comes before the runner would call the link lost (READY_MARGIN past the deaf time)
+    assert 1.9 < state["readiness_s"] < 2.0 + READY_MARGIN
     assert link.estimate_s and link.machine_budget_s == 3.0
 
 

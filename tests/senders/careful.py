@@ -15,7 +15,9 @@ import time
 
 import serial
 
-TIMEOUT = 0.15
+# how long an answer may take before it counts as lost: an emulator on a loaded machine can be
+# a few hundred ms late, and a late answer taken for lost is a second line in flight
+TIMEOUT = 0.4
 
 
 def summed(body: str) -> str:
