@@ -137,7 +137,7 @@ def _family_of(targets: tuple[str, ...], variant: str | None, baud: int = 115200
     variant expected. ``probe``: a port given no ``--variant`` is asked `conform ports
     --probe`'s harmless questions, in the families' probe order (never one family's identify,
     which another family's unit may act on), and a port where nobody answers is refused."""
-    from conform.families import default_family, family, family_for_variant, unit_on_port
+    from conform.families import Family, default_family, family, family_for_variant, unit_on_port
 
     wanted = [variant] + [parse_target(t)[1] for t in targets if parse_target(t)[0] == "emu"]
     named = {family_for_variant(v).name for v in wanted if v}
@@ -148,7 +148,9 @@ def _family_of(targets: tuple[str, ...], variant: str | None, baud: int = 115200
         for p, (_, vid) in zip(ports, found, strict=True):
             if not quiet:
                 click.echo(f"{p}: {vid} answered", err=True)
-        if len(targets) == 1:
+        if len(targets) == 1 and type(found[0][0]).identify is Family.identify:
+            # a family that does not ask its units itself takes the probe's variant; one that
+            # does asks again (its own question, harmless to its own unit) and notes the answer
             variant = found[0][1]
     if len(named) > 1:
         raise UserError(f"this run names units of {' and '.join(sorted(named))}: run each "
