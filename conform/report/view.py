@@ -354,10 +354,14 @@ class Cause:
     def sentence(self) -> str:
         n = len(self.checks)
         wanted = " or ".join(self.expected)
-        return (f"{', '.join(self.commands)} answered {self.actual} where {wanted} was "
+        shown = ", ".join(self.commands[:CAUSE_NAMES])
+        if len(self.commands) > CAUSE_NAMES:
+            shown += f" and {len(self.commands) - CAUSE_NAMES} more commands"
+        return (f"{shown} answered {self.actual} where {wanted} was "
                 f"expected: one cause, {n} checks")
 
 
+CAUSE_NAMES = 8  # commands a cause names before "and N more" (the first screen stays readable)
 CAUSE_MIN = 3   # this many FAILs with the same wrong answer code are shown as one cause
 
 
