@@ -129,7 +129,7 @@ def test_the_tour_leaves_no_untracked_file(tmp_path):
     clone, tour = tmp_path / "clone", tmp_path / "tour"
     clone.mkdir()
     tour.mkdir()
-    for name in ("captures", "conform", "tests"):
+    for name in ("captures", "conform", "specs", "tests"):
         (clone / name).symlink_to(REPO / name)
     (clone / ".gitignore").write_text((REPO / ".gitignore").read_text())
     git = ["git", "-C", str(clone), "-c", "user.name=t", "-c", "user.email=t@t"]
