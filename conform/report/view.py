@@ -351,6 +351,16 @@ class Cause:
     def commands(self) -> list[str]:
         return Section("", self.checks).commands
 
+    def shown(self, limit: int = 12) -> list[CheckResult]:
+        """The checks the cause links to: the first of each command first, then the rest, at
+        most ``limit`` (the others are listed with their sections below)."""
+        firsts: dict[str, CheckResult] = {}
+        for c in self.checks:
+            parts = c.id.split("/")
+            firsts.setdefault(parts[2] if len(parts) > 2 else c.id, c)
+        rest = [c for c in self.checks if all(c is not f for f in firsts.values())]
+        return [*firsts.values(), *rest][:limit]
+
     def sentence(self) -> str:
         n = len(self.checks)
         wanted = " or ".join(self.expected)

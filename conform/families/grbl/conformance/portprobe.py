@@ -38,9 +38,18 @@ def probe(device: str, *, baud: int, timeout: float) -> ProbeAnswer:
     status = _STATUS.search(heard)
     answer = (status.group(0) if status else found.group(0) if found else heard[:60]).decode("latin-1")
     version = (found.group(1) or found.group(2)).decode() if found else None
-    for v in load_grbl().variants.values():
+    variants = list(load_grbl().variants.values())
+    for v in variants:
         if version and v.version == version:
             return ProbeAnswer(v.id, answer, f"grbl {version} answered ? and $I")
+    if version is None and status and b"|" in status.group(0):
+        # a 1.1 status report (fields split by '|', interface.md) from a grbl too busy to
+        # answer $I (it refuses '$' while a motion runs): it is a grbl 1.1, and no other
+        # family's question (GVE's '!' is feed hold here) may be sent to it
+        ones = [v for v in variants if v.version.startswith("1.1")]
+        if len(ones) == 1:
+            return ProbeAnswer(ones[0].id, answer, "a grbl 1.1 status report answered ? "
+                               "($I unanswered while it moves)")
     return ProbeAnswer(None, answer, f"a grbl answered, but version {version or '?'} is not in "
                                      "the tables")
 
