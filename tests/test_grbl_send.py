@@ -137,6 +137,17 @@ def test_a_job_streams_completely(grbl, tmp_path, method, detected):
         assert m["max_lines_in_flight"] == 1
 
 
+def _wait_idle(pty: str, bound: float = 20.0) -> None:
+    """Until the unit reports Idle (``?``, a realtime byte that only reads)."""
+    end = time.monotonic() + bound
+    with serial.Serial(pty, 115200, timeout=0.2) as port:
+        while time.monotonic() < end:
+            port.write(b"?")
+            if b"<Idle|" in port.read(200):
+                return
+    raise AssertionError(f"{pty}: not Idle within {bound:g} s")
+
+
 def test_an_error_stops_with_one_line_naming_the_job_line(grbl, tmp_path):
     _, pty = grbl
     job = tmp_path / "err.nc"
@@ -147,6 +158,7 @@ def test_an_error_stops_with_one_line_naming_the_job_line(grbl, tmp_path):
     assert p.stderr.count("\n") == 1 and "Traceback" not in p.stderr, p.stderr
     assert "err.nc:3 'G5 X3': error:20" in p.stderr, p.stderr
     assert "sent 3 of 5 job lines" in p.stdout   # nothing after the refused line
+    _wait_idle(pty)   # G1 X1 may still run: a job starts from Idle (the sender refuses a Run)
     p = conform("send", str(job), "--target", pty, "--allow-motion", "-q")   # counting
     assert p.returncode == 1 and p.stderr.count("\n") == 1, p.stderr
     assert "err.nc:3 'G5 X3': error:20" in p.stderr
