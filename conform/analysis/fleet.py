@@ -357,11 +357,11 @@ def write_fleet_report(summary: JsonObject, out_dir: str | Path) -> dict[str, Pa
     and look of a session's analysis report: the verdict first, then the plots and the
     tables, each session's row linking its own report when one was written)."""
     from conform.analysis.fleetplots import fleet_plots
-    from conform.analysis.report import _clean, _env, report_folder
+    from conform.analysis.report import _clean, report_folder, template_env
 
     d = report_folder(out_dir)
     doc = _clean(summary)
-    env = _env()
+    env = template_env()
     paths = {"json": d / "fleet.json", "markdown": d / "summary.md", "html": d / "index.html"}
     plots = fleet_plots(doc)
     paths["json"].write_text(json.dumps(doc, indent=1), "utf-8")

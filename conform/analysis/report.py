@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -53,7 +54,7 @@ def findings_document(a: Any) -> dict[str, object]:
     })
 
 
-def _env(*folders: Path) -> jinja2.Environment:
+def template_env(*folders: Path) -> jinja2.Environment:
     """Templates from ``folders`` (a family's) first, then the engine's and the shared
     pieces."""
     import jinja2
@@ -70,15 +71,20 @@ def fmt_ms(v: float | None) -> str:
     return "–" if v is None or v != v else f"{v * 1000:.3f}"
 
 
+def severity_counts(findings: Iterable[Any]) -> dict[str, int]:
+    """How many findings of each severity, in the order they first appear."""
+    by_sev: dict[str, int] = {}
+    for f in findings:
+        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
+    return by_sev
+
+
 def base_context(a: Reported) -> dict[str, object]:
     """What every analysis report's templates get: the analysis ``a``, its metrics ``m``
     (plain, non-finite kept), ``findings``, their number per severity and per kind, the
     notes and ``ms`` (seconds as milliseconds)."""
     m = _clean(a.metrics, finite=False)
-    by_sev: dict[str, int] = {}
-    for f in a.findings:
-        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
-    return {"a": a, "m": m, "findings": a.findings, "by_sev": by_sev,
+    return {"a": a, "m": m, "findings": a.findings, "by_sev": severity_counts(a.findings),
             "counts": m.get("finding_counts", {}), "ms": fmt_ms, "notes": a.notes,
             "code_meaning": getattr(a, "code_meaning", None)}   # the family's, when it has one
 
@@ -99,7 +105,7 @@ def render_report(out_dir: str | Path, templates: Path, context: dict[str, objec
     (``report.html.j2``, ``summary.md.j2``) with ``context`` (``base_context`` and its own
     keys), and ``document`` as ``findings.json``."""
     d = report_folder(out_dir)
-    env = _env(templates)
+    env = template_env(templates)
     paths = {"html": d / "index.html", "markdown": d / "summary.md",
              "json": d / "findings.json"}
     paths["html"].write_text(env.get_template("report.html.j2").render(**context), "utf-8")

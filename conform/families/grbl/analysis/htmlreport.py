@@ -13,7 +13,6 @@ import numpy as np
 from conform.analysis.plots import legend_beside, new_figure, over_time, thin_points
 
 HERE = Path(__file__).resolve().parent
-SHARED = HERE.parents[2] / "report" / "templates"   # conform/report/templates
 
 
 def _times(a: Any) -> tuple[float, np.ndarray, np.ndarray]:
@@ -118,16 +117,10 @@ def latency_stats(a: Any) -> dict[str, float] | None:
 
 
 def render_html(a: Any) -> str:
-    import jinja2
+    from conform.analysis.report import severity_counts, template_env
 
-    env = jinja2.Environment(
-        loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(HERE)),
-                                    jinja2.FileSystemLoader(str(SHARED))]),
-        autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
-        trim_blocks=True, lstrip_blocks=True)
-    by_sev: dict[str, int] = {}
-    for f in a.findings:
-        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
+    env = template_env(HERE)
+    by_sev = severity_counts(a.findings)
     plots = {"buffer": buffer_plot(a), "latency": latency_plot(a), "machine": machine_plot(a)}
     return env.get_template("report.html.j2").render(a=a, m=a.metrics, by_sev=by_sev,
                                                       plots=plots, latency=latency_stats(a))

@@ -15,7 +15,6 @@ import numpy as np
 from conform.analysis.plots import new_figure, over_time, thin_points
 
 HERE = Path(__file__).resolve().parent
-SHARED = HERE.parents[2] / "report" / "templates"   # conform/report/templates
 
 
 def verdict(a: Any) -> tuple[str, str]:
@@ -141,16 +140,10 @@ def in_flight_plot(a: Any) -> str | None:
 
 
 def render_html(a: Any) -> str:
-    import jinja2
+    from conform.analysis.report import severity_counts, template_env
 
-    env = jinja2.Environment(
-        loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(HERE)),
-                                    jinja2.FileSystemLoader(str(SHARED))]),
-        autoescape=jinja2.select_autoescape(("html", "html.j2"), default=False),
-        trim_blocks=True, lstrip_blocks=True)
-    by_sev: dict[str, int] = {}
-    for f in a.findings:
-        by_sev[f.severity] = by_sev.get(f.severity, 0) + 1
+    env = template_env(HERE)
+    by_sev = severity_counts(a.findings)
     plots = {"latency": latency_plot(a), "resends": resend_plot(a), "busy": busy_plot(a),
              "in_flight": in_flight_plot(a)}
     word, sentence = verdict(a)
