@@ -1,0 +1,247 @@
+"""Mutation score of each family's reference unit: mutants of ``conform/families/<f>/unit/``
+made by cosmic-ray's operators, each run against the conformance checks (in-process, full
+profile, every opt-in, no state machine), against the target of 90 % killed.
+
+    pip install -e '.[mutation]'
+    python bench/bench_mutation.py [--family gve|grbl|marlin ...] [--sample N] [--seed S]
+                                   [--jobs J] [--out DIR] [--all-files] [--mutant ID ...]
+
+A mutant is KILLED when the run reports a FAIL or an ERROR, stops, crashes or runs out of
+time (10x the unmutated run's CPU time); it SURVIVED when the run passes as the unmutated
+one does. ``--sample N`` mutants per family are drawn with ``--seed`` from all mutation points
+of the unit modules the unmutated run imports (``--all-files``: of every file in unit/, the
+control socket's and fault injection's too). Equivalent mutants are listed, each with why, in
+``<out>/<family>-equivalent.toml`` and left out of the denominator:
+score = killed / (sampled - equivalent). Written per family: ``<family>-survivors.txt`` (each
+survivor's id and changed line) and ``<family>-results.json`` (every mutant). ``--mutant ID``
+runs just those mutants (ids as in the survivors file) and prints each one's outcome.
+Ids and the triage file's format: bench/mutation_lib.py and docs/conformance.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import resource
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from mutation_lib import (  # noqa: E402
+    FAMILIES,
+    ROOT,
+    Point,
+    TriageError,
+    enumerate_points,
+    family_dir,
+    line_diff,
+    load_equivalent,
+    match_key,
+    module_name,
+    mutated_source,
+)
+
+TARGET = 0.90
+TIMEOUT_FACTOR = 10
+CHILD = [sys.executable, str(Path(__file__).resolve().parent / "mutation_lib.py"), "--child"]
+
+
+def fail(text: str) -> None:
+    print(f"bench_mutation: {text}", file=sys.stderr)
+    sys.exit(2)
+
+
+def run_child(job: dict, wall_limit: float) -> dict:
+    try:
+        r = subprocess.run(CHILD, input=json.dumps(job), capture_output=True, text=True,
+                           timeout=wall_limit, cwd=ROOT)
+    except subprocess.TimeoutExpired:
+        return {"outcome": "timeout", "why": f"no result within {wall_limit:.0f} s"}
+    if r.returncode == -24:   # SIGXCPU: the CPU limit
+        return {"outcome": "timeout", "why": f"CPU limit {job.get('cpu_limit')} s"}
+    lines = r.stdout.strip().splitlines()
+    if r.returncode != 0 or not lines:
+        tail = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
+        return {"outcome": "crashed", "why": tail[:200]}
+    out = json.loads(lines[-1])
+    if out.get("loaded") is False:
+        out |= {"outcome": "unreached", "why": "the run never imported the module"}
+    elif out["failed"]:
+        out |= {"outcome": "killed", "why": out["failed"]}
+    else:
+        out |= {"outcome": "survived", "why": ""}
+    return out
+
+
+def baseline(family: str) -> tuple[dict, float]:
+    t0 = time.perf_counter()
+    out = run_child({"family": family, "stop": False}, wall_limit=900)
+    wall = time.perf_counter() - t0
+    if out.get("outcome") != "survived":
+        fail(f"{family}: the unmutated run does not pass ({out.get('why')}); mutants cannot be "
+             "judged against it")
+    if out.get("not_pass"):
+        print(f"  {family}: unmutated run grades other than PASS: {out['not_pass']}")
+    return out, wall
+
+
+def unit_files(family: str, base: dict, all_files: bool) -> tuple[list[Path], list[str]]:
+    files = sorted((family_dir(family) / "unit").glob("*.py"))
+    if all_files:
+        return files, []
+    loaded = set(base["unit_modules"])
+    kept = [p for p in files if module_name(p) in loaded]
+    return kept, [p.name for p in files if p not in kept]
+
+
+def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, label: str
+          ) -> list[dict]:
+    """Run each point's mutant in its own interpreter; one record per point."""
+    records: list[dict] = []
+
+    def one(point: Point) -> dict:
+        code = mutated_source(point)
+        original = point.path.read_text()
+        rec = {"id": point.id, "diff": line_diff(original, code) if code else []}
+        if code is None or code == original:
+            return rec | {"outcome": "invalid", "why": "the operator changed nothing"}
+        try:
+            compile(code, str(point.path), "exec", dont_inherit=True)
+        except SyntaxError as exc:
+            return rec | {"outcome": "invalid", "why": f"not Python: {exc.msg}"}
+        job = {"family": family, "module": module_name(point.path), "path": str(point.path),
+               "code": code, "cpu_limit": cpu_limit}
+        out = run_child(job, wall_limit=cpu_limit * 4 + 30)
+        return rec | {k: out.get(k) for k in ("outcome", "why", "not_pass", "cpu_s")}
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        for n, rec in enumerate(pool.map(one, points), 1):
+            records.append(rec)
+            if n % 10 == 0 or n == len(points):
+                print(f"  {label}: {n}/{len(points)} mutants in {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr, flush=True)
+    return records
+
+
+def write_outputs(out_dir: Path, family: str, records: list[dict], equivalent: dict[str, str],
+                  meta: dict) -> None:
+    survivors = [r for r in records if r["outcome"] in ("survived", "unreached")
+                 and match_key(r["id"]) not in equivalent]
+    lines = [f"# {family}: {len(survivors)} surviving mutants not listed as equivalent "
+             f"(sample {meta['sampled']}, seed {meta['seed']}); triage: list an equivalent one in "
+             f"{family}-equivalent.toml with why, or give the suite a check that kills it.", ""]
+    for r in sorted(survivors, key=lambda r: (r["id"].split(":")[0], int(r["id"].split(":")[1]))):
+        lines.append(r["id"] + ("  (module never imported)" if r["outcome"] == "unreached" else ""))
+        lines += [f"    {d}" for d in r["diff"]]
+        if r.get("not_pass"):
+            lines.append(f"    grades other than PASS: {r['not_pass']}")
+        lines.append("")
+    (out_dir / f"{family}-survivors.txt").write_text("\n".join(lines))
+    doc = meta | {"mutants": sorted(records, key=lambda r: r["id"])}
+    (out_dir / f"{family}-results.json").write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
+    triage = out_dir / f"{family}-equivalent.toml"
+    try:
+        equivalent = load_equivalent(triage)
+    except TriageError as exc:
+        fail(str(exc))
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    base, base_wall = baseline(family)
+    cpu_limit = max(10, int(TIMEOUT_FACTOR * base["cpu_s"] + 0.999) + 2)
+    files, skipped = unit_files(family, base, args.all_files)
+    points = enumerate_points(files, family)
+    by_key = {p.key: p for p in points}
+    stale = sorted(k for k in equivalent if k not in by_key)
+    for k in stale:
+        print(f"  {family}: triage entry {k} matches no mutation point (its line changed?)")
+    if args.mutant:
+        chosen = [by_key[match_key(m)] for m in args.mutant if match_key(m) in by_key]
+    else:
+        chosen = random.Random(args.seed).sample(points, min(args.sample, len(points)))
+    print(f"{family}: {len(points)} mutation points in {len(files)} files"
+          + (f" (left out, not imported by the run: {', '.join(skipped)})" if skipped else "")
+          + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
+          f"timeout {cpu_limit} s CPU")
+    records = judge(family, chosen, cpu_limit, args.jobs, family)
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime)
+    count = {k: sum(1 for r in records if r["outcome"] == k)
+             for k in ("killed", "crashed", "timeout", "survived", "unreached", "invalid")}
+    equiv = [r for r in records if r["outcome"] == "survived" and match_key(r["id"]) in equivalent]
+    for r in records:
+        if r["outcome"] in ("killed", "crashed", "timeout") and match_key(r["id"]) in equivalent:
+            print(f"  {family}: {r['id']} is listed as equivalent but was killed ({r['why']})")
+    killed = count["killed"] + count["crashed"] + count["timeout"]
+    judged = len(records) - count["invalid"] - len(equiv)
+    score = killed / judged if judged else 0.0
+    res = {"sampled": len(records), "killed": killed, "crashed": count["crashed"],
+           "timed_out": count["timeout"], "survived": count["survived"] + count["unreached"],
+           "unreached": count["unreached"], "invalid": count["invalid"],
+           "equivalent": len(equiv), "score": round(score, 4),
+           "score_ratio": round(score / TARGET, 4), "points": len(points),
+           "cpu_s": round(cpu, 1), "wall_s": round(time.perf_counter() - t0, 1),
+           "cpu_per_mutant_s": round(cpu / max(1, len(records)), 2),
+           "baseline_cpu_s": base["cpu_s"], "baseline_wall_s": round(base_wall, 2)}
+    if not args.mutant:
+        write_outputs(out_dir, family, records, equivalent,
+                      {"family": family, "seed": args.seed, "sampled": len(records)} | res)
+    print(f"{family}: sampled {res['sampled']}, killed {killed} (of which crashed "
+          f"{count['crashed']}, timed out {count['timeout']}), survived {res['survived']}, "
+          f"equivalent {len(equiv)}, invalid {count['invalid']}: score {score:.1%} "
+          f"({res['score_ratio']:.2f} of the {TARGET:.0%} target); {cpu:.0f} s CPU "
+          f"({res['cpu_per_mutant_s']} s per mutant), {res['wall_s']:.0f} s wall")
+    if args.mutant:
+        for r in records:
+            print(f"  {r['outcome'].upper()} {r['id']}  {r['why'] or ''}")
+            for d in r["diff"]:
+                print(f"      {d}")
+    return res
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--family", action="append", choices=FAMILIES,
+                    help="family to mutate (repeatable; default: all three)")
+    ap.add_argument("--sample", type=int, default=300, help="mutants per family (default 300)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of the sample (default 1)")
+    ap.add_argument("--jobs", type=int, default=2, help="mutants run side by side (default 2)")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "mutation"),
+                    help="folder of the survivors, results and triage files (default bench/mutation)")
+    ap.add_argument("--all-files", action="store_true",
+                    help="also mutate unit/ files the unmutated run never imports")
+    ap.add_argument("--mutant", action="append", default=[], metavar="ID",
+                    help="run only this mutant (an id from a survivors file; repeatable)")
+    args = ap.parse_args(argv)
+    if args.sample <= 0 or args.jobs <= 0:
+        fail("--sample and --jobs must be positive")
+    try:
+        import cosmic_ray  # noqa: F401
+    except ImportError:
+        fail("cosmic-ray is not installed: pip install -e '.[mutation]'")
+    for m in args.mutant:
+        try:
+            match_key(m)
+        except ValueError as exc:
+            fail(f"--mutant: {exc}")
+    families = args.family or list(FAMILIES)   # --mutant: each id runs in the family it matches
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results = {f: bench_family(f, args, out_dir) for f in families}
+    summary = {"families": results, "sample": args.sample, "seed": args.seed, "jobs": args.jobs,
+               "target": TARGET, "profile": "full", "all_files": args.all_files,
+               "met": all(r["score"] >= TARGET for r in results.values())}
+    print(json.dumps(summary))
+    return 0 if summary["met"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,289 @@
+"""The mutation benchmark's parts (bench/bench_mutation.py): the mutation points of a family's
+reference unit (cosmic-ray's operators), their stable ids, the triage file of equivalent
+mutants, and the run of one mutant in its own interpreter.
+
+A mutant is never written into the tree: the child interpreter (``python bench/mutation_lib.py
+--child``, the job as JSON on stdin) puts a finder first on ``sys.meta_path`` that gives the
+mutated module's source for that one module name, then runs the conformance checks in-process
+against the family's emulator (``conform run --target emu:V --profile full --no-machine``: an
+emulator gets every opt-in), stopping at the first FAIL or ERROR. Runs are therefore safe side
+by side and beside other work in the same tree.
+
+Mutant ids: ``<file>:<line>:<operator>:<k>:<hash>``, e.g.
+``unit/motion.py:123:NumberReplacer:1:3f9a0c12``: the file under the family's package, the
+line number (for the reader), cosmic-ray's operator without its ``core/`` prefix, ``k`` the
+operator's k-th mutation point on that line, and the first 8 hex digits of the SHA-1 of the
+line's text (stripped); ``~N`` after the hash when the same text appears on an earlier line of
+the file too (N-th repeat). The triage file matches an id without its line number, so an id
+stays the same as long as its own line's text does, whatever changes elsewhere.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import importlib.abc
+import importlib.util
+import json
+import resource
+import sys
+import time
+import tomllib
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FAMILIES = ("gve", "grbl", "marlin")
+PROFILE = "full"
+
+
+def family_dir(family: str) -> Path:
+    return ROOT / "conform" / "families" / family
+
+
+def module_name(path: Path) -> str:
+    rel = path.resolve().relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+# -- mutation points and ids --------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Point:
+    """One mutation: ``operator`` (cosmic-ray's name) at its ``occurrence`` in ``path``."""
+
+    id: str
+    path: Path
+    operator: str
+    occurrence: int
+    line: int
+
+    @property
+    def key(self) -> str:
+        return match_key(self.id)
+
+
+def line_hash(text: str) -> str:
+    return hashlib.sha1(text.strip().encode()).hexdigest()[:8]
+
+
+def make_id(rel: str, line: int, operator: str, k: int, text: str, repeat: int) -> str:
+    op = operator.split("/", 1)[-1]
+    return f"{rel}:{line}:{op}:{k}:{line_hash(text)}" + (f"~{repeat}" if repeat else "")
+
+
+def match_key(mutant_id: str) -> str:
+    """The id without its line number: what the triage file is matched on."""
+    parts = mutant_id.split(":")
+    if len(parts) != 5 or not parts[1].isdigit():
+        raise ValueError(f"{mutant_id!r} is not a mutant id (FILE:LINE:OPERATOR:K:HASH)")
+    return ":".join(parts[:1] + parts[2:])
+
+
+def operators() -> list[tuple[str, object]]:
+    """cosmic-ray's operators that take no arguments (its two variable operators need a
+    configuration and are left out)."""
+    import cosmic_ray.plugins
+
+    out = []
+    for name in cosmic_ray.plugins.operator_names():
+        cls = cosmic_ray.plugins.get_operator(name)
+        if not cls.arguments():
+            out.append((name, cls()))
+    return out
+
+
+def enumerate_points(paths: list[Path], family: str) -> list[Point]:
+    """Every mutation point of ``paths``, in a fixed order (file, operator, tree order)."""
+    from cosmic_ray.ast import ast_nodes, get_ast
+
+    ops = operators()
+    points: list[Point] = []
+    base = family_dir(family)
+    for path in sorted(paths):
+        source = path.read_text()
+        lines = source.splitlines()
+        repeats: list[int] = []
+        seen: Counter[str] = Counter()
+        for text in lines:
+            repeats.append(seen[text.strip()])
+            seen[text.strip()] += 1
+        nodes = list(ast_nodes(get_ast(source)))
+        rel = path.relative_to(base).as_posix()
+        for name, op in ops:
+            occurrence = 0
+            per_line: Counter[int] = Counter()
+            for node in nodes:
+                for (line, _col), _end in op.mutation_positions(node):
+                    k = per_line[line]
+                    per_line[line] += 1
+                    text = lines[line - 1] if 0 < line <= len(lines) else ""
+                    rep = repeats[line - 1] if 0 < line <= len(lines) else 0
+                    points.append(Point(make_id(rel, line, name, k, text, rep), path, name,
+                                        occurrence, line))
+                    occurrence += 1
+    return points
+
+
+def mutated_source(point: Point) -> str | None:
+    """The module's source with ``point`` applied (None: cosmic-ray made no change)."""
+    import cosmic_ray.plugins
+    from cosmic_ray.mutating import mutate_code
+
+    op = cosmic_ray.plugins.get_operator(point.operator)()
+    return mutate_code(point.path.read_text(), op, point.occurrence)
+
+
+def line_diff(before: str, after: str) -> list[str]:
+    """The changed lines only, ``-`` before and ``+`` after."""
+    return [d for d in difflib.unified_diff(before.splitlines(), after.splitlines(), n=0,
+                                            lineterm="")
+            if d[:1] in "-+" and not d.startswith(("---", "+++"))]
+
+
+# -- the triage file ------------------------------------------------------------------------
+
+class TriageError(ValueError):
+    """A triage file that cannot be used (one line, naming the file and the entry)."""
+
+
+def load_equivalent(path: Path) -> dict[str, str]:
+    """``match_key(id) -> why`` from a triage file::
+
+        [[equivalent]]
+        id = "unit/motion.py:123:NumberReplacer:1:3f9a0c12"
+        why = "the factor is applied to 0 on every path the unit reaches"
+
+    An entry without a ``why`` (or an empty one), a malformed id or an id given twice is
+    refused."""
+    if not path.exists():
+        return {}
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise TriageError(f"{path}: not TOML ({exc})") from None
+    unknown = set(doc) - {"equivalent"}
+    if unknown:
+        raise TriageError(f"{path}: unknown table(s) {', '.join(sorted(unknown))} "
+                          "(only [[equivalent]] entries)")
+    out: dict[str, str] = {}
+    for n, entry in enumerate(doc.get("equivalent", []), 1):
+        mid = entry.get("id") if isinstance(entry, dict) else None
+        if not isinstance(mid, str):
+            raise TriageError(f"{path}: equivalent entry {n} has no id")
+        why = entry.get("why")
+        if not isinstance(why, str) or not why.strip():
+            raise TriageError(f"{path}: equivalent entry {n} ({mid}) has no why: say why the "
+                              "mutant cannot be told from the unit")
+        extra = set(entry) - {"id", "why"}
+        if extra:
+            raise TriageError(f"{path}: equivalent entry {n} ({mid}): unknown key(s) "
+                              f"{', '.join(sorted(extra))}")
+        try:
+            key = match_key(mid)
+        except ValueError as exc:
+            raise TriageError(f"{path}: equivalent entry {n}: {exc}") from None
+        if key in out:
+            raise TriageError(f"{path}: equivalent entry {n} ({mid}) is listed twice")
+        out[key] = why.strip()
+    return out
+
+
+# -- one run of the checks (the child interpreter) -----------------------------------------
+
+class _FirstFailure(BaseException):
+    """Stops a run at its first FAIL or ERROR (a BaseException: the runner records ordinary
+    exceptions as a harness error and goes on to finish the run)."""
+
+
+class Substitute(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Gives ``code`` as the source of module ``name`` (file ``path``) at import time."""
+
+    def __init__(self, name: str, path: str, code: str) -> None:
+        self.name, self.path, self.code = name, path, code
+        self.loaded = False
+
+    def find_spec(self, fullname, path, target=None):  # noqa: ANN001, ANN201
+        if fullname != self.name:
+            return None
+        package = Path(self.path).name == "__init__.py"
+        return importlib.util.spec_from_file_location(
+            fullname, self.path, loader=self,
+            submodule_search_locations=[str(Path(self.path).parent)] if package else None)
+
+    def create_module(self, spec):  # noqa: ANN001, ANN201
+        return None
+
+    def exec_module(self, module) -> None:  # noqa: ANN001
+        self.loaded = True
+        exec(compile(self.code, self.path, "exec", dont_inherit=True), module.__dict__)  # noqa: S102
+
+
+def run_checks(family: str, stop_at_failure: bool = True) -> dict[str, object]:
+    """The family's checks on its emulator (default variant, full profile, no state
+    machine, every opt-in as an emulator gets): the first failure's check, or the counts."""
+    from conform.conformance.plan import Permissions
+    from conform.conformance.results import Grade
+    from conform.conformance.runner import RunOptions
+    from conform.families import family as family_named
+
+    fam = family_named(family)
+    vid = fam.default_variant
+    perms = Permissions.of(True, False, None, False)
+    target, _ = fam.open_target(f"emu:{vid}", baud=115200, permissions=perms,
+                                inputs_control=None)
+    first: list[str] = []
+
+    def progress(result) -> None:  # noqa: ANN001
+        if result.grade in (Grade.FAIL, Grade.ERROR):
+            detail = (result.detail or "").splitlines()[0][:200] if result.detail else ""
+            first.append(f"{result.grade} {result.id}: {detail or result.actual}")
+            if stop_at_failure:
+                raise _FirstFailure
+
+    try:
+        checks = fam.plan_checks(vid, permissions=perms, profile=PROFILE, patterns=(),
+                                 machine=False)
+        runner = fam.runner(target, vid, options=RunOptions(profile=PROFILE, seed=0),
+                            permissions=perms)
+        try:
+            run = runner.run(checks, progress)
+        except _FirstFailure:
+            return {"failed": first[0], "checks": len(checks)}
+    finally:
+        target.close()
+    if run.aborted:
+        return {"failed": f"aborted: {run.aborted}", "checks": len(checks)}
+    other = {c.id: str(c.grade) for c in run.checks if c.grade is not Grade.PASS}
+    return {"failed": first[0] if first else None, "checks": len(checks),
+            "not_pass": other}
+
+
+def child_main() -> int:
+    """``--child``: one job (JSON on stdin: family, and module/path/code to substitute or
+    none), one JSON line on stdout."""
+    job = json.loads(sys.stdin.read())
+    if job.get("cpu_limit"):
+        lim = int(job["cpu_limit"])
+        resource.setrlimit(resource.RLIMIT_CPU, (lim, lim + 5))
+    sub = None
+    if job.get("code") is not None:
+        sub = Substitute(job["module"], job["path"], job["code"])
+        sys.meta_path.insert(0, sub)
+    t0 = time.process_time()
+    result = run_checks(job["family"], stop_at_failure=job.get("stop", True))
+    prefix = f"conform.families.{job['family']}.unit"
+    result |= {"loaded": sub.loaded if sub else None, "cpu_s": round(time.process_time() - t0, 3),
+               "unit_modules": sorted(m for m in sys.modules
+                                      if m == prefix or m.startswith(prefix + "."))}
+    print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__" and sys.argv[1:] == ["--child"]:
+    sys.path.insert(0, str(ROOT))
+    sys.exit(child_main())
