@@ -27,6 +27,7 @@ import resource
 import subprocess
 import sys
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -116,7 +117,7 @@ def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, label: st
             return rec | {"outcome": "invalid", "why": f"not Python: {exc.msg}"}
         job = {"family": family, "module": module_name(point.path), "path": str(point.path),
                "code": code, "cpu_limit": cpu_limit}
-        out = run_child(job, wall_limit=cpu_limit * 4 + 30)
+        out = run_child(job, wall_limit=cpu_limit * 10 + 60)   # the CPU limit judges; this catches a stuck child
         return rec | {k: out.get(k) for k in ("outcome", "why", "not_pass", "cpu_s")}
 
     t0 = time.perf_counter()
@@ -181,9 +182,11 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
         if r["outcome"] in ("killed", "crashed", "timeout") and match_key(r["id"]) in equivalent:
             print(f"  {family}: {r['id']} is listed as equivalent but was killed ({r['why']})")
     killed = count["killed"] + count["crashed"] + count["timeout"]
+    by_fail = sum(1 for r in records if r["outcome"] == "killed" and r["why"].startswith("FAIL"))
     judged = len(records) - count["invalid"] - len(equiv)
     score = killed / judged if judged else 0.0
-    res = {"sampled": len(records), "killed": killed, "crashed": count["crashed"],
+    res = {"sampled": len(records), "killed": killed, "killed_by_fail": by_fail,
+           "killed_by_error": count["killed"] - by_fail, "crashed": count["crashed"],
            "timed_out": count["timeout"], "survived": count["survived"] + count["unreached"],
            "unreached": count["unreached"], "invalid": count["invalid"],
            "equivalent": len(equiv), "score": round(score, 4),
@@ -194,8 +197,9 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
     if not args.mutant:
         write_outputs(out_dir, family, records, equivalent,
                       {"family": family, "seed": args.seed, "sampled": len(records)} | res)
-    print(f"{family}: sampled {res['sampled']}, killed {killed} (of which crashed "
-          f"{count['crashed']}, timed out {count['timeout']}), survived {res['survived']}, "
+    print(f"{family}: sampled {res['sampled']}, killed {killed} (by a FAIL {by_fail}, an ERROR "
+          f"{res['killed_by_error']}, crashed {count['crashed']}, timed out {count['timeout']}), "
+          f"survived {res['survived']}, "
           f"equivalent {len(equiv)}, invalid {count['invalid']}: score {score:.1%} "
           f"({res['score_ratio']:.2f} of the {TARGET:.0%} target); {cpu:.0f} s CPU "
           f"({res['cpu_per_mutant_s']} s per mutant), {res['wall_s']:.0f} s wall")
@@ -221,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mutant", action="append", default=[], metavar="ID",
                     help="run only this mutant (an id from a survivors file; repeatable)")
     args = ap.parse_args(argv)
+    warnings.filterwarnings("ignore", category=SyntaxWarning)   # a mutant's `x is 0` compiles
     if args.sample <= 0 or args.jobs <= 0:
         fail("--sample and --jobs must be positive")
     try:
