@@ -166,6 +166,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
         print(f"  {family}: triage entry {k} matches no mutation point (its line changed?)")
     if args.mutant:
         chosen = [by_key[match_key(m)] for m in args.mutant if match_key(m) in by_key]
+        args.matched.update(p.key for p in chosen)
     else:
         chosen = random.Random(args.seed).sample(points, min(args.sample, len(points)))
     print(f"{family}: {len(points)} mutation points in {len(files)} files"
@@ -238,6 +239,7 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             fail(f"--mutant: {exc}")
     families = args.family or list(FAMILIES)   # --mutant: each id runs in the family it matches
+    args.matched = set()
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     results = {f: bench_family(f, args, out_dir) for f in families}
@@ -245,6 +247,10 @@ def main(argv: list[str] | None = None) -> int:
                "target": TARGET, "profile": "full", "all_files": args.all_files,
                "met": all(r["score"] >= TARGET for r in results.values())}
     print(json.dumps(summary))
+    unmatched = [m for m in args.mutant if match_key(m) not in args.matched]
+    if unmatched:
+        fail(f"--mutant {unmatched[0]}: no mutation point of {', '.join(families)} has this id "
+             "(its line changed, or another family's?)")
     return 0 if summary["met"] else 1
 
 
