@@ -28,6 +28,7 @@ import subprocess
 import sys
 import time
 import warnings
+from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -159,7 +160,8 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
     base, base_wall = baseline(family)
     cpu_limit = max(10, int(TIMEOUT_FACTOR * base["cpu_s"] + 0.999) + 2)
     files, skipped = unit_files(family, base, args.all_files)
-    points = enumerate_points(files, family)
+    left_out: Counter[str] = Counter()
+    points = enumerate_points(files, family, left_out)
     by_key = {p.key: p for p in points}
     stale = sorted(k for k in equivalent if k not in by_key)
     for k in stale:
@@ -169,8 +171,9 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
         args.matched.update(p.key for p in chosen)
     else:
         chosen = random.Random(args.seed).sample(points, min(args.sample, len(points)))
-    print(f"{family}: {len(points)} mutation points in {len(files)} files"
-          + (f" (left out, not imported by the run: {', '.join(skipped)})" if skipped else "")
+    print(f"{family}: {len(points)} mutation points in {len(files)} files (left out, as they "
+          f"cannot change what the unit does: {dict(left_out) or 'none'})"
+          + (f"; files left out, not imported by the run: {', '.join(skipped)}" if skipped else "")
           + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
           f"timeout {cpu_limit} s CPU")
     records = judge(family, chosen, cpu_limit, args.jobs, family)
@@ -194,6 +197,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
            "score_ratio": round(score / TARGET, 4), "points": len(points),
            "cpu_s": round(cpu, 1), "wall_s": round(time.perf_counter() - t0, 1),
            "cpu_per_mutant_s": round(cpu / max(1, len(records)), 2),
+           "points_left_out": dict(left_out),
            "baseline_cpu_s": base["cpu_s"], "baseline_wall_s": round(base_wall, 2)}
     if not args.mutant:
         write_outputs(out_dir, family, records, equivalent,

@@ -97,8 +97,33 @@ def operators() -> list[tuple[str, object]]:
     return out
 
 
-def enumerate_points(paths: list[Path], family: str) -> list[Point]:
-    """Every mutation point of ``paths``, in a fixed order (file, operator, tree order)."""
+def never_run(node, lazy_annotations: bool) -> str | None:  # noqa: ANN001 - a parso node
+    """Why a mutation at ``node`` could not change what the module does, or None: a
+    keyword-only marker ``*`` in a parameter list (not an operator: cosmic-ray's mutants of it
+    are not Python), and, in a module with ``from __future__ import annotations``, anything in
+    an annotation (kept as a string, never evaluated)."""
+    parent = node.parent
+    if (node.type == "operator" and node.value in ("*", "**") and parent is not None
+            and parent.type in ("parameters", "typedargslist", "varargslist")):
+        return "keyword-only marker"
+    child = node
+    while lazy_annotations and parent is not None:
+        kids = parent.children
+        if ((parent.type == "tfpdef" and len(kids) == 3 and kids[2] is child)
+                or (parent.type == "annassign" and kids[1] is child)
+                or (parent.type == "funcdef" and any(
+                    k.type == "operator" and k.value == "->" and kids[i + 1] is child
+                    for i, k in enumerate(kids[:-1])))):
+            return "annotation"
+        child, parent = parent, parent.parent
+    return None
+
+
+def enumerate_points(paths: list[Path], family: str,
+                     left_out: Counter[str] | None = None) -> list[Point]:
+    """Every mutation point of ``paths``, in a fixed order (file, operator, tree order), but
+    those that cannot change what the module does (:func:`never_run`, counted by reason in
+    ``left_out``)."""
     from cosmic_ray.ast import ast_nodes, get_ast
 
     ops = operators()
@@ -113,19 +138,25 @@ def enumerate_points(paths: list[Path], family: str) -> list[Point]:
             repeats.append(seen[text.strip()])
             seen[text.strip()] += 1
         nodes = list(ast_nodes(get_ast(source)))
+        lazy = "from __future__ import annotations" in source
         rel = path.relative_to(base).as_posix()
         for name, op in ops:
             occurrence = 0
             per_line: Counter[int] = Counter()
             for node in nodes:
                 for (line, _col), _end in op.mutation_positions(node):
+                    occurrence += 1   # cosmic-ray counts every point, the left-out ones too
+                    why = never_run(node, lazy)
+                    if why is not None:
+                        if left_out is not None:
+                            left_out[why] += 1
+                        continue
                     k = per_line[line]
                     per_line[line] += 1
                     text = lines[line - 1] if 0 < line <= len(lines) else ""
                     rep = repeats[line - 1] if 0 < line <= len(lines) else 0
                     points.append(Point(make_id(rel, line, name, k, text, rep), path, name,
-                                        occurrence, line))
-                    occurrence += 1
+                                        occurrence - 1, line))
     return points
 
 
