@@ -1,7 +1,7 @@
 """bench/bench_mutation.py's parts: a mutant's source really reaches the conformance run (a
 hand-made mutant of grbl's reference unit is killed, the same module substituted unmutated
 passes), the triage file refuses an entry without a why, and a mutant's id does not move when
-lines are added elsewhere in its file."""
+lines are added elsewhere in its file, and annotations are not mutated."""
 
 from __future__ import annotations
 
@@ -59,7 +59,8 @@ def test_triage_entry_without_why_is_refused(tmp_path):
 
 def test_ids_stay_when_lines_are_added_elsewhere(tmp_path, monkeypatch):
     pytest.importorskip("cosmic_ray")
-    code = "def f(a, b):\n    if a < b:\n        return a + 1\n    return b - 1\n"
+    code = ("from __future__ import annotations\n\n\ndef f(a: int | None, *, b: int = 2) -> int:\n"
+            "    if a < b:\n        return a + 1\n    return b - 1\n")
     fam = tmp_path / "fam"
     (fam / "unit").mkdir(parents=True)
     path = fam / "unit" / "m.py"
@@ -72,3 +73,6 @@ def test_ids_stay_when_lines_are_added_elsewhere(tmp_path, monkeypatch):
     assert [p.key for p in before] == [p.key for p in after]
     assert [p.line + 2 for p in before] == [p.line for p in after]
     assert len({p.id for p in before}) == len(before)
+    # on the def line only the default's number: its annotations are never evaluated, and
+    # its '*' is no product
+    assert {p.operator for p in before if p.line == 4} == {"core/NumberReplacer"}
