@@ -81,15 +81,23 @@ def run_child(job: dict, wall_limit: float) -> dict:
 
 
 def baseline(family: str) -> tuple[dict, float]:
-    t0 = time.perf_counter()
-    out = run_child({"family": family, "stop": False}, wall_limit=900)
-    wall = time.perf_counter() - t0
-    if out.get("outcome") != "survived":
-        fail(f"{family}: the unmutated run does not pass ({out.get('why')}); mutants cannot be "
+    """The unmutated runs: the plain one (which unit modules it imports), then the one whose
+    emulator runs the copy of those modules, which must pass as well (its CPU time sets the
+    timeout)."""
+    plain = run_child({"family": family, "stop": False}, wall_limit=900)
+    if plain.get("outcome") != "survived":
+        fail(f"{family}: the unmutated run does not pass ({plain.get('why')}); mutants cannot be "
              "judged against it")
+    t0 = time.perf_counter()
+    out = run_child({"family": family, "stop": False, "shadow": True,
+                     "modules": plain["unit_modules"]}, wall_limit=900)
+    wall = time.perf_counter() - t0
+    if out.get("outcome") != "survived" or out.get("not_pass") != plain.get("not_pass"):
+        fail(f"{family}: the run against the unit's unmutated copy does not pass as the plain run "
+             f"does ({out.get('why') or out.get('not_pass')}); the copy is not faithful")
     if out.get("not_pass"):
         print(f"  {family}: unmutated run grades other than PASS: {out['not_pass']}")
-    return out, wall
+    return out | {"unit_modules": plain["unit_modules"]}, wall
 
 
 def unit_files(family: str, base: dict, all_files: bool) -> tuple[list[Path], list[str]]:
@@ -101,7 +109,7 @@ def unit_files(family: str, base: dict, all_files: bool) -> tuple[list[Path], li
     return kept, [p.name for p in files if p not in kept]
 
 
-def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, label: str
+def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: list[str]
           ) -> list[dict]:
     """Run each point's mutant in its own interpreter; one record per point."""
     records: list[dict] = []
@@ -116,8 +124,8 @@ def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, label: st
             compile(code, str(point.path), "exec", dont_inherit=True)
         except SyntaxError as exc:
             return rec | {"outcome": "invalid", "why": f"not Python: {exc.msg}"}
-        job = {"family": family, "module": module_name(point.path), "path": str(point.path),
-               "code": code, "cpu_limit": cpu_limit}
+        job = {"family": family, "shadow": True, "modules": modules,
+               "module": module_name(point.path), "code": code, "cpu_limit": cpu_limit}
         out = run_child(job, wall_limit=cpu_limit * 10 + 60)   # the CPU limit judges; this catches a stuck child
         return rec | {k: out.get(k) for k in ("outcome", "why", "not_pass", "cpu_s")}
 
@@ -126,7 +134,7 @@ def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, label: st
         for n, rec in enumerate(pool.map(one, points), 1):
             records.append(rec)
             if n % 10 == 0 or n == len(points):
-                print(f"  {label}: {n}/{len(points)} mutants in {time.perf_counter() - t0:.0f} s",
+                print(f"  {family}: {n}/{len(points)} mutants in {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
     return records
 
@@ -176,7 +184,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
           + (f"; files left out, not imported by the run: {', '.join(skipped)}" if skipped else "")
           + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
           f"timeout {cpu_limit} s CPU")
-    records = judge(family, chosen, cpu_limit, args.jobs, family)
+    records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"])
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime)
     count = {k: sum(1 for r in records if r["outcome"] == k)

@@ -2,12 +2,14 @@
 reference unit (cosmic-ray's operators), their stable ids, the triage file of equivalent
 mutants, and the run of one mutant in its own interpreter.
 
-A mutant is never written into the tree: the child interpreter (``python bench/mutation_lib.py
---child``, the job as JSON on stdin) puts a finder first on ``sys.meta_path`` that gives the
-mutated module's source for that one module name, then runs the conformance checks in-process
-against the family's emulator (``conform run --target emu:V --profile full --no-machine``: an
-emulator gets every opt-in), stopping at the first FAIL or ERROR. Runs are therefore safe side
-by side and beside other work in the same tree.
+A mutant is never written into the tree, and it reaches only the unit under test: the child
+interpreter (``python bench/mutation_lib.py --child``, the job as JSON on stdin) imports a copy
+of the family's ``unit`` package under another name (:class:`Shadow`, one module's source
+replaced by the mutant's) and makes the emulator's unit from the copy, while the suite's own
+reference units (GVE's expected transcripts, grbl's from-state pairs) stay the original. It
+then runs the conformance checks in-process (``conform run --target emu:V --profile full
+--no-machine``: an emulator gets every opt-in), stopping at the first FAIL or ERROR. Runs are
+therefore safe side by side and beside other work in the same tree.
 
 Mutant ids: ``<file>:<line>:<operator>:<k>:<hash>``, e.g.
 ``unit/motion.py:123:NumberReplacer:1:3f9a0c12``: the file under the family's package, the
@@ -231,32 +233,106 @@ class _FirstFailure(BaseException):
     exceptions as a harness error and goes on to finish the run)."""
 
 
-class Substitute(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Gives ``code`` as the source of module ``name`` (file ``path``) at import time."""
+SHADOW = "conform_mutant_unit"
 
-    def __init__(self, name: str, path: str, code: str) -> None:
-        self.name, self.path, self.code = name, path, code
+
+class Shadow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """A second copy of a family's ``unit`` package, importable as ``conform_mutant_unit[.X]``
+    (its own imports of ``conform.families.<f>.unit`` turned into that name), with one module's
+    source replaced by ``code``: the unit under test. The original package stays what the
+    suite's own reference copies of the unit (the expected transcripts) are made of."""
+
+    def __init__(self, family: str, module: str | None = None, code: str | None = None) -> None:
+        self.prefix = f"conform.families.{family}.unit"
+        self.dir = family_dir(family) / "unit"
+        self.module, self.code = module, code
         self.loaded = False
 
+    def shadow_name(self, name: str) -> str:
+        return SHADOW + name[len(self.prefix):]
+
+    def _path(self, fullname: str) -> Path | None:
+        rest = fullname[len(SHADOW):].lstrip(".")
+        path = self.dir / "__init__.py" if not rest else self.dir / f"{rest}.py"
+        return path if path.exists() else None
+
     def find_spec(self, fullname, path, target=None):  # noqa: ANN001, ANN201
-        if fullname != self.name:
+        if fullname != SHADOW and not fullname.startswith(SHADOW + "."):
             return None
-        package = Path(self.path).name == "__init__.py"
+        file = self._path(fullname)
+        if file is None:
+            return None
+        package = file.name == "__init__.py"
         return importlib.util.spec_from_file_location(
-            fullname, self.path, loader=self,
-            submodule_search_locations=[str(Path(self.path).parent)] if package else None)
+            fullname, file, loader=self, submodule_search_locations=[str(self.dir)] if package else None)
 
     def create_module(self, spec):  # noqa: ANN001, ANN201
         return None
 
     def exec_module(self, module) -> None:  # noqa: ANN001
-        self.loaded = True
-        exec(compile(self.code, self.path, "exec", dont_inherit=True), module.__dict__)  # noqa: S102
+        path = module.__spec__.origin
+        original = self.prefix + module.__name__[len(SHADOW):]
+        if original == self.module:
+            self.loaded = True
+            source = self.code
+        else:
+            source = Path(path).read_text()
+        source = source.replace(self.prefix, SHADOW)
+        exec(compile(source, path, "exec", dont_inherit=True), module.__dict__)  # noqa: S102
+
+    def install(self, originals: list[str]) -> dict[str, object]:
+        """Put the finder first and import the copy of each of ``originals``; name -> copy."""
+        import importlib
+
+        sys.meta_path.insert(0, self)
+        return {name: importlib.import_module(self.shadow_name(name)) for name in originals}
+
+    def wrap(self, factory, copies: dict[str, object]):  # noqa: ANN001, ANN201
+        """``factory`` (a target's unit factory) made to build the copy: while it runs, the
+        unit package's names in ``sys.modules``, and the unit's classes and functions bound in
+        the family's other modules or in the factory's closure, are the copy's."""
+        def copy_of(value):  # noqa: ANN001, ANN202
+            owner = getattr(value, "__module__", None)
+            if callable(value) and isinstance(owner, str) and owner in copies:
+                return getattr(copies[owner], getattr(value, "__name__", ""), None)
+            return None
+
+        def build():  # noqa: ANN202
+            saved = {name: sys.modules[name] for name in copies if name in sys.modules}
+            rebound: list[tuple[object, str, object]] = []
+            family_pkg = self.prefix.rsplit(".", 1)[0] + "."
+            for modname, mod in list(sys.modules.items()):
+                if not modname.startswith(family_pkg) or modname.startswith(self.prefix) or mod is None:
+                    continue
+                for attr, value in list(vars(mod).items()):
+                    other = copy_of(value)
+                    if other is not None:
+                        rebound.append((mod, attr, value))
+                        setattr(mod, attr, other)
+            cells = []
+            for cell in getattr(factory, "__closure__", None) or ():
+                other = copy_of(cell.cell_contents)
+                if other is not None:
+                    cells.append((cell, cell.cell_contents))
+                    cell.cell_contents = other
+            sys.modules.update(copies)
+            try:
+                return factory()
+            finally:
+                sys.modules.update(saved)
+                for mod, attr, value in rebound:
+                    setattr(mod, attr, value)
+                for cell, value in cells:
+                    cell.cell_contents = value
+        return build
 
 
-def run_checks(family: str, stop_at_failure: bool = True) -> dict[str, object]:
+def run_checks(family: str, stop_at_failure: bool = True, shadow: Shadow | None = None,
+               modules: list[str] = ()) -> dict[str, object]:
     """The family's checks on its emulator (default variant, full profile, no state
-    machine, every opt-in as an emulator gets): the first failure's check, or the counts."""
+    machine, every opt-in as an emulator gets): the first failure's check, or the counts.
+    ``shadow``: the emulator's unit is built from that copy of the unit package (``modules``:
+    the unit modules to copy), the suite's own reference units from the original."""
     from conform.conformance.plan import Permissions
     from conform.conformance.results import Grade
     from conform.conformance.runner import RunOptions
@@ -267,6 +343,14 @@ def run_checks(family: str, stop_at_failure: bool = True) -> dict[str, object]:
     perms = Permissions.of(True, False, None, False)
     target, _ = fam.open_target(f"emu:{vid}", baud=115200, permissions=perms,
                                 inputs_control=None)
+    unit_of = None
+    if shadow is not None:
+        copies = shadow.install(list(modules))
+        target.factory = shadow.wrap(target.factory, copies)
+        target.unit, target.t = target.factory(), 0.0
+        unit_of = type(target.unit).__module__
+        if not unit_of.startswith(SHADOW):
+            raise RuntimeError(f"the emulator's unit is {unit_of}'s, not the copy's")
     first: list[str] = []
 
     def progress(result) -> None:  # noqa: ANN001
@@ -284,31 +368,32 @@ def run_checks(family: str, stop_at_failure: bool = True) -> dict[str, object]:
         try:
             run = runner.run(checks, progress)
         except _FirstFailure:
-            return {"failed": first[0], "checks": len(checks)}
+            return {"failed": first[0], "checks": len(checks), "unit_of": unit_of}
     finally:
         target.close()
     if run.aborted:
-        return {"failed": f"aborted: {run.aborted}", "checks": len(checks)}
+        return {"failed": f"aborted: {run.aborted}", "checks": len(checks), "unit_of": unit_of}
     other = {c.id: str(c.grade) for c in run.checks if c.grade is not Grade.PASS}
     return {"failed": first[0] if first else None, "checks": len(checks),
-            "not_pass": other}
+            "not_pass": other, "unit_of": unit_of}
 
 
 def child_main() -> int:
-    """``--child``: one job (JSON on stdin: family, and module/path/code to substitute or
-    none), one JSON line on stdout."""
+    """``--child``: one job as JSON on stdin (``family``; ``shadow``: the emulator runs a copy
+    of the unit, ``modules`` the unit modules copied (default: all), ``module``/``code`` the one whose source
+    is replaced; ``cpu_limit``; ``stop``), one JSON line on stdout."""
     job = json.loads(sys.stdin.read())
     if job.get("cpu_limit"):
         lim = int(job["cpu_limit"])
         resource.setrlimit(resource.RLIMIT_CPU, (lim, lim + 5))
-    sub = None
-    if job.get("code") is not None:
-        sub = Substitute(job["module"], job["path"], job["code"])
-        sys.meta_path.insert(0, sub)
+    shadow = Shadow(job["family"], job.get("module"), job.get("code")) if job.get("shadow") else None
     t0 = time.process_time()
-    result = run_checks(job["family"], stop_at_failure=job.get("stop", True))
+    every = [module_name(p) for p in sorted((family_dir(job["family"]) / "unit").glob("*.py"))]
+    result = run_checks(job["family"], stop_at_failure=job.get("stop", True), shadow=shadow,
+                        modules=job.get("modules") or every)
     prefix = f"conform.families.{job['family']}.unit"
-    result |= {"loaded": sub.loaded if sub else None, "cpu_s": round(time.process_time() - t0, 3),
+    result |= {"loaded": shadow.loaded if shadow and job.get("module") else None,
+               "cpu_s": round(time.process_time() - t0, 3),
                "unit_modules": sorted(m for m in sys.modules
                                       if m == prefix or m.startswith(prefix + "."))}
     print(json.dumps(result))

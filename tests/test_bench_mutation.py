@@ -1,7 +1,8 @@
-"""bench/bench_mutation.py's parts: a mutant's source really reaches the conformance run (a
-hand-made mutant of grbl's reference unit is killed, the same module substituted unmutated
-passes), the triage file refuses an entry without a why, and a mutant's id does not move when
-lines are added elsewhere in its file, and annotations are not mutated."""
+"""bench/bench_mutation.py's parts: a mutant's source really reaches the emulator the
+conformance run judges, and only it (a hand-made mutant of GVE's reference unit FAILs, the
+same module copied unmutated passes), the triage file refuses an entry without a why, and a
+mutant's id does not move when lines are added elsewhere in its file, and annotations are not
+mutated."""
 
 from __future__ import annotations
 
@@ -17,12 +18,12 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 import mutation_lib  # noqa: E402
 
-REPLIES = ROOT / "conform" / "families" / "grbl" / "unit" / "replies.py"
-VERSION_LINE = 'f"[VER:{v.version}.{v.build}:{info}]"'
+ANSWERS = ROOT / "conform" / "families" / "gve" / "unit" / "answers.py"
+A10_LINE = "        if a10 == 1:\n"   # A10: which lines advance the @ index
 
 
-def child(code: str) -> dict:
-    job = {"family": "grbl", "module": mutation_lib.module_name(REPLIES), "path": str(REPLIES),
+def child(code: str | None) -> dict:
+    job = {"family": "gve", "shadow": True, "module": mutation_lib.module_name(ANSWERS),
            "code": code, "cpu_limit": 60}
     r = subprocess.run([sys.executable, str(ROOT / "bench" / "mutation_lib.py"), "--child"],
                        input=json.dumps(job), capture_output=True, text=True, timeout=300,
@@ -31,15 +32,19 @@ def child(code: str) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-def test_substituted_source_reaches_the_run():
-    source = REPLIES.read_text()
-    assert source.count(VERSION_LINE) == 1
-    broken = source.replace(VERSION_LINE, VERSION_LINE.replace("{v.build}", "{v.build}x"))
-    killed = child(broken)
-    assert killed["loaded"] is True
-    assert killed["failed"] and killed["failed"].startswith(("FAIL", "ERROR")), killed
+def test_mutant_reaches_the_emulator_and_not_the_reference():
+    """GVE's checks grade the emulator's transcript against the reference unit's: a mutant
+    that reached both would pass. The hand-made one (A10 the wrong way round: the @ index
+    advanced by the lines the default does not count) FAILs its check, so only the emulator
+    runs it; the same module copied unchanged passes."""
+    source = ANSWERS.read_text()
+    assert source.count(A10_LINE) == 1
+    killed = child(source.replace(A10_LINE, A10_LINE.replace("a10 == 1", "a10 != 1")))
+    assert killed["loaded"] is True and killed["unit_of"].startswith(mutation_lib.SHADOW)
+    assert killed["failed"] and killed["failed"].startswith("FAIL"), killed
     same = child(source)
-    assert same["loaded"] is True and same["failed"] is None, same
+    assert same["loaded"] is True and same["unit_of"].startswith(mutation_lib.SHADOW)
+    assert same["failed"] is None, same
     assert same["checks"] > 100 and not same["not_pass"]
 
 
