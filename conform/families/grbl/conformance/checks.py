@@ -299,13 +299,17 @@ def _sequences(s: Session) -> Outcome:
     try:
         out = run_sequences(s, Session(reference, s.spec, s.v), s.spec, s.v,
                             emulated=s.target.emulated, profile=opts.profile, seed=opts.seed,
-                            budget=budget)
+                            budget=budget, max_steps=s.max_steps)
     finally:
         reference.close()
     want = "every answer as the reference unit's"
     notes = out.note
     if out.cut:
         notes += f"; {out.cut} examples left out by the link's time budget of {budget:g} s"
+    if out.beyond:
+        notes += (f"; {out.beyond} examples ended before a line that would move an axis more "
+                  f"than --max-steps {s.max_steps} steps (never sent to the target), the first: "
+                  f"{out.first_beyond}")
     if out.unconfirmed:
         notes += (f"; {len(out.unconfirmed)} differences not seen again on a replay, the first: "
                   f"{out.unconfirmed[0]}")
@@ -411,11 +415,12 @@ class GrblRunner(Runner):
 
     def __init__(self, target: Any, vid: str, *, spec: GrblSpec | None = None,
                  allow_motion: bool = False, allow_eeprom: bool = False,
-                 options: RunOptions | None = None) -> None:
+                 options: RunOptions | None = None, max_steps: int | None = None) -> None:
         super().__init__(target, vid, options)
         self.spec = spec or load_grbl()
         self.session = Session(target, self.spec, self.spec.variant(vid))
         self.session.options = self.options
+        self.session.max_steps = max_steps
         self.motion_ok = allow_motion or target.emulated
         self.eeprom_ok = allow_eeprom or target.emulated
 
@@ -471,15 +476,15 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
                announce: Callable[[str], None] | None = None, sequences: bool = True,
-               seed: int = 1) -> TargetRun:
+               seed: int = 1, max_steps: int | None = None) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
     interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
     ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's); ``seed``
-    draws them (the command line's default, 1)."""
+    draws them (the command line's default, 1); ``max_steps`` bounds their moves."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
-                        allow_eeprom=allow_eeprom,
+                        allow_eeprom=allow_eeprom, max_steps=max_steps,
                         options=RunOptions(profile=profile, seed=seed, notes=list(notes or []),
                                            announce=announce))
     try:
