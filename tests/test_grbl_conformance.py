@@ -246,16 +246,17 @@ class Watched(GrblUnit):
         self.planner.push = record
 
 
-def _random_moves(max_steps):
-    """The random sequences (seed 1) on a watched unit: the check's result and the steps
-    of every axis of every block the unit planned (an arc: at least its length in steps)."""
+def _moves(max_steps, patterns=("*/sequences/*",)):
+    """The checks (by default the random sequences, seed 1) on a watched unit: their results
+    and the steps of every axis of every block the unit planned (an arc: at least its length
+    in steps)."""
     import math
 
     units = []
     target = EmuTarget(lambda: units.append(Watched(V, G)) or units[-1], "emu:grbl-1.1f")
     try:
-        (c,) = run_checks(target, V.id, spec=G, patterns=["*/sequences/*"],
-                          max_steps=max_steps).checks
+        checks = run_checks(target, V.id, spec=G, patterns=list(patterns),
+                            max_steps=max_steps).checks
     finally:
         target.close()
     steps = []
@@ -266,7 +267,7 @@ def _random_moves(max_steps):
                 if getattr(move.tag, "kind", "") == "arc":
                     n = max(n, math.ceil(move.length * per_mm[i]))
                 steps.append(n)
-    return c, steps
+    return checks, steps
 
 
 def test_max_steps_bounds_every_random_move():
@@ -280,13 +281,28 @@ def test_max_steps_bounds_every_random_move():
     runner = family("grbl").runner(EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f"), V.id,
                                    permissions=Permissions.of(True, True, 10, True))
     assert runner.session.max_steps == 10          # --max-steps reaches the sequences
-    c, steps = _random_moves(10)
+    (c,), steps = _moves(10)
     assert c.grade is Grade.PASS, c.actual
     assert "than --max-steps 10 steps (never sent to the target), the first: " in c.actual
     assert all(n <= 10 for n in steps), max(steps)
-    c, steps = _random_moves(None)
+    (c,), steps = _moves(None)
     assert c.grade is Grade.PASS and "--max-steps" not in c.actual
     assert max(steps) > 10
+
+
+def test_max_steps_skips_a_directed_check_that_moves_further():
+    """A directed check whose moves take an axis further than --max-steps on the reference
+    unit is SKIPPED and saying so; those that stay within it run, and nothing the target
+    planned went further."""
+    checks, steps = _moves(2000, patterns=("*/alarm_codes/*", "*/realtime/*", "*/error/8"))
+    skipped = {c.id.split("/", 1)[1]: c.detail for c in checks if c.grade is Grade.SKIPPED}
+    assert skipped["alarm_codes/alarm/3"] == ("moves an axis 5000 steps (the reference unit "
+                                              "from power-up): beyond --max-steps 2000")
+    assert "error_codes/error/8" not in skipped                  # 1250 steps: it runs
+    assert all(c.grade is Grade.PASS for c in checks if c.grade is not Grade.SKIPPED)
+    assert steps and max(steps) <= 2000
+    unbound, steps = _moves(None, patterns=("*/alarm_codes/alarm/3",))
+    assert unbound[0].grade is Grade.PASS and max(steps) == 5000
 
 
 @pytest.mark.slow

@@ -425,12 +425,44 @@ class GrblRunner(Runner):
         self.eeprom_ok = allow_eeprom or target.emulated
 
     def run_check(self, check: GrblCheck) -> CheckResult:
-        result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
+        bound = self.session.max_steps
+        far = self._farthest(check) if bound is not None and check.motion and \
+            self.motion_ok and not check.id.endswith(SEQUENCES) else 0
+        if bound is not None and far > bound:
+            result = CheckResult(id=check.id, clause=check.clause, level=check.level,
+                                 title=check.title, grade=Grade.SKIPPED,
+                                 detail=f"moves an axis {far} steps (the reference unit from "
+                                        f"power-up): beyond --max-steps {bound}")
+        else:
+            result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
         result.variant, result.target = self.variant_id, self.target.name
         if check.id.endswith(SEQUENCES):
             result.seed = self.options.seed
             result.replay = f"{check.id}@{self.options.seed}"
         return result
+
+    def _farthest(self, check: GrblCheck) -> int:
+        """The most whole steps a block of ``check`` takes an axis, on the reference unit
+        started at power-up (the random sequences weigh each line themselves)."""
+        from conform.conformance.target import EmuTarget
+        from conform.families.grbl.conformance.machine import Weighed
+
+        units: list[Weighed] = []
+
+        def make() -> Weighed:
+            units.append(Weighed(self.session.v, self.spec))
+            return units[-1]
+
+        sim = EmuTarget(make, "weigh", baud=self.target.baud)
+        try:
+            s = Session(sim, self.spec, self.session.v)
+            s.fresh()
+            check.run(s)
+        except HarnessError:
+            pass
+        finally:
+            sim.close()
+        return max(u.farthest for u in units)
 
     def halt(self, after_silence: bool = False) -> str:
         return stop_unit(self.target)

@@ -38,6 +38,7 @@ from conform.conformance.target import HarnessError
 from conform.families.grbl.conformance.readback import read_eeprom, read_state
 from conform.families.grbl.spec.load import GrblSpec, Variant
 from conform.families.grbl.unit.adopt import UnitState, start_from
+from conform.families.grbl.unit.model import GrblUnit
 
 PROFILES = {"quick": (60, 15), "full": (300, 30)}   # examples, steps per example
 LINK_BUDGET = {"quick": 45.0, "full": 900.0}      # s of examples on a link
@@ -179,14 +180,9 @@ class Pair:
         moves = list(self.planned)
         self.planned.clear()
         for mv in moves:
-            arc = getattr(mv.tag, "kind", "") == "arc"
-            for i, (a, b) in enumerate(zip(mv.start, mv.end, strict=True)):
-                per_mm = max(unit.settings.get(100 + i, 0.0), 0.0)
-                steps = abs(_lround(b * per_mm) - _lround(a * per_mm))
-                if arc:                     # any point of an arc: within its length
-                    steps = max(steps, math.ceil(mv.length * per_mm))
-                if steps > (self.max_steps or 0):
-                    return f"{'XYZ'[i]} {steps} steps"
+            axis, steps = block_steps(unit, mv)
+            if steps > (self.max_steps or 0):
+                return f"{axis} {steps} steps"
         if unit.rx or unit._pending is not None:
             return "a line the reference could not plan yet"
         return ""
@@ -253,6 +249,38 @@ class Pair:
 def _lround(x: float) -> int:
     """C's lround: half away from zero (planner.c plan_buffer_line's target steps)."""
     return int(math.copysign(math.floor(abs(x) + 0.5), x))
+
+
+def block_steps(unit: Any, move: Any) -> tuple[str, int]:
+    """The axis a planner block takes furthest and by how many whole steps ($100-$102 in
+    force, each end as planner.c rounds it); an arc's every point lies within its length."""
+    arc = getattr(move.tag, "kind", "") == "arc"
+    best = ("X", 0)
+    for i, (a, b) in enumerate(zip(move.start, move.end, strict=True)):
+        per_mm = max(unit.settings.get(100 + i, 0.0), 0.0)
+        steps = abs(_lround(b * per_mm) - _lround(a * per_mm))
+        if arc:
+            steps = max(steps, math.ceil(move.length * per_mm))
+        if steps > best[1]:
+            best = ("XYZ"[i], steps)
+    return best
+
+
+class Weighed(GrblUnit):
+    """The reference unit keeping the most whole steps any block it plans takes an axis,
+    across its resets (a check's own ``farthest`` move)."""
+
+    farthest = 0
+
+    def _reset(self, t: float, power_up: bool = False, announce: float | None = None) -> None:
+        super()._reset(t, power_up, announce)
+        push = self.planner.push
+
+        def weigh(move: Any) -> None:
+            if move.kind not in ("dwell", "pause", "end", "marker"):
+                self.farthest = max(self.farthest, block_steps(self, move)[1])
+            push(move)
+        self.planner.push = weigh  # type: ignore[method-assign]
 
 
 def _minimize(pair: Pair, out: Outcome, until: float | None) -> None:
