@@ -296,8 +296,9 @@ def test_max_steps_skips_a_directed_check_that_moves_further():
     planned went further."""
     checks, steps = _moves(2000, patterns=("*/alarm_codes/*", "*/realtime/*", "*/error/8"))
     skipped = {c.id.split("/", 1)[1]: c.detail for c in checks if c.grade is Grade.SKIPPED}
-    assert skipped["alarm_codes/alarm/3"] == ("moves an axis 5000 steps (the reference unit "
-                                              "from power-up): beyond --max-steps 2000")
+    assert skipped["alarm_codes/alarm/3"] == (
+        "moves an axis 5000 steps, beyond --max-steps 2000 (the reference unit from power-up; "
+        "enable with --max-steps 5000)")
     assert "error_codes/error/8" not in skipped                  # 1250 steps: it runs
     assert all(c.grade is Grade.PASS for c in checks if c.grade is not Grade.SKIPPED)
     assert steps and max(steps) <= 2000

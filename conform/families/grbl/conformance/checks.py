@@ -431,8 +431,9 @@ class GrblRunner(Runner):
         if bound is not None and far > bound:
             result = CheckResult(id=check.id, clause=check.clause, level=check.level,
                                  title=check.title, grade=Grade.SKIPPED,
-                                 detail=f"moves an axis {far} steps (the reference unit from "
-                                        f"power-up): beyond --max-steps {bound}")
+                                 detail=f"moves an axis {far} steps, beyond --max-steps {bound} "
+                                        f"(the reference unit from power-up; enable with "
+                                        f"--max-steps {far})")
         else:
             result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
         result.variant, result.target = self.variant_id, self.target.name
