@@ -233,6 +233,79 @@ def test_random_sequences_still_catch_a_deviant_unit():
     assert "replay: '$\\n'" in r.actual and "$SLP" in r.actual
 
 
+class Watched(GrblUnit):
+    """The reference unit that keeps every block it plans, with its steps/mm at that moment."""
+
+    def _reset(self, t, power_up=False, announce=None):
+        super()._reset(t, power_up, announce)
+        push, self.moves = self.planner.push, getattr(self, "moves", [])
+
+        def record(move):
+            self.moves.append((move, [self.settings[100 + i] for i in range(3)]))
+            push(move)
+        self.planner.push = record
+
+
+def _moves(max_steps, patterns=("*/sequences/*",)):
+    """The checks (by default the random sequences, seed 1) on a watched unit: their results
+    and the steps of every axis of every block the unit planned (an arc: at least its length
+    in steps)."""
+    import math
+
+    units = []
+    target = EmuTarget(lambda: units.append(Watched(V, G)) or units[-1], "emu:grbl-1.1f")
+    try:
+        checks = run_checks(target, V.id, spec=G, patterns=list(patterns),
+                            max_steps=max_steps).checks
+    finally:
+        target.close()
+    steps = []
+    for unit in units:
+        for move, per_mm in getattr(unit, "moves", []):
+            for i in range(3):
+                n = abs(round(move.end[i] * per_mm[i]) - round(move.start[i] * per_mm[i]))
+                if getattr(move.tag, "kind", "") == "arc":
+                    n = max(n, math.ceil(move.length * per_mm[i]))
+                steps.append(n)
+    return checks, steps
+
+
+def test_max_steps_bounds_every_random_move():
+    """With --max-steps 10 no line of the random sequences moves an axis of the target more
+    than 10 steps (an arc not more than 10 steps along its length): the lines that would are
+    never sent, the examples end there, and the result says so. The same seed without the
+    bound moves further."""
+    from conform.conformance.plan import Permissions
+    from conform.families import family
+
+    runner = family("grbl").runner(EmuTarget(lambda: GrblUnit(V, G), "emu:grbl-1.1f"), V.id,
+                                   permissions=Permissions.of(True, True, 10, True))
+    assert runner.session.max_steps == 10          # --max-steps reaches the sequences
+    (c,), steps = _moves(10)
+    assert c.grade is Grade.PASS, c.actual
+    assert "than --max-steps 10 steps (never sent to the target), the first: " in c.actual
+    assert all(n <= 10 for n in steps), max(steps)
+    (c,), steps = _moves(None)
+    assert c.grade is Grade.PASS and "--max-steps" not in c.actual
+    assert max(steps) > 10
+
+
+def test_max_steps_skips_a_directed_check_that_moves_further():
+    """A directed check whose moves take an axis further than --max-steps on the reference
+    unit is SKIPPED and saying so; those that stay within it run, and nothing the target
+    planned went further."""
+    checks, steps = _moves(2000, patterns=("*/alarm_codes/*", "*/realtime/*", "*/error/8"))
+    skipped = {c.id.split("/", 1)[1]: c.detail for c in checks if c.grade is Grade.SKIPPED}
+    assert skipped["alarm_codes/alarm/3"] == (
+        "moves an axis 5000 steps, beyond --max-steps 2000 (the reference unit from power-up; "
+        "enable with --max-steps 5000)")
+    assert "error_codes/error/8" not in skipped                  # 1250 steps: it runs
+    assert all(c.grade is Grade.PASS for c in checks if c.grade is not Grade.SKIPPED)
+    assert steps and max(steps) <= 2000
+    unbound, steps = _moves(None, patterns=("*/alarm_codes/alarm/3",))
+    assert unbound[0].grade is Grade.PASS and max(steps) == 5000
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [3, 17])
 def test_random_sequences_agree_over_a_pty_from_where_the_machine_stands(tmp_path, seed):

@@ -124,3 +124,21 @@ def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_
             assert eeprom(port) == before
     finally:
         emulated.stop(proc)
+
+
+def test_a_reset_puts_the_parser_on_the_whole_steps_the_motors_made():
+    """main.c after a reset: gc_sync_position. X0.0019 is 0.475 of a step at $100=250, so the
+    motor made none: after the reset G92X0 sets the offset from X0, not from X0.0019."""
+    *_, params = _answers((b"G1X0.0019F100\n", b"G4P0.2\n", b"\x18", b"G92X0\n", b"$#\n"))
+    assert "[G92:0.000,0.000,0.000]" in params, params
+
+
+def test_the_reference_adopts_the_position_in_whole_steps():
+    """At 80 steps/mm a step is 0.0125 mm and the report's three decimals round it; the
+    reference takes it back to the step (81 steps, not 1.013 mm)."""
+    from conform.families.grbl.unit.adopt import UnitState, start_from
+
+    unit = GrblUnit(V, G)
+    start_from(unit, UnitState(position=[1.013, -0.988, 0.0],
+                               settings={100: 80.0, 101: 80.0, 102: 250.0}))
+    assert unit.parser_position() == [81 / 80, -79 / 80, 0.0]

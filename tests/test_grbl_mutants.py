@@ -91,7 +91,9 @@ def test_random_sequences_agree_on_the_reference():
 FROM_STATE = [n for n, m in MUTANTS.items() if all(p.startswith("from_state/") for p in m.catches)]
 DEFAULT_RUN = {"g92-ignores-tlo", "g92-zeroes-other-axes", "g92.1-no-wco-refresh", "g43.1-adds",
                "g43.1-ignores-inches", "g90.1-accepted", "m30-keeps-coord", "reset-keeps-g92",
-               "reset-keeps-overrides", "check-exit-keeps-modes", "feed-reset-resets-all"}
+               "reset-keeps-overrides", "check-exit-keeps-modes", "feed-reset-resets-all",
+               "g49-keeps-tlo", "g91.1-as-g91", "g21-sets-g90", "g54-clears-g92", "g17-ignored",
+               "g80-ignored", "g93-ignored"}
 
 
 def test_the_from_state_mutants_are_new_bug_classes(report):

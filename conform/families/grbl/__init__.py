@@ -103,10 +103,12 @@ class GrblFamily(Family):
         halt by feed hold then soft reset."""
         from conform.families.grbl.conformance.checks import GrblRunner
 
+        max_steps = None
         if permissions is not None:
             allow_motion, allow_eeprom = permissions.allow_motion, permissions.allow_eeprom
+            max_steps = permissions.max_steps
         return GrblRunner(target, variant, allow_motion=allow_motion, allow_eeprom=allow_eeprom,
-                          options=options)
+                          options=options, max_steps=max_steps)
 
     def plan_checks(self, variant: str, *, permissions: Permissions, profile: str = "quick",
                     patterns: Sequence[str] = (), machine: bool = True, **_: Any) -> Sequence[Check]:

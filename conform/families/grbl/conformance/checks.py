@@ -299,13 +299,17 @@ def _sequences(s: Session) -> Outcome:
     try:
         out = run_sequences(s, Session(reference, s.spec, s.v), s.spec, s.v,
                             emulated=s.target.emulated, profile=opts.profile, seed=opts.seed,
-                            budget=budget)
+                            budget=budget, max_steps=s.max_steps)
     finally:
         reference.close()
     want = "every answer as the reference unit's"
     notes = out.note
     if out.cut:
         notes += f"; {out.cut} examples left out by the link's time budget of {budget:g} s"
+    if out.beyond:
+        notes += (f"; {out.beyond} examples ended before a line that would move an axis more "
+                  f"than --max-steps {s.max_steps} steps (never sent to the target), the first: "
+                  f"{out.first_beyond}")
     if out.unconfirmed:
         notes += (f"; {len(out.unconfirmed)} differences not seen again on a replay, the first: "
                   f"{out.unconfirmed[0]}")
@@ -411,21 +415,55 @@ class GrblRunner(Runner):
 
     def __init__(self, target: Any, vid: str, *, spec: GrblSpec | None = None,
                  allow_motion: bool = False, allow_eeprom: bool = False,
-                 options: RunOptions | None = None) -> None:
+                 options: RunOptions | None = None, max_steps: int | None = None) -> None:
         super().__init__(target, vid, options)
         self.spec = spec or load_grbl()
         self.session = Session(target, self.spec, self.spec.variant(vid))
         self.session.options = self.options
+        self.session.max_steps = max_steps
         self.motion_ok = allow_motion or target.emulated
         self.eeprom_ok = allow_eeprom or target.emulated
 
     def run_check(self, check: GrblCheck) -> CheckResult:
-        result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
+        bound = self.session.max_steps
+        far = self._farthest(check) if bound is not None and check.motion and \
+            self.motion_ok and not check.id.endswith(SEQUENCES) else 0
+        if bound is not None and far > bound:
+            result = CheckResult(id=check.id, clause=check.clause, level=check.level,
+                                 title=check.title, grade=Grade.SKIPPED,
+                                 detail=f"moves an axis {far} steps, beyond --max-steps {bound} "
+                                        f"(the reference unit from power-up; enable with "
+                                        f"--max-steps {far})")
+        else:
+            result = _one(self.session, check, self.motion_ok, self.eeprom_ok)
         result.variant, result.target = self.variant_id, self.target.name
         if check.id.endswith(SEQUENCES):
             result.seed = self.options.seed
             result.replay = f"{check.id}@{self.options.seed}"
         return result
+
+    def _farthest(self, check: GrblCheck) -> int:
+        """The most whole steps a block of ``check`` takes an axis, on the reference unit
+        started at power-up (the random sequences weigh each line themselves)."""
+        from conform.conformance.target import EmuTarget
+        from conform.families.grbl.conformance.machine import Weighed
+
+        units: list[Weighed] = []
+
+        def make() -> Weighed:
+            units.append(Weighed(self.session.v, self.spec))
+            return units[-1]
+
+        sim = EmuTarget(make, "weigh", baud=self.target.baud)
+        try:
+            s = Session(sim, self.spec, self.session.v)
+            s.fresh()
+            check.run(s)
+        except HarnessError:
+            pass
+        finally:
+            sim.close()
+        return max(u.farthest for u in units)
 
     def halt(self, after_silence: bool = False) -> str:
         return stop_unit(self.target)
@@ -471,15 +509,15 @@ def run_checks(target: Any, vid: str, *, patterns: Sequence[str] = (), profile: 
                progress: Callable[[CheckResult], None] | None = None,
                spec: GrblSpec | None = None,
                announce: Callable[[str], None] | None = None, sequences: bool = True,
-               seed: int = 1) -> TargetRun:
+               seed: int = 1, max_steps: int | None = None) -> TargetRun:
     """Run the checks on an open target (EmuTarget or LinkTarget) in the engine's runner; an
     interrupted run comes back with ``aborted`` saying what was sent to stop the unit.
     ``sequences=False`` leaves the random sequences out (the mutant run, as GVE's); ``seed``
-    draws them (the command line's default, 1)."""
+    draws them (the command line's default, 1); ``max_steps`` bounds their moves."""
     from conform.conformance.runner import RunAborted
 
     runner = GrblRunner(target, vid, spec=spec, allow_motion=allow_motion,
-                        allow_eeprom=allow_eeprom,
+                        allow_eeprom=allow_eeprom, max_steps=max_steps,
                         options=RunOptions(profile=profile, seed=seed, notes=list(notes or []),
                                            announce=announce))
     try:

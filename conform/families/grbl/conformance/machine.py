@@ -13,10 +13,17 @@ G/M codes with and without fractions, value words with edge values), so the pars
 of checks is exercised far beyond the directed checks. Answers are compared line by line;
 on a unit behind a link, status reports are compared by their state only (positions and
 feeds there follow real time), on an emulated one exactly.
+
+With ``--max-steps N`` no random line moves an axis further than N steps: each step goes to
+the reference unit first, and when a block it planned would take an axis more than N whole
+steps ($100-$102 in force, planner.c's lround of each end) -- or its arc's length more than
+N steps -- or the reference still holds a line it could not plan yet (a pause, a hold), the
+example ends there and that step never reaches the target.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -31,6 +38,7 @@ from conform.conformance.target import HarnessError
 from conform.families.grbl.conformance.readback import read_eeprom, read_state
 from conform.families.grbl.spec.load import GrblSpec, Variant
 from conform.families.grbl.unit.adopt import UnitState, start_from
+from conform.families.grbl.unit.model import GrblUnit
 
 PROFILES = {"quick": (60, 15), "full": (300, 30)}   # examples, steps per example
 LINK_BUDGET = {"quick": 45.0, "full": 900.0}      # s of examples on a link
@@ -81,11 +89,19 @@ class Outcome:
     unconfirmed: list[str] = field(default_factory=list)   # differences no replay showed again
     error: HarnessError | None = None                   # the link failed: the run stops
     note: str = ""                                      # what the run left changed on the unit
+    beyond: int = 0                # examples ended before a step beyond --max-steps
+    first_beyond: str = ""         # the first such step, and why
+
+
+class Beyond(Exception):
+    """A step the target must not get: it would move further than the run's bound."""
 
 
 def compare_step(target_session: Any, reference_session: Any, data: bytes,
-                 normalize: Callable[[list[str]], list[str]]) -> str:
-    """Send ``data`` to both; how their answers differ ("" when they agree)."""
+                 normalize: Callable[[list[str]], list[str]],
+                 guard: Callable[[], str] | None = None) -> str:
+    """Send ``data`` to both; how their answers differ ("" when they agree). ``guard``, asked
+    after the reference has taken the step, names why the target must not (:class:`Beyond`)."""
     lines = data.count(b"\n")
     status = data.count(b"?") if not lines else 0
     # the reference says how many answers to wait for: a held unit (feed hold, M0) answers its
@@ -93,6 +109,9 @@ def compare_step(target_session: Any, reference_session: Any, data: bytes,
     # sent would cost the target's whole timeout at every step of a hold
     ref = reference_session.talk(data, answers=lines, status=status, timeout=3.0, linger=0.05)
     answers = sum(1 for x in ref.lines if x == "ok" or x.startswith("error:"))
+    stop = guard() if guard is not None else ""
+    if stop:
+        raise Beyond(stop)
     tgt = target_session.talk(data, answers=answers, status=status, timeout=3.0, linger=0.05)
     got = [normalize(tgt.lines), normalize(ref.lines)]
     if got[0] == got[1]:
@@ -110,8 +129,12 @@ class Pair:
     jitter would decide which side of it each unit answers from."""
 
     def __init__(self, target_session: Any, reference_session: Any,
-                 normalize: Callable[[list[str]], list[str]]) -> None:
+                 normalize: Callable[[list[str]], list[str]], max_steps: int | None = None
+                 ) -> None:
         self.t, self.r, self.normalize = target_session, reference_session, normalize
+        self.max_steps = max_steps
+        self.planned: list[Any] = []   # the reference's blocks not yet weighed against it
+        self.beyond, self.first_beyond = 0, ""
         self.linked = not target_session.target.emulated
         self.known: UnitState | None = None
         self.first: UnitState | None = None   # the target's state before the first example
@@ -138,6 +161,31 @@ class Pair:
                     f"the reference could not start from the target's state: after {data!r} "
                     f"the target answered {' | '.join(lines)}, the reference {' | '.join(theirs)}")
         self.offset = t.target.now() - r.target.now()
+        if self.max_steps is not None:
+            self._record(r.target.unit.planner)
+
+    def _record(self, planner: Any) -> None:
+        """Keep every block the reference plans from now on in ``planned``."""
+        push, planned = planner.push, self.planned
+        planned.clear()
+
+        def record(move: Any) -> None:
+            planned.append(move)
+            push(move)
+        planner.push = record
+
+    def _too_far(self) -> str:
+        """Why the step the reference just took must not reach the target ("" if it may)."""
+        unit = self.r.target.unit
+        moves = list(self.planned)
+        self.planned.clear()
+        for mv in moves:
+            axis, steps = block_steps(unit, mv)
+            if steps > (self.max_steps or 0):
+                return f"{axis} {steps} steps"
+        if unit.rx or unit._pending is not None:
+            return "a line the reference could not plan yet"
+        return ""
 
     def put_back(self) -> str:
         """A unit behind a link keeps the G54-G59 offsets the examples wrote (EEPROM): write
@@ -183,13 +231,56 @@ class Pair:
     def run(self, steps: Sequence[bytes]) -> tuple[str, int]:
         """Start, then send ``steps``: the first difference and its step ("", -1 if none)."""
         self.start()
+        guard = self._too_far if self.max_steps is not None else None
         for i, data in enumerate(steps):
             if self.linked:
                 self._settle()
-            why = compare_step(self.t, self.r, data, self.normalize)
+            try:
+                why = compare_step(self.t, self.r, data, self.normalize, guard)
+            except Beyond as exc:
+                self.beyond += 1
+                self.first_beyond = self.first_beyond or f"{data!r} ({exc})"
+                return "", -1
             if why:
                 return why, i
         return "", -1
+
+
+def _lround(x: float) -> int:
+    """C's lround: half away from zero (planner.c plan_buffer_line's target steps)."""
+    return int(math.copysign(math.floor(abs(x) + 0.5), x))
+
+
+def block_steps(unit: Any, move: Any) -> tuple[str, int]:
+    """The axis a planner block takes furthest and by how many whole steps ($100-$102 in
+    force, each end as planner.c rounds it); an arc's every point lies within its length."""
+    arc = getattr(move.tag, "kind", "") == "arc"
+    best = ("X", 0)
+    for i, (a, b) in enumerate(zip(move.start, move.end, strict=True)):
+        per_mm = max(unit.settings.get(100 + i, 0.0), 0.0)
+        steps = abs(_lround(b * per_mm) - _lround(a * per_mm))
+        if arc:
+            steps = max(steps, math.ceil(move.length * per_mm))
+        if steps > best[1]:
+            best = ("XYZ"[i], steps)
+    return best
+
+
+class Weighed(GrblUnit):
+    """The reference unit keeping the most whole steps any block it plans takes an axis,
+    across its resets (a check's own ``farthest`` move)."""
+
+    farthest = 0
+
+    def _reset(self, t: float, power_up: bool = False, announce: float | None = None) -> None:
+        super()._reset(t, power_up, announce)
+        push = self.planner.push
+
+        def weigh(move: Any) -> None:
+            if move.kind not in ("dwell", "pause", "end", "marker"):
+                self.farthest = max(self.farthest, block_steps(self, move)[1])
+            push(move)
+        self.planner.push = weigh  # type: ignore[method-assign]
 
 
 def _minimize(pair: Pair, out: Outcome, until: float | None) -> None:
@@ -240,12 +331,13 @@ def link_budget(options: Any) -> float:
 
 def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v: Variant, *,
                   emulated: bool, profile: str = "quick", seed: int = 0,
-                  budget: float | None = None) -> Outcome:
+                  budget: float | None = None, max_steps: int | None = None) -> Outcome:
     """Random examples, each drawn whole before it is sent (what the target answers never
     changes what is drawn, so hypothesis can replay and shrink an example against any
     target); an Outcome whose ``steps`` is empty when every example agreed. A difference
     counts only when a replay of the example shows it again. ``budget``: wall seconds for the
-    examples (a link); those left out are counted in ``cut``."""
+    examples (a link); those left out are counted in ``cut``. ``max_steps``: no step that
+    would move an axis further reaches the target (those examples end there, in ``beyond``)."""
     examples, steps = PROFILES.get(profile, PROFILES["quick"])
     out = Outcome()
 
@@ -254,7 +346,7 @@ def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v
             return lines
         return [x.split("|", 1)[0] + ">" if x.startswith("<") else x for x in lines]
 
-    pair = Pair(target_session, reference_session, normalize)
+    pair = Pair(target_session, reference_session, normalize, max_steps)
     verdicts: dict[tuple[bytes, ...], str] = {}
     t0 = time.perf_counter()
     ends = {"examples": None if budget is None else t0 + budget, "shrink": None}
@@ -292,6 +384,7 @@ def run_sequences(target_session: Any, reference_session: Any, spec: GrblSpec, v
         else:
             out.steps, out.why = found
     out.note = pair.put_back()
+    out.beyond, out.first_beyond = pair.beyond, pair.first_beyond
     return out
 
 

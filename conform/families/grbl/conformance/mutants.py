@@ -263,6 +263,44 @@ class G431IgnoresInches(_Block):
             block.modal.tlo /= 25.4
 
 
+def _rewrite(pattern: str, into: str) -> type[GrblUnit]:
+    """A :class:`_Rewritten` unit taking ``pattern`` as ``into``."""
+    return type("Rewritten", (_Rewritten,), {"pattern": re.compile(pattern), "into": into})
+
+
+class _Kept(_Block):
+    """A word that is checked and accepted but not applied: ``field`` of the parser state
+    stays as it was (a case missing from the switch that executes it)."""
+
+    field = ""
+
+    def change(self, block: Block) -> None:
+        setattr(block.modal, self.field, getattr(self.modal, self.field))
+
+
+def _kept(word: str, field: str) -> type[GrblUnit]:
+    """A :class:`_Kept` unit: G``word`` leaves ``field``."""
+    return type("Kept", (_Kept,), {"when": re.compile(rf"G{word}(?![\d.])"), "field": field})
+
+
+class G21SetsG90(_Block):
+    """G21 also puts the distance mode back to G90 (a units change resetting its neighbour)."""
+
+    when = re.compile(r"G21(?![\d.])")
+
+    def change(self, block: Block) -> None:
+        block.modal.distance = "90"
+
+
+class G54ClearsG92(_Block):
+    """Selecting G54 clears the G92 offset (a system select taken as G92.1 too)."""
+
+    when = re.compile(r"G54(?![\d.])")
+
+    def change(self, block: Block) -> None:
+        block.modal.g92 = [0.0, 0.0, 0.0]
+
+
 class M30KeepsCoord(GrblUnit):
     """M30 keeps the coordinate system (M2 resets it to G54)."""
 
@@ -559,6 +597,22 @@ MUTANTS: dict[str, Mutant] = {m.name: m for m in (
            ("from_state/effect/rst-star",), RstStarKeepsStartup),
     Mutant("axis-setting-spills", "an axis setting written is written to the next axis too",
            ("from_state/effect/setting-writes",), AxisSettingSpills),
+    Mutant("g49-keeps-tlo", "G49 is accepted and leaves the tool length offset",
+           ("from_state/effect/g49",), _kept("49", "tlo")),
+    Mutant("g91.1-as-g91", "G91.1 is taken as G91 (distance mode, not arc mode)",
+           ("from_state/effect/g91.1",), _rewrite(r"G91\.1", "G91")),
+    Mutant("g21-sets-g90", "G21 also puts the distance mode back to G90",
+           ("from_state/effect/modal-words",), G21SetsG90),
+    Mutant("g54-clears-g92", "selecting G54 clears the G92 offset",
+           ("from_state/effect/modal-words",), G54ClearsG92),
+    Mutant("g17-ignored", "G17 is accepted and leaves the plane",
+           ("from_state/effect/modal-words",), _kept("17", "plane")),
+    Mutant("g80-ignored", "G80 is accepted and leaves the motion mode",
+           ("from_state/effect/modal-words",), _kept("80", "motion")),
+    Mutant("g93-ignored", "G93 is accepted and leaves the feed rate mode",
+           ("from_state/effect/modal-words",), _kept("93", "feed_mode")),
+    Mutant("g10-p0-as-g54", "G10 L2 P0 writes G54, not the active system",
+           ("from_state/effect/g10-l2-p0",), _rewrite(r"(G10.*)P0(?![\d.])", r"\1P1")),
 )}
 
 

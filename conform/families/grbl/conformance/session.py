@@ -40,6 +40,7 @@ class Session:
         self.original: dict[int, str] | None = None   # a real unit's settings before the run
         self.dirty = False
         self.options = RunOptions()   # the run's profile, seed and budgets (the runner's)
+        self.max_steps: int | None = None   # --max-steps: the bound on every random move
 
     def settings(self) -> dict[int, str]:
         out = {}

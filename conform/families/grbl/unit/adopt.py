@@ -55,8 +55,12 @@ def start_from(unit: GrblUnit, s: UnitState) -> None:
     ee.coords = [list(c) for c in s.coords]
     ee.g28, ee.g30 = list(s.g28), list(s.g30)
     unit.modal = _modal(s)
-    unit.planner.clear(list(s.position))
-    unit._check_pos = list(s.position)
+    # grbl counts its position in whole steps (sys_position) and, after the reset that starts
+    # every check, its parser stands on them too (main.c gc_sync_position): the report's three
+    # decimals are taken back to the step they print (exact below 1000 steps/mm)
+    position = unit._in_steps(list(s.position))
+    unit.planner.clear(position)
+    unit._check_pos = list(position)
     unit.prb, unit.prb_ok = list(s.prb), s.prb_ok
     unit.state = "Alarm" if s.state == "Alarm" else "Idle"
 

@@ -680,7 +680,9 @@ class GrblUnit:
     def _reset(self, t: float, power_up: bool = False, announce: float | None = None) -> None:
         while self._n_coded < len(getattr(self, "taken", None) or ()):
             self._code_taken(None)           # lines parsed but never answered: dropped
-        pos = self.planner.where(t)[0] if not power_up else [0.0] * 3
+        # main.c after a reset: plan_sync_position, gc_sync_position -- the parser and the
+        # planner start again from sys_position, the whole steps the motors made
+        pos = self._in_steps(self.planner.where(t)[0]) if not power_up else [0.0] * 3
         a = [self.settings[120 + i] for i in range(3)]
         r = [self.settings[110 + i] / 60.0 for i in range(3)]
         self.planner = Planner(self.v.planner_blocks, r, a, self.settings[11])
