@@ -98,6 +98,43 @@ def test_conform_run_over_the_pty(tmp_path):
 
 
 @pytest.mark.slow
+def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch):
+    """Every check with every opt-in (--allow-motion, --allow-eeprom, the heaters) against
+    `conform emulate serve marlin-2.1` on a pty, at 1 000 000 Bd (M575's fastest rate): the
+    runner treats it as a real board. Nothing FAILs or ERRORs; the two halt checks a real
+    board cannot run one after the other are SKIPPED naming the one that runs last; the report
+    says what the run changed on the unit and that it is left halted until reset. Most of
+    its wall time is the unit's own: G28 (16 s on this build), M109/M190's 10 s residency,
+    moves timed on the real clock, and 0.1 s after each inspected answer for a late line."""
+    monkeypatch.setenv("CONFORM_MARLIN_ALLOW_HEATERS", "1")
+    proc, path, _ = emulated.serve("serve", "marlin-2.1", "--baud", "1000000")
+    try:
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
+                            "marlin-2.1", "--baud", "1000000", "--report", str(tmp_path), "-q",
+                            "--allow-motion", "--max-steps", "100000", "--allow-eeprom"],
+                           capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, p.stdout + p.stderr
+        checks = json.loads((tmp_path / "results.json").read_text())["checks"]
+        grades = [c["grade"] for c in checks]
+        assert len(checks) >= 150
+        assert grades.count("FAIL") == 0 and grades.count("ERROR") == 0, [
+            (c["id"], c["actual"]) for c in checks if c["grade"] in ("FAIL", "ERROR")]
+        skipped = [c for c in checks if c["grade"] == "SKIPPED"]
+        assert {c["id"].rsplit("/", 1)[-1] for c in skipped} == {"m112", "m112-while-busy"}
+        assert grades.count("PASS") == len(checks) - len(skipped) - grades.count(
+            "NOT-APPLICABLE")
+        assert "left halted" in checks[-1]["detail"]
+        summary = (tmp_path / "summary.md").read_text()
+        for said in ("put back what M503, M220, M221 read before each check",
+                     "EEPROM checks end with M500", "motion checks home (G28)",
+                     "leave the unit halted until it is reset",
+                     "checks that heat run (CONFORM_MARLIN_ALLOW_HEATERS=1)"):
+            assert said in summary, said
+    finally:
+        stop(proc)
+
+
+@pytest.mark.slow
 def test_a_real_unit_is_halted_once_by_the_last_halt_check(tmp_path):
     """Over a pty (not emulated for the runner) with --allow-motion: of the three checks that
     leave the unit halted only the last planned one runs, after every other check, and says
