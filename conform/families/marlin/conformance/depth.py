@@ -72,7 +72,8 @@ def _line(code: str, values: list[float]) -> bytes:
 
 
 def read_values(s: Session) -> Values:
-    got = s.talk(b"M503\n")
+    """M503's setting lines (its ok ends the answer: nothing is waited for after it)."""
+    got = s.talk(b"M503\n", linger=0.0)
     out: Values = {}
     for line in got.lines:
         m = _REPORT.match(line)
@@ -90,8 +91,8 @@ def _only(got: Talk, s: Session) -> list[str]:
 
 
 def read_state(s: Session) -> State:
-    fr = _only(s.talk(b"M220\n"), s)
-    flow = _only(s.talk(b"M221\n"), s)
+    fr = _only(s.talk(b"M220\n", linger=0.0), s)
+    flow = _only(s.talk(b"M221\n", linger=0.0), s)
     return State(read_values(s), fr[0] if len(fr) == 1 else " | ".join(fr),
                  flow[0] if len(flow) == 1 else " | ".join(flow))
 
