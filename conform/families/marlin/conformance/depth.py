@@ -912,7 +912,8 @@ def command_checks(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
             s.talk(_m302_restore(was))
             s.talk(b"G92 E0\n")
     add("M302", "motion", "m302-p1-extrudes", "M302 P1: G1 E1 with a cold hotend extrudes "
-        "(no 'cold extrusion prevented')", cold, motion=True,
+        "(no 'cold extrusion prevented'; on a printer: 1 mm of filament into a cold nozzle)", cold,
+        motion=True,
         cite=cmd["M302"] + "; planner.cpp _populate_block")
 
     # M303: only the error form (a valid one heats for minutes)
