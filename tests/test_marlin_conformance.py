@@ -97,6 +97,64 @@ def test_conform_run_over_the_pty(tmp_path):
         stop(proc)
 
 
+def _run_over_a_pty(tmp_path, *opt_ins: str) -> tuple[list[dict], str]:
+    """`conform run` of every check against `conform emulate serve marlin-2.1` on a pty at
+    1 000 000 Bd (M575's fastest rate; the runner treats the pty as a real board): its
+    checks (none FAIL or ERROR, at least 150) and its summary."""
+    proc, path, _ = emulated.serve("serve", "marlin-2.1", "--baud", "1000000")
+    try:
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
+                            "marlin-2.1", "--baud", "1000000", "--report", str(tmp_path), "-q",
+                            *opt_ins], capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, p.stdout + p.stderr
+    finally:
+        stop(proc)
+    checks = json.loads((tmp_path / "results.json").read_text())["checks"]
+    assert len(checks) >= 150
+    assert [(c["id"], c["actual"]) for c in checks if c["grade"] in ("FAIL", "ERROR")] == []
+    summary = (tmp_path / "summary.md").read_text()
+    for said in ("put back what M503, M220, M221 read before each check",
+                 "EEPROM checks end with M500", "motion checks home (G28)",
+                 "leave the unit halted until it is reset"):
+        assert said in summary, said
+    return checks, summary
+
+
+@pytest.mark.slow
+def test_the_default_run_over_a_pty_skips_only_what_needs_an_opt_in(tmp_path, monkeypatch):
+    """Without opt-ins every check that moves, halts, writes the EEPROM or heats is SKIPPED
+    and says which opt-in it needs; the rest PASS (about 80 s of checks)."""
+    monkeypatch.delenv("CONFORM_MARLIN_ALLOW_HEATERS", raising=False)
+    checks, summary = _run_over_a_pty(tmp_path)
+    skipped = [c for c in checks if c["grade"] == "SKIPPED"]
+    needs = ("needs --allow-motion", "needs --allow-eeprom", "needs CONFORM_MARLIN_ALLOW_HEATERS=1")
+    assert skipped and all(any(n in c["detail"] for n in needs) for c in skipped)
+    assert all(any(n in c["detail"] for c in skipped) for n in needs)
+    passed = [c for c in checks if c["grade"] == "PASS"]
+    assert len(passed) + len(skipped) + 1 == len(checks)      # the banner: a reset (DTR)
+    assert "checks that move or halt the unit SKIPPED (no --allow-motion)" in summary
+
+
+@pytest.mark.slow
+def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch):
+    """Every opt-in (--allow-motion, --allow-eeprom, the heaters): nothing FAILs or ERRORs;
+    of the three halt checks only the last runs (the others SKIPPED naming it) and the unit
+    is left halted; the report says what the run changed on the unit. Most of its wall time
+    (about 190 s of checks) is the unit's own: the first G28 (16 s on this build), M109/M190's
+    10 s residency, dwells and moves timed on the real clock, and 0.1 s after each checked
+    answer for a late line."""
+    monkeypatch.setenv("CONFORM_MARLIN_ALLOW_HEATERS", "1")
+    checks, summary = _run_over_a_pty(tmp_path, "--allow-motion", "--max-steps", "100000",
+                                      "--allow-eeprom")
+    grades = [c["grade"] for c in checks]
+    skipped = [c for c in checks if c["grade"] == "SKIPPED"]
+    assert {c["id"].rsplit("/", 1)[-1] for c in skipped} == {"m112", "m112-while-busy"}
+    assert all(checks[-1]["id"] in c["detail"] for c in skipped)
+    assert grades.count("PASS") == len(checks) - len(skipped) - 1      # the banner (DTR)
+    assert "left halted" in checks[-1]["detail"]
+    assert "checks that heat run (CONFORM_MARLIN_ALLOW_HEATERS=1)" in summary
+
+
 @pytest.mark.slow
 def test_a_real_unit_is_halted_once_by_the_last_halt_check(tmp_path):
     """Over a pty (not emulated for the runner) with --allow-motion: of the three checks that

@@ -147,6 +147,13 @@ INTENDED = {
     "settings/m221-t1", "g20-accepted": "reply/unknown-g20", "dwell-adds": "dwell/g4-s-wins",
     "extrudes-cold": "modes/m83-e-relative", "g91-leaves-e": "modes/g91-e-relative",
     "m220-no-speed": "motion/m220-speeds-up", "no-arcs": "motion/g2", "m104-sets-bed": "heat/m104-target",
+    "m113-ignored": "keepalive/m113-interval", "m113-unbounded": "keepalive/m113-at-most-60",
+    "m200-d-no-enable": "settings/m200-d", "m200-heading-kept": "settings/m200-d",
+    "m211-ignores-s": "settings/m211-s0", "m211-native": "settings/m211-report",
+    "m302-float": "settings/m302-report", "m302-p-ignored": "settings/m302-p1",
+    "m303-echo": "heat/m303-bad-heater", "m575-silent": "reply/m575-implausible",
+    "m85-m120-unknown": "reply/m85-s0", "m428-adds": "motion/m428-offsets",
+    "m428-no-limit": "motion/m428-too-far", "m999-one-ok": "line/m999-resend",
 }
 
 

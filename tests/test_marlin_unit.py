@@ -223,3 +223,32 @@ def test_random_traffic_never_stops_the_unit(vid):
         u.power_cycle(t + 10)     # (a halted unit needs the reset; a busy one is freed by it)
         u.poll(t + 60)
         assert lines(u, frame(1, "G90"), t + 61, until=t + 90)[-1].startswith("ok")
+
+
+def test_the_rarely_sent_commands_answer_as_the_source_says():
+    """M85, M113, M120/M121, M200, M211, M302, M303, M428, M575, M999 (commands.toml): each
+    is compiled into the linux_native build, none is an Unknown command."""
+    u, t = unit(), 1.0
+    said = {}
+    for cmd in ("M428", "M85 S0", "M120", "M121", "M113 S0", "M113", "M200 D2.85", "M200",
+                "M211 S0", "M211", "M302 S0", "M302", "M303 E3", "M575 B57", "M575 B57600 P1",
+                "M575 B7", "M110 N9", "M999", "M999 S1"):
+        said[cmd] = lines(u, f"{cmd}\n".encode(), t)
+        t += 0.5
+    assert said["M428"] == ["echo:Home XYZ First", "ok"]            # not homed yet
+    assert all(said[c] == ["ok"] for c in ("M85 S0", "M120", "M121", "M113 S0", "M200 D2.85",
+                                            "M211 S0", "M302 S0", "M575 B57600 P1", "M999 S1"))
+    assert said["M113"] == ["echo:M113 S0", "ok"]
+    assert said["M200"] == ["  M200 S1 D2.85", "ok"]
+    assert said["M211"][0] == "  M211 S0 ; OFF"
+    assert said["M302"] == ["echo:Cold extrudes are enabled (min temp 0C)", "ok"]
+    assert said["M303 E3"] == ["PID Autotune failed! Bad heater id", "ok"]
+    assert said["M575 B57"] == ["echo: Serial 0 baud rate set to 57600", "ok"]
+    assert said["M575 B7"] == ["echo:?(B)aud rate implausible.", "ok"]
+    assert said["M999"] == ["Resend: 10", "ok", "ok"]
+    # M113 S0: a dwell says no busy: at all
+    assert lines(u, b"G4 S3\n", t, until=t + 4) == ["ok"]
+    # after homing M428 takes the offsets from where the axes are
+    lines(u, b"G28\nG1 X5 Y6 F3000\nM400\n", t + 4, until=t + 40)
+    assert lines(u, b"M428\n", t + 41)[0].startswith("X:0.00 Y:0.00 Z:0.00")
+    assert "M206 X-5.00 Y-6.00 Z0.00" in " ".join(lines(u, b"M503\n", t + 42))

@@ -9,6 +9,7 @@ detection), ``unit`` (the reference unit, its faults, control requests and ``ser
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -138,7 +139,10 @@ class MarlinFamily(Family):
             "checks that move or halt the unit SKIPPED (no --allow-motion)"]
         notes += [] if permissions.allow_eeprom else [
             "EEPROM checks (M500) SKIPPED (no --allow-eeprom)"]
-        return notes + [f"checks that heat SKIPPED unless {HEATERS_ENV}=1"] + REAL_BOARD_NOTES
+        heating = os.environ.get(HEATERS_ENV, "") == "1"
+        notes += [f"checks that heat run ({HEATERS_ENV}=1) and set the targets back to 0"
+                  if heating else f"checks that heat SKIPPED unless {HEATERS_ENV}=1"]
+        return notes + REAL_BOARD_NOTES
 
     def mutant_fault(self, name: str) -> str:
         from conform.families.marlin.conformance.mutants import MUTANTS

@@ -72,7 +72,8 @@ def _line(code: str, values: list[float]) -> bytes:
 
 
 def read_values(s: Session) -> Values:
-    got = s.talk(b"M503\n")
+    """M503's setting lines (its ok ends the answer: nothing is waited for after it)."""
+    got = s.talk(b"M503\n", linger=0.0)
     out: Values = {}
     for line in got.lines:
         m = _REPORT.match(line)
@@ -90,20 +91,22 @@ def _only(got: Talk, s: Session) -> list[str]:
 
 
 def read_state(s: Session) -> State:
-    fr = _only(s.talk(b"M220\n"), s)
-    flow = _only(s.talk(b"M221\n"), s)
+    fr = _only(s.talk(b"M220\n", linger=0.0), s)
+    flow = _only(s.talk(b"M221\n", linger=0.0), s)
     return State(read_values(s), fr[0] if len(fr) == 1 else " | ".join(fr),
                  flow[0] if len(flow) == 1 else " | ".join(flow))
 
 
 def put(s: Session, state: State) -> None:
-    """Set the unit to ``state`` (what read_state gave, or a wanted one)."""
+    """Set the unit to ``state`` (what read_state gave, or a wanted one). Each line's ok is
+    its only answer, so nothing is waited for after it (a stray line after an ok still
+    shows in the next exchange)."""
     for code, values in state.values.items():
-        s.talk(_line(code, values))
+        s.talk(_line(code, values), linger=0.0)
     for cmd, text in (("M220", state.fr), ("M221", state.flow)):
         m = re.search(r"(\d+)%", text)
         if m:
-            s.talk(f"{cmd} S{m.group(1)}\n".encode())
+            s.talk(f"{cmd} S{m.group(1)}\n".encode(), linger=0.0)
 
 
 def base_state() -> State:
@@ -699,8 +702,267 @@ def heat_checks(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
                         target("M104 S35\nM104 S0", ("0.00", "0.00")), heat=True)]
 
 
+_FILAMENT = re.compile(r"^echo:; Filament settings(?: \(Disabled\):)?$")
+_M200 = re.compile(r"^echo:  M200 S([01]) D(-?[\d.]+)$")
+
+
+def _filament(s: Session) -> tuple[list[str], str]:
+    """M503's filament group (heading and line) and the M200 line that sets it again."""
+    got = s.talk(b"M503\n")
+    group = [x for x in got.lines if _FILAMENT.match(x) or _M200.match(x)]
+    m = next((_M200.match(x) for x in group if _M200.match(x)), None)
+    return group, (f"M200 S{m.group(1)} D{m.group(2)}" if m else "M200 S0 D1.75")
+
+
+def _filament_want(on: bool, dia: float) -> list[str]:
+    return ["echo:; Filament settings" + ("" if on else " (Disabled):"),
+            f"echo:  M200 S{int(on)} D{st.number(dia)}"]
+
+
+def m200_case(command: str, on: bool, dia: float, printed: list[str] | None = None
+              ) -> Callable[[Session], Outcome]:
+    """From ``M200 S0 D1.60`` (off, a diameter unlike the default) and the BASE settings,
+    ``command``: M503's filament heading and line are then ``on``/``dia``, every other
+    setting as it was (a unit that writes another setting, or resets the rest, fails)."""
+    def body(s: Session) -> Outcome:
+        _, before = _filament(s)
+        try:
+            s.talk(b"M200 S0 D1.60\n")
+            got = _only(s.talk(f"{command}\n".encode()), s)
+            group, _ = _filament(s)
+            ok, expected, actual = _compare(base_state(), read_state(s), printed or [], got)
+            want = _filament_want(on, dia)
+            if group != want:
+                ok, actual = False, f"M503 {' | '.join(group) or 'no filament group'}; {actual}"
+            return ok, f"{' | '.join(want)}; {expected}", actual
+        finally:
+            s.talk(f"{before}\n".encode())
+    return restoring(body)
+
+
+def _state_line(command: str, read: bytes, want: Callable[[Session], list[str]],
+                restore: Callable[[list[str]], bytes], *, before: bytes = b""
+                ) -> Callable[[Session], Outcome]:
+    """``command`` prints nothing but its ok; ``read`` then prints ``want``; ``restore``
+    (given what ``read`` printed before) puts the unit back."""
+    def run(s: Session) -> Outcome:
+        was = _only(s.talk(read), s)
+        try:
+            if before:
+                s.talk(before)
+            printed = _only(s.talk(f"{command}\n".encode()), s)
+            got = _only(s.talk(read), s)
+            wanted = want(s)
+            ok = printed == [] and got == wanted
+            return ok, f"{command}: ok alone; then {read.decode().strip()}: " + \
+                " | ".join(wanted), f"{' | '.join(printed) or 'ok alone'}; then " + \
+                (" | ".join(got) or "nothing")
+        finally:
+            s.talk(restore(was))
+    return run
+
+
+def _m302_restore(was: list[str]) -> bytes:
+    m = re.match(r"echo:Cold extrudes are (en|dis)abled \(min temp (-?\d+)C\)", was[0]) \
+        if was else None
+    if not m:
+        return b"M302 S170 P0\n"
+    return f"M302 S{m.group(2)} P{int(m.group(1) == 'en')}\n".encode()
+
+
+def _m113_restore(was: list[str]) -> bytes:
+    m = re.match(r"echo:M113 S(\d+)$", was[0]) if was else None
+    return f"M113 S{m.group(1) if m else 2}\n".encode()
+
+
+def _m211_restore(was: list[str]) -> bytes:
+    return b"M211 S0\n" if was and was[0].startswith("  M211 S0") else b"M211 S1\n"
+
+
+def command_checks(spec: MarlinSpec, vid: str) -> list[MarlinCheck]:
+    """The commands of the linux_native build a host may send besides the settings above:
+    M85, M113, M120/M121, M200, M211, M302, M303, M428, M575, M999 (gcode.cpp
+    process_parsed_command compiles each of them in this configuration)."""
+    v = spec.variant(vid)
+    cmd = {k: x.cite for k, x in spec.commands.items()}
+    out: list[MarlinCheck] = []
+
+    def add(code: str, group: str, name: str, title: str, run: Callable[[Session], Outcome],
+            **kw: object) -> None:
+        if spec.command(code, v) is None:
+            return
+        cite = str(kw.pop("cite", "") or cmd[code])
+        out.append(MarlinCheck(f"{vid}/{_file(cmd[code])}/{group}/{name}", cite, title, run,
+                               **kw))  # type: ignore[arg-type]
+
+    # M113: the keepalive interval, read back and seen in a dwell's busy: lines
+    add("M113", "keepalive", "m113-report", f"M113: echo:M113 S{v.keepalive} (the interval "
+        "in force)", _exact("M113", [f"echo:M113 S{v.keepalive}"]))
+
+    def busy_every(s: Session) -> Outcome:
+        was = _only(s.talk(b"M113\n"), s)
+        try:
+            s.talk(b"M113 S1\n")
+            got = s.talk(b"G4 P2500\n", timeout=5.0)
+            busy = [round(t - got.t0, 1) for t, x in zip(got.times, got.lines, strict=True)
+                    if x == "echo:busy: processing"]
+            now = _only(s.talk(b"M113\n"), s)
+            ok = len(busy) == 2 and now == ["echo:M113 S1"]
+            return ok, "G4 P2500 after M113 S1: busy: processing twice (1 s apart, not " \
+                "the 2 s default); M113 then echo:M113 S1", f"busy: at {busy} s; M113: " + \
+                " | ".join(now)
+        finally:
+            s.talk(_m113_restore(was))
+    add("M113", "keepalive", "m113-interval", "M113 S1: busy: every second during a dwell, "
+        "and M113 reads it back", busy_every)
+    add("M113", "keepalive", "m113-at-most-60", "M113 S99: the interval is held at 60 s "
+        "(NOMORE)", _state_line("M113 S99", b"M113\n", lambda s: ["echo:M113 S60"],
+                                _m113_restore))
+
+    # M85, M120, M121: known, no output
+    add("M85", "reply", "m85-s0", "M85 S0 (no inactivity timeout): a plain ok, not Unknown "
+        "command", _exact("M85 S0", []))
+    add("M120", "reply", "m120-ok", "M120 (endstops on): a plain ok", _exact("M120", []))
+
+    def endstops_off_on(s: Session) -> Outcome:
+        try:
+            got = s.talk(b"M121\n")
+            ok = len(got.lines) == 1 and _ok_kind(s, got.lines[0])
+            return ok, "M121: ok alone (M120 after it)", got.text()
+        finally:
+            s.talk(b"M120\n")
+    add("M121", "reply", "m121-ok", "M121 (endstops off outside homing): a plain ok; M120 "
+        "turns them back on", endstops_off_on)
+
+    # M200: the volumetric switch and the filament diameter, read back in M503
+    add("M200", "settings", "m200-report", "M200 alone: its line (no heading), nothing changed",
+        m200_case("M200", False, 1.6, ["  M200 S0 D1.60"]))
+    add("M200", "settings", "m200-d", "M200 D2.85: the diameter, and volumetric on (the "
+        "heading loses '(Disabled)')", m200_case("M200 D2.85", True, 2.85))
+    add("M200", "settings", "m200-s1", "M200 S1: volumetric on, the diameter kept",
+        m200_case("M200 S1", True, 1.6))
+    add("M200", "settings", "m200-d0", "M200 S1 D0: D0 turns it off whatever S says",
+        m200_case("M200 S1 D0", False, 1.6))
+    add("M200", "settings", "m200-s0-d", "M200 S0 D3: the diameter set, volumetric off",
+        m200_case("M200 S0 D3", False, 3.0))
+    add("M200", "settings", f"m200-t{v.extruders}", f"M200 T{v.extruders} D2: echo:M200 "
+        "Invalid extruder, nothing set", m200_case(f"M200 T{v.extruders} D2", False, 1.6,
+                                                   [f"echo:M200 Invalid extruder {v.extruders}"]),
+        cite=cmd["M200"] + "; gcode.cpp GcodeSuite::get_target_extruder_from_command")
+
+    def m502_filament(s: Session) -> Outcome:
+        _, before = _filament(s)
+        try:
+            s.talk(b"M200 S1 D2.5\n")
+            s.talk(b"M502\n")
+            group, _ = _filament(s)
+            want = _filament_want(False, 1.75)
+            return group == want, " | ".join(want), " | ".join(group) or "no filament group"
+        finally:
+            s.talk(f"{before}\n".encode())
+    add("M502", "settings", "m502-m200", "M502 puts M200 back: off, D1.75 "
+        "(DEFAULT_NOMINAL_FILAMENT_DIA)", restoring(m502_filament),
+        cite=cmd["M502"] + "; settings.cpp reset: volumetric_enabled, filament_size")
+
+    # M211: software endstops, the bounds shown in logical coordinates
+    def bounds(s: Session) -> list[str]:
+        off = BASE["M206"]
+        lo = " ".join(f"{a}{st.number(x + off[i])}" for i, (a, x) in enumerate(
+            zip("XYZ", st.SOFT_MIN, strict=True)))
+        hi = " ".join(f"{a}{st.number(x + off[i])}" for i, (a, x) in enumerate(
+            zip("XYZ", st.SOFT_MAX, strict=True)))
+        return [f"  Min:  {lo}   Max:  {hi}"]
+
+    def m211_report(s: Session) -> Outcome:
+        got = _only(s.talk(b"M211\n"), s)
+        want = ["  M211 S1 ; ON", *bounds(s)]
+        return got == want, " | ".join(want) + " (the M206 offset of the BASE settings added)", \
+            " | ".join(got) or "ok alone"
+    add("M211", "settings", "m211-report", "M211: on, and the bounds moved by the M206 offset "
+        "(asLogical)", restoring(m211_report))
+    add("M211", "settings", "m211-s0", "M211 S0: ok alone, then M211 reports OFF, the bounds "
+        "unchanged", restoring(_state_line("M211 S0", b"M211\n",
+                                           lambda s: ["  M211 S0 ; OFF", *bounds(s)],
+                                           _m211_restore, before=b"M211 S1\n")))
+
+    # M302: cold extrusion
+    add("M302", "settings", "m302-report", "M302: echo:Cold extrudes are disabled (min temp "
+        f"{st.EXTRUDE_MINTEMP}C)", _exact("M302", [f"echo:Cold extrudes are disabled (min temp "
+                                                  f"{st.EXTRUDE_MINTEMP}C)"]))
+    for command, state, low in (("M302 P1", "en", 170), ("M302 S0", "en", 0),
+                                ("M302 S180", "dis", 180), ("M302 S180 P1", "en", 180)):
+        add("M302", "settings", command.lower().replace(" ", "-"), f"{command}: cold extrusion "
+            f"{state}abled, the minimum {low}C", _state_line(
+                command, b"M302\n", lambda s, e=state, n=low: [
+                    f"echo:Cold extrudes are {e}abled (min temp {n}C)"], _m302_restore,
+                before=b"M302 S170 P0\n"))
+
+    def cold(s: Session) -> Outcome:
+        was = _only(s.talk(b"M302\n"), s)
+        try:
+            s.talk(b"M302 S170 P0\nG92 E0\nM82\n", timeout=4.0)
+            s.talk(b"M302 P1\n")
+            printed = _only(s.talk(b"G1 E1 F600\n"), s)
+            s.talk(b"M400\n", timeout=10.0)
+            pos = next((x for x in s.talk(b"M114\n").lines if _POS.match(x)), "")
+            ok = printed == [] and " E:1.00 " in pos
+            return ok, "no 'cold extrusion prevented'; E:1.00", \
+                f"{' | '.join(printed) or 'nothing printed'}; {pos}"
+        finally:
+            s.talk(_m302_restore(was))
+            s.talk(b"G92 E0\n")
+    add("M302", "motion", "m302-p1-extrudes", "M302 P1: G1 E1 with a cold hotend extrudes "
+        "(no 'cold extrusion prevented'; on a printer: 1 mm of filament into a cold nozzle)", cold,
+        motion=True,
+        cite=cmd["M302"] + "; planner.cpp _populate_block")
+
+    # M303: only the error form (a valid one heats for minutes)
+    add("M303", "heat", "m303-bad-heater", "M303 E5: PID Autotune failed! Bad heater id "
+        "(nothing heats)", _exact("M303 E5", ["PID Autotune failed! Bad heater id"]))
+
+    # M428: the home offsets from where the axes are (after homing)
+    def m428(target: str, want_printed: Callable[[], list[str]],
+             offset: list[float]) -> Callable[[Session], Outcome]:
+        def body(s: Session) -> Outcome:
+            s.talk(b"G28\n", timeout=30.0)
+            s.talk(f"G1 {target} F3000\n".encode(), timeout=10.0)
+            s.talk(b"M400\n", timeout=10.0)
+            got = _only(s.talk(b"M428\n"), s)
+            want = base_state()
+            want.values["M206"] = list(offset)
+            printed = [x.split(" Count")[0] for x in got]
+            return _compare(want, read_state(s), want_printed(), printed)
+        return restoring(body)
+    # from BASE (M206 1.5 2.5 3.5): G1 to logical 6.5 8.5 5.5 is native 5 6 2
+    add("M428", "motion", "m428-offsets", "M428 at native X5 Y6 Z2: the offsets -5 -6 -2, "
+        "the position then 0 0 0; nothing else changed", m428(
+            "X6.5 Y8.5 Z5.5", lambda: ["X:0.00 Y:0.00 Z:0.00 E:0.00"], [-5.0, -6.0, -2.0]),
+        motion=True)
+    add("M428", "motion", "m428-too-far", "M428 at native X30: Error:Too far from reference "
+        "point, no offset changed", m428("X31.5 Y2.5 Z3.5", lambda: [
+            "Error:Too far from reference point"], list(BASE["M206"])), motion=True)
+
+    # M575: only the forms that leave the link as it is
+    add("M575", "reply", "m575-implausible", "M575 B1234: echo:?(B)aud rate implausible.",
+        _exact("M575 B1234", ["echo:?(B)aud rate implausible."]))
+    add("M575", "reply", "m575-no-b", "M575 without B: echo:?(B)aud rate implausible.",
+        _exact("M575", ["echo:?(B)aud rate implausible."]))
+
+    # M999: a resend of the next line, its own ok after
+    def m999(s: Session) -> Outcome:
+        s.talk(b"M110 N41\n")
+        got = s.talk(b"M999\n", answers=2)
+        want = ["Resend: 42", "ok"]
+        ok = got.lines[:2] == want and len(got.lines) == 3 and _ok_kind(s, got.lines[2])
+        return ok, "Resend: 42 | ok | ok (M110 N41 before it)", got.text()
+    add("M999", "line", "m999-resend", "M999: Resend: last+1 and ok (flush_and_request_resend), "
+        "then its own ok", m999)
+    add("M999", "line", "m999-s1", "M999 S1: ok alone (no resend)", _exact("M999 S1", []))
+    return out
+
+
 def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
     """Every depth check of ``vid`` (``profile`` ``full``: more values per setting)."""
     return (settings_checks(spec, vid, profile) + eeprom_checks(spec, vid) +
             report_checks(spec, vid, profile) + dwell_checks(spec, vid) +
-            motion_checks(spec, vid) + heat_checks(spec, vid))
+            motion_checks(spec, vid) + heat_checks(spec, vid) + command_checks(spec, vid))

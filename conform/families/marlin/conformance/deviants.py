@@ -170,6 +170,117 @@ class _M221AnyExtruder(Settings):
         return (True, []) if code == "M221" else super()._extruder(code, w)
 
 
+class _M113Ignored(Settings):
+    def m113(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        return super().m113({}, text, t, eeprom) if "S" not in w else []
+
+
+class _M113Unbounded(Settings):
+    def m113(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        out = super().m113(w, text, t, eeprom)
+        if st.boolval(w, "S", False):
+            self.keepalive = int(float(w["S"]))
+        return out
+
+
+class _M200NoEnable(Settings):
+    def m200(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        was = self.volumetric
+        out = super().m200(w, text, t, eeprom)
+        if "S" not in w:
+            self.volumetric = was
+        return out
+
+
+class _M200HeadingKept(Settings):
+    def report(self, for_replay: bool = False) -> list[str]:
+        return [x.replace("Filament settings", "Filament settings (Disabled):")
+                if x == "echo:; Filament settings" else x for x in super().report(for_replay)]
+
+
+class _M211IgnoresS(Settings):
+    def m211(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        return [] if "S" in w else super().m211(w, text, t, eeprom)
+
+
+class _M211Native(Settings):
+    def m211(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        off, self.now["M206"] = self.now["M206"], [0.0, 0.0, 0.0]
+        try:
+            return super().m211(w, text, t, eeprom)
+        finally:
+            self.now["M206"] = off
+
+
+class _M302Float(Settings):
+    def m302(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        return [x.replace(f"temp {self.cold_min}C", f"temp {self.cold_min:.2f}C")
+                for x in super().m302(w, text, t, eeprom)]
+
+
+class _M302PIgnored(Settings):
+    def m302(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        if "P" not in w:
+            return super().m302(w, text, t, eeprom)
+        rest = {k: x for k, x in w.items() if k != "P"}
+        return super().m302(rest, text, t, eeprom) if rest else []
+
+
+class _M303Echo(Settings):
+    def m303(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        return ["echo:" + x for x in super().m303(w, text, t, eeprom)]
+
+
+class _M575Silent(Settings):
+    def m575(self, w: Words, text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        return [x for x in super().m575(w, text, t, eeprom) if "implausible" not in x]
+
+
+class _Unknown(MarlinUnit):
+    unknown: tuple[str, ...] = ()
+
+    def _command(self, code: str) -> Any:
+        return None if code in self.unknown else super()._command(code)
+
+
+class OldCommandsUnknown(_Unknown):
+    """Answers M85, M120 and M121 Unknown command (a build without them; this one has them)."""
+
+    unknown = ("M85", "M120", "M121")
+
+
+class M428AddsOffset(MarlinUnit):
+    """M428 adds the distance to the offset it had instead of replacing it."""
+
+    def _m428(self) -> list[str]:
+        before = list(self.settings.home_offset)
+        out = super()._m428()
+        if out and not out[0].startswith(("Error", "echo:")):
+            self.settings.home_offset[:] = [a + b for a, b in zip(before, self.settings.home_offset,
+                                                                  strict=True)]
+            out = [self._position_line()]
+        return out
+
+
+class M428NoLimit(MarlinUnit):
+    """M428 sets the offsets however far the axes are from home (no 20 mm limit)."""
+
+    def _m428(self) -> list[str]:
+        if not self.homed:
+            return super()._m428()
+        self.settings.home_offset[:] = [-x for x in self.position[:3]]
+        return [self._position_line()]
+
+
+class M999OneOk(MarlinUnit):
+    """M999: Resend: and one ok (the request's ok taken for the command's)."""
+
+    def _ok(self, q: Queued, t: float) -> None:
+        if q.text.strip() == "M999":
+            return
+        super()._ok(q, t)
+
+
 class InchMode(MarlinUnit):
     """Takes G20 (as with INCH_MODE_SUPPORT) where this build says Unknown command."""
 
@@ -260,6 +371,22 @@ DEVIANTS: dict[str, type[MarlinUnit]] = {
     "m31-minutes": _unit(_ClockInMinutes, "M31 always prints minutes ('0m 2s')."),
     "m206-no-logical": _unit(_NoLogicalOffset, "M206 is stored but the position ignores it."),
     "m221-any-extruder": _unit(_M221AnyExtruder, "M221 T1 accepted with one extruder."),
+    "m113-ignored": _unit(_M113Ignored, "M113 S is taken but the interval stays as it was."),
+    "m113-unbounded": _unit(_M113Unbounded, "M113 S99 keeps 99 (no 60 s limit)."),
+    "m200-d-no-enable": _unit(_M200NoEnable, "M200 D sets the diameter but leaves volumetric "
+                              "off."),
+    "m200-heading-kept": _unit(_M200HeadingKept, "M503 says 'Filament settings (Disabled):' "
+                               "with volumetric on."),
+    "m211-ignores-s": _unit(_M211IgnoresS, "M211 S0 is taken but the soft endstops stay on."),
+    "m211-native": _unit(_M211Native, "M211 reports the bounds without the M206 offset."),
+    "m302-float": _unit(_M302Float, "M302 prints the minimum as a float (170.00C)."),
+    "m302-p-ignored": _unit(_M302PIgnored, "M302 P1 does not allow cold extrusion."),
+    "m303-echo": _unit(_M303Echo, "M303 E5's error carries an echo: prefix."),
+    "m575-silent": _unit(_M575Silent, "M575 with a rate it does not know says only ok."),
+    "m85-m120-unknown": OldCommandsUnknown,
+    "m428-adds": M428AddsOffset,
+    "m428-no-limit": M428NoLimit,
+    "m999-one-ok": M999OneOk,
     "g20-accepted": InchMode,
     "no-arcs": NoArcs,
     "dwell-adds": DwellAdds,

@@ -20,7 +20,8 @@ from conform.families.rows import LineTables, Rows, read_table
 FILES = ("variants", "messages", "commands", "caps")
 KINDS = ("move", "dwell", "sync", "home", "report_temp", "report_pos", "firmware",
          "autoreport_temp", "autoreport_pos", "line_no", "halt", "quickstop", "break_wait",
-         "set_temp", "wait_temp", "set", "position", "eeprom", "host_prompt", "user_wait", "settings")
+         "set_temp", "wait_temp", "set", "position", "eeprom", "host_prompt", "user_wait", "settings",
+         "home_offset_here", "restart")
 _NUMBERS = ("baud", "bufsize", "max_cmd_size", "rx_buffer", "block_buffer", "keepalive",
             "extruders", "temp_residency", "temp_bed_residency", "temp_window", "first_home_ms",
             "motion_time_pct")

@@ -1,8 +1,10 @@
 """What the Marlin reference unit keeps between commands besides motion and heat: the
-settings a host sets and reads back (M92, M201, M203, M204, M205, M206, M301, M304, M220,
-M221), the settings report (M503), the EEPROM (M500, M501, M502, M504), tools (T<n>),
-messages (M117, M118), debug flags (M111), the print timer (M31, M75, M77) and the endstop
-report (M119).
+settings a host sets and reads back (M92, M200, M201, M203, M204, M205, M206, M301, M304,
+M220, M221), the settings report (M503), the EEPROM (M500, M501, M502, M504), tools (T<n>),
+messages (M117, M118), debug flags (M111), the print timer (M31, M75, M77), the endstop
+report (M119), the keepalive interval (M113), the inactivity timeout (M85), endstops on/off
+(M120/M121), software endstops (M211), cold extrusion (M302), M303's heater check and
+M575's baud rate.
 
 ``Settings.run`` answers one such command: the lines it prints before its ``ok``. Every
 behaviour cites Marlin 2.1.2.4's function (spec/tables/settings.toml, commands.toml); the
@@ -29,6 +31,13 @@ HEADINGS = {"M92": "Steps per unit", "M203": "Max feedrates (units/s)"}
 WORDS = {"M92": "XYZE", "M203": "XYZE"}
 DEBUG_NAMES = ("ECHO", "INFO", "ERRORS", "DRYRUN", "COMMUNICATION")   # M111.cpp, bit by bit
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?\d*\.?\d*)")
+FILAMENT_DIA = 1.75     # Configuration.h DEFAULT_NOMINAL_FILAMENT_DIA (VOLUMETRIC_DEFAULT_ON off)
+EXTRUDE_MINTEMP = 170   # Configuration.h PREVENT_COLD_EXTRUSION, EXTRUDE_MINTEMP
+SOFT_MIN = (0.0, 0.0, 0.0)          # Configuration.h X_MIN_POS, Y_MIN_POS, Z_MIN_POS
+SOFT_MAX = (200.0, 200.0, 200.0)    # X_MAX_POS (X_BED_SIZE 200), Y_MAX_POS (Y_BED_SIZE), Z_MAX_POS
+BAUDS = (2400, 9600, 19200, 38400, 57600, 115200, 250000, 500000, 1000000)   # M575.cpp
+BAUD_SHORT = {24: 2400, 96: 9600, 192: 19200, 384: 38400, 576: 57600, 1152: 115200,
+              250: 250000, 500: 500000, 19: 19200, 38: 38400, 57: 57600, 115: 115200}
 
 
 @dataclass(frozen=True)
@@ -93,6 +102,14 @@ def words(text: str) -> dict[str, str]:
     return out
 
 
+def boolval(w: dict[str, str], letter: str, default: bool) -> bool:
+    """parser.boolval: the letter alone is true, with a value its byte is (0: false)."""
+    if letter not in w:
+        return default
+    x = _value(w, letter)
+    return True if x is None else int(x) != 0
+
+
 def _value(w: dict[str, str], letter: str) -> float | None:
     """parser.seenval: the letter with a number after it."""
     text = w.get(letter, "")
@@ -114,10 +131,24 @@ class Settings:
     debug: int = 0
     timer_start: float | None = None
     timer_total: float = 0.0
+    keepalive: int = -1                 # M113 (host_keepalive_interval; -1: the variant's)
+    inactive_s: float = 0.0             # M85 (max_inactive_time; 0: off)
+    endstops_on: bool = True            # M120/M121 (ENDSTOPS_ALWAYS_ON_DEFAULT)
+    volumetric: bool = False            # M200 S (parser.volumetric_enabled)
+    filament: float = FILAMENT_DIA      # M200 D (planner.filament_size[0])
+    soft_endstops: bool = True          # M211 S (soft_endstop._enabled)
+    cold_min: int = EXTRUDE_MINTEMP     # M302 S (thermalManager.extrude_min_temp, celsius_t)
+    cold_allowed: bool = False          # M302 P (thermalManager.allow_cold_extrude)
 
     def __post_init__(self) -> None:
         if not self.now:
             self.now = defaults(self.v)
+        if self.keepalive < 0:
+            self.keepalive = self.v.keepalive
+
+    def too_cold(self, temp: float) -> bool:
+        """temperature.h tooColdToExtrude: !allow_cold_extrude && temp < extrude_min_temp."""
+        return not self.cold_allowed and temp < self.cold_min
 
     @property
     def steps(self) -> list[float]:
@@ -214,15 +245,118 @@ class Settings:
         """module/settings.cpp MarlinSettings::report (M503; S0: for replay, without the
         headings and the echo: prefix)."""
         tab = table()
+        # M200_report: report_heading without its end, " (Disabled):" only when off
+        filament = "Filament settings" + ("" if self.volumetric else " (Disabled)")
         groups = [("Linear Units", "  G21 ; (mm)"), ("Temperature Units", "  M149 C ; Units in "
-                  "Celsius"), ("Filament settings (Disabled)", "  M200 S0 D1.75")]
+                  "Celsius"), (filament, self.m200_line())]
         groups += [(tab.headings[c], report_line(c, self.now[c])) for c in ORDER]
         if for_replay:
             return [line for _, line in groups]
         out = []
         for heading, line in groups:
-            out += [f"echo:; {heading}:", f"echo:{line}"]
+            colon = "" if heading == "Filament settings" else ":"
+            out += [f"echo:; {heading}{colon}", f"echo:{line}"]
         return out
+
+    def m200_line(self) -> str:
+        return f"  M200 S{int(self.volumetric)} D{number(self.filament)}"
+
+    def m200(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/config/M200-M205.cpp GcodeSuite::M200: no D, S or T: M200_report (the line
+        alone); T past EXTRUDERS stops it; D<n> sets the diameter and turns volumetric on, D0
+        turns it off; S (boolval) decides last."""
+        if not any(k in w for k in "DST"):
+            return [self.m200_line()]
+        ok, out = self._extruder("M200", w)
+        if not ok:
+            return out
+        enable, can = self.volumetric, True
+        d = _value(w, "D")
+        if d is not None:
+            if d:
+                self.filament, enable = d, True
+            else:
+                can = False
+        self.volumetric = can and boolval(w, "S", enable)
+        return []
+
+    def m113(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/host/M113.cpp GcodeSuite::M113: S (value_byte, NOMORE 60) sets
+        host_keepalive_interval (0: no busy: lines); no S: ``echo:M113 S<n>``."""
+        s = _value(w, "S")
+        if s is None:
+            return [f"echo:M113 S{self.keepalive}"]
+        self.keepalive = min(max(int(s), 0), 255, 60)
+        return []
+
+    def m85(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/control/M85.cpp GcodeSuite::M85: S<seconds> sets max_inactive_time (the kill
+        when it runs out is not modelled); nothing printed."""
+        if "S" in w:
+            self.inactive_s = _value(w, "S") or 0.0
+        return []
+
+    def m120(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/control/M120_M121.cpp: endstops.enable_globally(true); nothing printed."""
+        self.endstops_on = True
+        return []
+
+    def m121(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/control/M120_M121.cpp: endstops.enable_globally(false); nothing printed."""
+        self.endstops_on = False
+        return []
+
+    def m211(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/control/M211.cpp GcodeSuite::M211: S sets soft_endstop._enabled and prints
+        nothing; without S, M211_report(forReplay=true): ``  M211 S1 ; ON`` and the bounds
+        in logical coordinates (asLogical: the M206 offset added), print_pos with two
+        decimals."""
+        if "S" in w:
+            self.soft_endstops = boolval(w, "S", True)
+            return []
+        off = self.home_offset
+        lo = " ".join(f"{a}{number(x + off[i])}" for i, (a, x) in enumerate(zip("XYZ", SOFT_MIN,
+                                                                                 strict=True)))
+        hi = " ".join(f"{a}{number(x + off[i])}" for i, (a, x) in enumerate(zip("XYZ", SOFT_MAX,
+                                                                                 strict=True)))
+        on = int(self.soft_endstops)
+        return [f"  M211 S{on} ; {'ON' if on else 'OFF'}", f"  Min:  {lo}   Max:  {hi}"]
+
+    def m302(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/config/M302.cpp GcodeSuite::M302: S sets extrude_min_temp (a celsius_t, a
+        whole number); with S or P, cold extrusion is allowed when the minimum is 0 or P is
+        true; neither: ``echo:Cold extrudes are enabled|disabled (min temp <n>C)``."""
+        seen_s, seen_p = "S" in w, "P" in w
+        if seen_s:
+            self.cold_min = int(_value(w, "S") or 0)
+        if seen_s or seen_p:
+            self.cold_allowed = self.cold_min == 0 or (seen_p and boolval(w, "P", True))
+            return []
+        state = "en" if self.cold_allowed else "dis"
+        return [f"echo:Cold extrudes are {state}abled (min temp {self.cold_min}C)"]
+
+    def m303(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/temp/M303.cpp GcodeSuite::M303: E (default 0) names the heater: 0 (PIDTEMP,
+        one hotend) or -1 (the bed, PIDTEMPBED); any other: ``PID Autotune failed! Bad heater
+        id`` (SERIAL_ECHOLNPGM: no echo:) and nothing heats. The autotune itself
+        (temperature.cpp PID_autotune) is not modelled: a valid M303 is answered ok alone."""
+        e = _value(w, "E")
+        heater = int(e) if e is not None else 0
+        return [] if heater in (0, -1) else ["PID Autotune failed! Bad heater id"]
+
+    def m575(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
+        """gcode/config/M575.cpp GcodeSuite::M575 (BAUD_RATE_GCODE): B (shorthands 115 ->
+        115200, 250 -> 250000 ...) one of the rates, P -99 or 0 (one serial port):
+        ``echo: Serial 0 baud rate set to <b>`` and the port is opened again at that rate
+        (the emulator's link keeps its own); another P: nothing; another rate:
+        ``echo:?(B)aud rate implausible.``"""
+        b = int(_value(w, "B") or 0)
+        b = BAUD_SHORT.get(b, b)
+        if b not in BAUDS:
+            return ["echo:?(B)aud rate implausible."]
+        p = _value(w, "P")
+        port = int(p) if p is not None else -99
+        return [f"echo: Serial 0 baud rate set to {b}"] if port in (-99, 0) else []
 
     def m503(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:
         """gcode/eeprom/M500-M504.cpp GcodeSuite::M503: settings.report(!S)."""
@@ -237,6 +371,7 @@ class Settings:
         """settings.cpp MarlinSettings::save: the settings written, ``echo:Settings Stored
         (<bytes> bytes; crc <crc>)`` (EEPROM_CHITCHAT)."""
         eeprom["settings"] = {k: list(x) for k, x in self.now.items()}
+        eeprom["volumetric"] = (self.volumetric, self.filament)
         return [f"echo:Settings Stored ({table().stored_bytes} bytes; crc "
                 f"{self._crc(eeprom['settings'])})"]
 
@@ -253,6 +388,7 @@ class Settings:
         if validating:
             return ["echo:EEPROM OK"]
         self.now = {k: list(x) for k, x in stored.items()}
+        self.volumetric, self.filament = eeprom.get("volumetric", (False, FILAMENT_DIA))
         out = [f"echo:{tab.version} stored settings retrieved ({tab.stored_bytes} bytes; crc "
                f"{self._crc(stored)})"]
         return out + (self.report() if announce else [])
@@ -260,6 +396,7 @@ class Settings:
     def reset(self) -> list[str]:
         """settings.cpp MarlinSettings::reset: every setting to its power-up value."""
         self.now = defaults(self.v)
+        self.volumetric, self.filament = False, FILAMENT_DIA
         return ["echo:Hardcoded Default Settings Loaded"]
 
     def m501(self, w: dict[str, str], text: str, t: float, eeprom: dict[str, Any]) -> list[str]:

@@ -27,7 +27,8 @@ from typing import Any
 
 from conform.families.marlin.protocol.codec import checksum
 from conform.families.marlin.spec import MarlinSpec, Variant
-from conform.families.marlin.unit.settings import Settings
+from conform.families.marlin.unit.settings import Settings, boolval
+from conform.families.marlin.unit.settings import words as st_words
 
 EOL = b"\r\n"
 BACKSPACE = 0x08
@@ -41,7 +42,6 @@ MAX_ACCEL = (3000.0, 3000.0, 100.0, 10000.0)   # Configuration.h DEFAULT_MAX_ACC
                               # planner limits a block's acceleration by each axis in it
 DEFAULT_FEED = 25.0           # motion.cpp feedrate_mm_s = MMM_TO_MMS(1500)
 HOMING = 50.0                 # mm/s, Configuration.h HOMING_FEEDRATE_MM_M {50*60, 50*60, 4*60}
-EXTRUDE_MINTEMP = 170.0       # Configuration.h PREVENT_COLD_EXTRUSION, EXTRUDE_MINTEMP 170
 BOOT = 0.1                    # s from reset to "start" (the simulator; a real AVR board waits
                               # ~0.5-2 s in its bootloader)
 QUICKSTOP = 1.0               # planner.cpp Planner::quick_stop: cleaning_buffer_counter =
@@ -185,8 +185,9 @@ class MarlinUnit:
             self.cur, self._kind = Queued("", None, t), "_stall"
             self.cur_start = self.cur_done = t
         self.cur_done += seconds
-        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not self.cur_busy:
-            self.cur_busy, self.next_busy = True, t + self.v.keepalive
+        every = self.settings.keepalive
+        if every and self.v.on("HOST_KEEPALIVE_FEATURE") and not self.cur_busy:
+            self.cur_busy, self.next_busy = True, t + every
 
     def _banner(self) -> list[str]:
         """MarlinCore.cpp setup(): start, the reset cause (PowerUp), the version, the build's
@@ -287,7 +288,7 @@ class MarlinUnit:
         if self.cur is not None and self.cur_busy and self.next_busy <= t < self.cur_done:
             why = "paused for user" if self._kind == "user_wait" else "processing"
             self._say(t, f"echo:busy: {why}")
-            self.next_busy = t + self.v.keepalive
+            self.next_busy = t + self.settings.keepalive
         w = self.wait
         if w is not None and w.next_report() <= min(t, w.end) + 1e-9:   # (the report at the end too)
             self._say(t, f"{self._temps_line()} W:{w.w(t)}")
@@ -580,10 +581,11 @@ class MarlinUnit:
             self._quickstop(t)
             done = t + QUICKSTOP + self.line_time
 
-        if self.v.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not (
+        # gcode.cpp host_keepalive: host_keepalive_interval (M113) 0 says nothing
+        if self.settings.keepalive and self.v.on("HOST_KEEPALIVE_FEATURE") and not (
                 self.wait is not None and not self.v.on("BUSY_WHILE_HEATING")):
             self.cur_busy = True        # (a heating wait is NOT_BUSY without BUSY_WHILE_HEATING)
-            self.next_busy = t + self.v.keepalive
+            self.next_busy = t + self.settings.keepalive
         self.cur_done = done
         self._kind = kind
 
@@ -616,6 +618,14 @@ class MarlinUnit:
             words = _words(q.text)      # M876.cpp: S<n> answers the prompt
             if "S" in words:
                 self.truth.prompt_responses.append((t, int(words["S"])))
+        elif kind == "home_offset_here":
+            self._say(t, *self._m428())
+        elif kind == "restart":
+            # M999.cpp: marlin_state = MF_RUNNING; S1 returns, else queue.cpp
+            # flush_and_request_resend: Resend: last_N + 1 and a plain ok (STR_OK), then the
+            # command's own ok below
+            if not boolval(st_words(_after_command(q.text)), "S", False):
+                self._say(t, f"Resend: {self.last_n + 1}", "ok")
         elif kind == "settings":
             self._say(t, *self.settings.run(_code(q.text), _after_command(q.text),
                                             _after_number(q.text), t, self.eeprom,
@@ -623,6 +633,20 @@ class MarlinUnit:
         elif not kind:
             self._unknown(q, t)
         self._ok(q, t)
+
+    def _m428(self) -> list[str]:
+        """geometry/M206_M428.cpp GcodeSuite::M428: homing_needed_error first (motion.cpp:
+        ``echo:Home XYZ First``, MSG_HOME_FIRST "Home %s%s%s First"); then each axis's
+        offset is base_home_pos (0: every axis homes to its minimum) - current_position, and
+        one farther than 20 mm is ``Error:Too far from reference point`` (nothing set);
+        else every offset is set (set_home_offset) and the position reported."""
+        if not self.homed:
+            return ["echo:Home XYZ First"]
+        diff = [0.0 - x for x in self.position[:3]]
+        if any(not -20.0 <= d <= 20.0 for d in diff):
+            return ["Error:Too far from reference point"]
+        self.settings.home_offset[:] = diff
+        return [self._position_line()]
 
     def _homing_time(self) -> float:
         """G28.cpp / motion.cpp homeaxis per axis: to the switch at HOMING_FEEDRATE, back off
@@ -672,7 +696,7 @@ class MarlinUnit:
                 off = self.settings.home_offset[i] if i < 3 else 0.0
                 target[i] = (target[i] if rel else -off) + words[a]
         delta = [b - a for a, b in zip(self.position, target, strict=True)]
-        if delta[3] and self.temp(0, t) < EXTRUDE_MINTEMP:
+        if delta[3] and self.settings.too_cold(self.temp(0, t)):   # M302 sets the limit
             # planner.cpp _populate_block (PREVENT_COLD_EXTRUSION): E is taken as reached,
             # nothing extruded
             self._say(t, "echo: cold extrusion prevented")
