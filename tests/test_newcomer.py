@@ -190,12 +190,18 @@ def _marlin_profile(tmp_path: Path) -> str:
       "--record", "{file}/x.mcap"], 2, "a file is in the way"),
     (["send", str(REPO / "captures" / "jobs" / "raster.txt"), "--target", "emu:grbl-1.1f"], 2,
      "is it a job of another family? Nothing was sent"),
+    (["send", str(REPO / "captures" / "jobs" / "raster.txt"), "--target", "emu:marlin-2.1"], 2,
+     "raster.txt: it looks like a gve job: no line of it is a move a marlin unit executes; "
+     "is it a job of another family? Nothing was sent"),
+    (["send", str(REPO / "captures" / "jobs" / "marlin-ring.gcode"), "--target",
+      "emu:gve64-v19"], 2, "marlin-ring.gcode:4:1: word M82 is not in the supported subset"),
     (["bundle", GOOD, "-o", "{file}/x.zip"], 2, "a file is in the way"),
     (["capture", "recover", GOOD, "-o", "{file}/x.mcap"], 2, "a file is in the way"),
     (["report", "{results}", "-o", "{file}/again"], 2, "-o {file}/again"),
     (["spec", "show", "marlin-2.1", "nothing"], 2, "or a command of marlin-2.1 (e.g. M115"),
 ], ids=["seed", "missing-argument", "control-regular-file", "dialect-of-marlin",
         "report-capture", "report-empty", "record-under-file", "send-other-family",
+        "send-gve-job-to-marlin", "send-marlin-job-to-gve",
         "bundle-under-file", "recover-under-file", "report-under-file", "spec-show-nothing"])
 def test_mistakes_say_what_is_wrong_and_what_to_do(argv, code, says, tmp_path, capsys):
     file = tmp_path / "file"
