@@ -420,3 +420,37 @@ def test_check_sender_failing_page_says_what_to_fix_first_in_words(tmp_path, cap
     assert page.index("What to fix") < page.index("Rules × scenarios")
     assert "&#39;accepted_index&#39;" not in page and "{&#39;" not in page
     assert "accepted index" in page
+
+
+@pytest.mark.parametrize("variant, scenario", [("gve64-v19", "clean"), ("grbl-1.1f", "stream"),
+                                               ("marlin-2.1", "clean")])
+def test_check_sender_page_has_one_look_and_well_formed_lines_in_every_family(
+        variant, scenario, tmp_path, monkeypatch):
+    """Every family's check-sender page opens with the analysis reports' page head (their
+    fonts and styles), and a scenario's line joins no empty part (a family that compares no
+    job against the ground truth, or one whose comparison says nothing)."""
+    import conform.link.pty
+    from conform.analysis.report import template_env
+    from conform.sendercheck.grade import check
+    from conform.sendercheck.report import render_html
+
+    def no_pty(*_a, **_k):
+        raise OSError("out of ptys")
+
+    monkeypatch.setattr(conform.link.pty, "PtyEndpoint", no_pty)   # a run in no time
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[scenario],
+              directory=tmp_path / "r", timeout=10)
+    shared = template_env().from_string(
+        '{% import "analysis_pieces.html.j2" as p %}{{ p.head("x") }}').render()
+    style = re.search(r"<style>.*?</style>", shared, re.S).group(0)
+
+    class Silent:
+        def summary(self) -> str:
+            return ""
+
+    for comparison in (None, Silent()):
+        r.scenarios[0].session.comparison = comparison
+        page = render_html(r)
+        assert style in page, variant
+        line = re.search(r"<h3 id=[^>]*>.*?</h3>\s*<p>(.*?)</p>", page, re.S).group(1)
+        assert re.fullmatch(r"[\d.]+ s, exit status \S+; capture \S+session\.mcap", line), line
