@@ -454,3 +454,32 @@ def test_check_sender_page_has_one_look_and_well_formed_lines_in_every_family(
         assert style in page, variant
         line = re.search(r"<h3 id=[^>]*>.*?</h3>\s*<p>(.*?)</p>", page, re.S).group(1)
         assert re.fullmatch(r"[\d.]+ s, exit status \S+; capture \S+session\.mcap", line), line
+
+
+def _matrix_cells(page: str) -> list[str]:
+    table = page[page.index('id="sections"'):]
+    table = table[:table.index("</table>")]
+    return [re.sub(r"<[^>]+>", "", c).strip()
+            for c in re.findall(r'<td class="cell"[^>]*>(.*?)</td>', table, re.S)]
+
+
+def test_matrix_cells_hold_grades_and_long_citations_go_under_the_table(tmp_path, capsys):
+    """A source citation (grbl's, Marlin's: files and functions) is a numbered note under the
+    Commands × variants table, the cell keeping its grades and the note's number; a manual's
+    section (GVE's) stays in the cell."""
+    out = tmp_path / "marlin"
+    assert _code(["run", "--target", "emu:marlin-2.1", "--no-machine", "-q", "--report",
+                  str(out)], capsys)[0] == 0
+    page = (out / "index.html").read_text()
+    cells = _matrix_cells(page)
+    assert cells and all(re.fullmatch(r"(\d+ [A-Z-]+ ?)+ \[\d+\]", c) for c in cells), cells
+    assert '<li id="cite-1">queue.cpp' in page
+    assert "GcodeSuite::M110" in page[page.index('<ol class="sources'):]
+    md = (out / "summary.md").read_text()
+    table = md[md.index("## Commands × variants"):].split("\n\n")[2]
+    assert max(len(line) for line in table.splitlines()) < 80, table
+    out = tmp_path / "gve"
+    assert _code(["run", "--matrix", "--check", "*/13.5.1/*", "-q", "--report", str(out)],
+                 capsys)[0] == 0
+    cells = [c for c in _matrix_cells((out / "index.html").read_text()) if c != "—"]
+    assert cells and all(re.fullmatch(r"GVE\d+ §[\d.]+ (\d+ [A-Z-]+ ?)+", c) for c in cells), cells
