@@ -62,9 +62,9 @@ def sessions_plot(s: JsonObject) -> str | None:
     counted = _counted(s)
     measures = [m for m in s.get("latencies") or [] if any(r.get("latency") == m for r in rows)]
     n = len(counted) + max(len(measures), 1)
-    fig, axes = plt.subplots(n, 1, figsize=(9.0, 1.6 * n + 0.8), dpi=100, sharex=True,
+    fig, grid = plt.subplots(n, 1, figsize=(9.0, 1.6 * n + 0.8), dpi=100, sharex=True,
                              squeeze=False)
-    axes = list(axes[:, 0])
+    axes = list(grid[:, 0])
     machines = sorted({str(r["machine"]) for r in rows})
     colors = plt.get_cmap("tab10")
     for k, m in enumerate(machines):

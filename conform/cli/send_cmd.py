@@ -93,6 +93,8 @@ def _job_moves(fam: Family, lines: list[str]) -> int:
     """How many of ``lines`` are moves ``fam``'s unit executes (0 when it cannot tell)."""
     try:
         shapes = fam.check_sender
+        if shapes is None:
+            return 0
         return shapes.moves(lines) if shapes.moves else len(shapes.units(lines))
     except Exception:  # noqa: BLE001 - a family without check-sender, or a job it cannot read
         return 0
