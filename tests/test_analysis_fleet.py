@@ -212,3 +212,71 @@ def test_a_machines_starved_time_is_its_sessions_starved_time(tmp_path, capsys):
     assert float(machine["standstill s"]) > float(machine["starved s"])
     assert "starved s: time the replayed queue stood empty" in md
     assert "standstill s: from the queue running empty" in md
+
+
+def _flat_fleet(tmp_path: Path) -> Path:
+    """The README's captures side by side in one folder, as `conform samples` writes them:
+    four units (GVE's emulator, a GVE behind a proxy, a grbl, a Marlin)."""
+    root = tmp_path / "captures"
+    root.mkdir()
+    for n in ("good-rs232", "usb-packets", "proxy-emulator-noisy", "grbl-counting",
+              "grbl-send-response", "marlin-noisy"):
+        shutil.copy(CAPTURES / f"{n}.mcap", root / f"{n}.mcap")
+    return root
+
+
+def test_captures_side_by_side_are_told_apart_by_their_unit(tmp_path):
+    """A flat folder of several units' captures is not one machine named after the folder:
+    each capture is its unit's (variant or family and the port it was recorded on; an
+    emulator's by its variant); a per-machine subfolder still names its machine."""
+    from conform.analysis.fleet import name_machines
+
+    root = _flat_fleet(tmp_path)
+    files, names = name_machines([str(root)])
+    by = {f.stem: n for f, n in zip(files, names, strict=True)}
+    assert by["good-rs232"] == by["usb-packets"] == "gve64-v19 emulator"
+    assert by["grbl-counting"] == by["grbl-send-response"] == "grbl on vm:/tmp/gs/grbl.pty"
+    assert by["marlin-noisy"] == "marlin-2.1 on vm:/tmp/md/marlin.pty"
+    assert by["proxy-emulator-noisy"] == "gve64-v19 on vm:/dev/pts/1"
+    (root / "mill-7").mkdir()
+    shutil.copy(CAPTURES / "marlin-noisy.mcap", root / "mill-7" / "shift.mcap")
+    files, names = name_machines([str(root)])
+    assert dict(zip([f.name for f in files], names, strict=True))["shift.mcap"] is None  # its folder
+    files, names = name_machines([str(root / "good-rs232.mcap"), str(root / "usb-packets.mcap")])
+    assert names == ["captures", "captures"]   # one unit: the folder's machine, as before
+
+
+def test_fleet_time_axis_latency_columns_and_tables_that_fit(tmp_path):
+    """The time axis spans the sessions' wall-clock starts (an emulator's virtual clock is
+    no wall-clock time: said in a note, not placed at 2025-06-15); each family's latency is
+    a column named by what it measures, never GVE's round trip; the sessions table sits in a
+    container that keeps it on the page."""
+    from datetime import UTC, datetime
+
+    from conform.analysis.fleetplots import time_span, timed
+
+    s = analyze_fleet([str(_flat_fleet(tmp_path))], jobs=1)
+    assert s["totals"]["machines"] == 4
+    rows = {r["session"]: r for r in s["sessions"]}
+    assert rows["good-rs232"]["started"] is None and rows["good-rs232"]["clock"] == "virtual"
+    assert any("virtual clock" in n and "good-rs232" in n for n in s["notes"])
+    lo, hi = time_span(timed(s))
+    assert lo >= datetime(2026, 11, 20, tzinfo=UTC) and hi - lo < (
+        datetime(2026, 11, 28, tzinfo=UTC) - datetime(2026, 11, 20, tzinfo=UTC))
+    first = min(r["started"] for r in timed(s))
+    assert lo.timestamp() < first   # no session on the axis' edge
+    assert s["latencies"] == ["line to ok/error", "round trip", "line to ok"]
+    assert rows["grbl-counting"]["latency"] == "line to ok/error"
+    assert rows["marlin-noisy"]["latency"] == "line to ok"
+    assert rows["good-rs232"]["latency"] == "round trip"
+    paths = write_fleet_report(s, tmp_path / "rep")
+    md = paths["markdown"].read_text()
+    sessions = {r["session"]: r for r in _md_table(md, "Sessions")}
+    assert sessions["grbl-counting"]["round trip: p50 / p95 / p99 ms"] == ""
+    assert sessions["grbl-counting"]["line to ok/error: p50 / p95 / p99 ms"].count(" / ") == 2
+    machines = {r["machine"]: r for r in _md_table(md, "Machines")}
+    assert machines["grbl on vm:/tmp/gs/grbl.pty"]["round trip: worst p95 / p99 ms"] == ""
+    assert machines["grbl on vm:/tmp/gs/grbl.pty"]["line to ok/error: worst p95 / p99 ms"]
+    html = paths["html"].read_text()
+    assert '<div class="wide"><table class="sessions wide-t">' in html
+    assert "<th>line to ok: p50 / p95 / p99 ms</th>" in html and "rtt p50" not in html

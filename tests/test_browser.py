@@ -9,6 +9,7 @@ Chromium fails it (``.ci/run`` installs it). ``CONFORM_SCREENSHOTS=DIR`` keeps t
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -249,11 +250,19 @@ def test_fleet_report_loads_and_names_its_counts(browser, tmp_path, capsys):
         "return [...document.images].map(i => [i.alt, i.complete && i.naturalWidth > 0])")
     assert len(plots) == 2 and all(ok for _alt, ok in plots), plots
     assert plots[0][0].startswith("sessions over time")
+    # every table on the page: none runs off it (the sessions table's columns wrap)
+    widths = browser.execute_script(
+        "return [document.documentElement.scrollWidth, window.innerWidth, ...[...document"
+        ".querySelectorAll('table')].map(t => [t.className, t.getBoundingClientRect().right,"
+        " t.parentElement.getBoundingClientRect().right])]")
+    page, window, *tables = widths
+    assert page <= window, widths
+    assert all(right <= room + 1 for _name, right, room in tables), tables
     # a session's name opens that session's own report
-    link = browser.find_element("css selector", "a.session-report")
+    link = browser.find_element("link text", "good-rs232")   # a GVE session's
     session = link.text
     link.click()
-    assert browser.current_url.endswith(f"/sessions/captures/{session}/index.html")
+    assert re.search(rf"/sessions/[^/]+/{session}/index\.html$", browser.current_url)
     assert [e for e in browser.get_log("browser") if e.get("level") == "SEVERE"] == []
     own = _on_first_screen(browser, "h1")
     assert own.startswith("Session analysis: ") and own.endswith(f"{session}.mcap"), own

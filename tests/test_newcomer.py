@@ -190,12 +190,18 @@ def _marlin_profile(tmp_path: Path) -> str:
       "--record", "{file}/x.mcap"], 2, "a file is in the way"),
     (["send", str(REPO / "captures" / "jobs" / "raster.txt"), "--target", "emu:grbl-1.1f"], 2,
      "is it a job of another family? Nothing was sent"),
+    (["send", str(REPO / "captures" / "jobs" / "raster.txt"), "--target", "emu:marlin-2.1"], 2,
+     "raster.txt: it looks like a gve job: no line of it is a move a marlin unit executes; "
+     "is it a job of another family? Nothing was sent"),
+    (["send", str(REPO / "captures" / "jobs" / "marlin-ring.gcode"), "--target",
+      "emu:gve64-v19"], 2, "marlin-ring.gcode:4:1: word M82 is not in the supported subset"),
     (["bundle", GOOD, "-o", "{file}/x.zip"], 2, "a file is in the way"),
     (["capture", "recover", GOOD, "-o", "{file}/x.mcap"], 2, "a file is in the way"),
     (["report", "{results}", "-o", "{file}/again"], 2, "-o {file}/again"),
     (["spec", "show", "marlin-2.1", "nothing"], 2, "or a command of marlin-2.1 (e.g. M115"),
 ], ids=["seed", "missing-argument", "control-regular-file", "dialect-of-marlin",
         "report-capture", "report-empty", "record-under-file", "send-other-family",
+        "send-gve-job-to-marlin", "send-marlin-job-to-gve",
         "bundle-under-file", "recover-under-file", "report-under-file", "spec-show-nothing"])
 def test_mistakes_say_what_is_wrong_and_what_to_do(argv, code, says, tmp_path, capsys):
     file = tmp_path / "file"
@@ -414,3 +420,66 @@ def test_check_sender_failing_page_says_what_to_fix_first_in_words(tmp_path, cap
     assert page.index("What to fix") < page.index("Rules × scenarios")
     assert "&#39;accepted_index&#39;" not in page and "{&#39;" not in page
     assert "accepted index" in page
+
+
+@pytest.mark.parametrize("variant, scenario", [("gve64-v19", "clean"), ("grbl-1.1f", "stream"),
+                                               ("marlin-2.1", "clean")])
+def test_check_sender_page_has_one_look_and_well_formed_lines_in_every_family(
+        variant, scenario, tmp_path, monkeypatch):
+    """Every family's check-sender page opens with the analysis reports' page head (their
+    fonts and styles), and a scenario's line joins no empty part (a family that compares no
+    job against the ground truth, or one whose comparison says nothing)."""
+    import conform.link.pty
+    from conform.analysis.report import template_env
+    from conform.sendercheck.grade import check
+    from conform.sendercheck.report import render_html
+
+    def no_pty(*_a, **_k):
+        raise OSError("out of ptys")
+
+    monkeypatch.setattr(conform.link.pty, "PtyEndpoint", no_pty)   # a run in no time
+    r = check([sys.executable, "-c", "pass", "{port}"], variant=variant, names=[scenario],
+              directory=tmp_path / "r", timeout=10)
+    shared = template_env().from_string(
+        '{% import "analysis_pieces.html.j2" as p %}{{ p.head("x") }}').render()
+    style = re.search(r"<style>.*?</style>", shared, re.S).group(0)
+
+    class Silent:
+        def summary(self) -> str:
+            return ""
+
+    for comparison in (None, Silent()):
+        r.scenarios[0].session.comparison = comparison
+        page = render_html(r)
+        assert style in page, variant
+        line = re.search(r"<h3 id=[^>]*>.*?</h3>\s*<p>(.*?)</p>", page, re.S).group(1)
+        assert re.fullmatch(r"[\d.]+ s, exit status \S+; capture \S+session\.mcap", line), line
+
+
+def _matrix_cells(page: str) -> list[str]:
+    table = page[page.index('id="sections"'):]
+    table = table[:table.index("</table>")]
+    return [re.sub(r"<[^>]+>", "", c).strip()
+            for c in re.findall(r'<td class="cell"[^>]*>(.*?)</td>', table, re.S)]
+
+
+def test_matrix_cells_hold_grades_and_long_citations_go_under_the_table(tmp_path, capsys):
+    """A source citation (grbl's, Marlin's: files and functions) is a numbered note under the
+    Commands × variants table, the cell keeping its grades and the note's number; a manual's
+    section (GVE's) stays in the cell."""
+    out = tmp_path / "marlin"
+    assert _code(["run", "--target", "emu:marlin-2.1", "--no-machine", "-q", "--report",
+                  str(out)], capsys)[0] == 0
+    page = (out / "index.html").read_text()
+    cells = _matrix_cells(page)
+    assert cells and all(re.fullmatch(r"(\d+ [A-Z-]+ ?)+ \[\d+\]", c) for c in cells), cells
+    assert '<li id="cite-1">queue.cpp' in page
+    assert "GcodeSuite::M110" in page[page.index('<ol class="sources'):]
+    md = (out / "summary.md").read_text()
+    table = md[md.index("## Commands × variants"):].split("\n\n")[2]
+    assert max(len(line) for line in table.splitlines()) < 80, table
+    out = tmp_path / "gve"
+    assert _code(["run", "--matrix", "--check", "*/13.5.1/*", "-q", "--report", str(out)],
+                 capsys)[0] == 0
+    cells = [c for c in _matrix_cells((out / "index.html").read_text()) if c != "—"]
+    assert cells and all(re.fullmatch(r"GVE\d+ §[\d.]+ (\d+ [A-Z-]+ ?)+", c) for c in cells), cells

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
 from conform.errors import UserError
-from conform.families import FleetColumn, default_family, families, family
+from conform.families import Family, FleetColumn, default_family, families, family
 from conform.jsondoc import JsonObject
 
 if TYPE_CHECKING:
@@ -68,6 +68,52 @@ def expand_inputs(items: Iterable[str]) -> list[Path]:
     return out
 
 
+def name_machines(items: Iterable[str]) -> tuple[list[Path], list[str | None]]:
+    """The captures of ``items`` (``expand_inputs``) and the machine each is named after
+    where its folder does not say it (None: the session's ``machine`` key, else its folder,
+    decided when it is analysed). A capture in a subfolder of a folder given is that
+    subfolder's machine (``week/mill-1/mon.mcap``: ``mill-1``). Captures side by side in one
+    folder (a folder given, or files named one by one) are the folder's machine when they
+    come from one unit; from several, each is named after its unit (``unit_identity``: the
+    variant or family and the port it was recorded on, an emulator's by its variant)."""
+    files = expand_inputs(items)
+    walked = {q for item in items if Path(item).is_dir()
+              for q in Path(item).rglob("*.mcap") if q.parent != Path(item)}
+    flat: dict[Path, list[tuple[int, str | None, str | None]]] = {}
+    for i, q in enumerate(files):
+        if q not in walked:
+            meta, unit = unit_identity(q)
+            flat.setdefault(q.resolve().parent, []).append((i, meta.get("machine"), unit))
+    names: list[str | None] = [None] * len(files)
+    for folder, caps in flat.items():
+        units = {u for _i, _m, u in caps if u}
+        for i, named, unit in caps:
+            names[i] = named or (unit if len(units) > 1 and unit else folder.name or "-")
+    return files, names
+
+
+def unit_identity(path: Path) -> tuple[dict[str, str], str | None]:
+    """A capture's session metadata and the unit it was recorded from, as its metadata and
+    first bytes say it (``grbl-1.1f on host:/dev/ttyUSB0``, ``gve64-v19 emulator``); None
+    when the file says nothing of it."""
+    from conform.families.peek import peek_capture, peek_family
+
+    try:
+        meta = {str(k): str(v) for k, v in peek_capture(str(path))[2].items()}
+    except Exception:  # noqa: BLE001 - not ours to report: its analysis says what is wrong
+        return {}, None
+    if not meta:
+        return meta, None
+    detected = peek_family(str(path), None)[0] if not meta.get("variant") else None
+    what = meta.get("variant") or (detected.family if detected else default_family().name)
+    port, host = meta.get("unit_port"), meta.get("hostname")
+    if port:
+        return meta, f"{what} on {host}:{port}" if host else f"{what} on {port}"
+    if "emulator" in meta.get("capture_method", ""):
+        return meta, f"{what} emulator"
+    return meta, what
+
+
 def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._")[:80] or "unnamed"
 
@@ -79,17 +125,19 @@ def machine_of(path: Path, metadata: dict[str, dict[str, str]]) -> str:
 
 
 def analyze_one(path: str, parquet_dir: str | None, options: JsonObject,
-                report_dir: str | None = None) -> JsonObject:
+                report_dir: str | None = None, machine: str | None = None) -> JsonObject:
     """One fleet task: analyse ``path``, write its Parquet parts (and, with ``report_dir``,
-    its own report under ``report_dir/sessions/``), return its summary row."""
+    its own report under ``report_dir/sessions/``), return its summary row. ``machine``:
+    its machine's name (``name_machines``; None: ``machine_of``)."""
     from conform.analysis import analyze
 
     p = Path(path)
     row: JsonObject = dict.fromkeys(SUMMARY_KEYS) | dict.fromkeys(
         c.key for c in fleet_columns())
-    row.update(machine=p.parent.name or "-", session=p.stem, path=str(p), state="error",
-               started=_mtime(p))
-    other = _other_family(p, parquet_dir, options, row, report_dir)
+    row.update(machine=machine or p.parent.name or "-", session=p.stem, path=str(p),
+               state="error", started=_mtime(p))
+    part_machine = row["machine"]
+    other = _other_family(p, parquet_dir, options, row, report_dir, machine)
     if other is not None:
         return other
     row["family"] = default_family().name
@@ -103,8 +151,9 @@ def analyze_one(path: str, parquet_dir: str | None, options: JsonObject,
     a = _attempt(row, lambda: analyze(p, whatif_replays=False, parquet=sink, **options))
     if a is None:
         return row
-    _fill(row, a, machine_of(p, a.raw.metadata), a.raw.metadata.get("conform.session", {}))
-    if sink is not None and row["machine"] != p.parent.name:  # named by the metadata
+    _fill(row, a, machine or machine_of(p, a.raw.metadata),
+          a.raw.metadata.get("conform.session", {}))
+    if sink is not None and row["machine"] != part_machine:  # named by the metadata
         for name, written in a.tables.items():
             d = sink.dir / name / f"machine={_safe(row['machine'])}"
             d.mkdir(parents=True, exist_ok=True)
@@ -114,14 +163,25 @@ def analyze_one(path: str, parquet_dir: str | None, options: JsonObject,
 
 
 def _fill(row: JsonObject, a: AnalysisResult, machine: str, meta: JsonObject) -> None:
-    """A row from an analysis: its ``fleet_row()``, the machine, the findings per severity
-    and the session's start (its metadata's ``started``, else the file's time)."""
+    """A row from an analysis: its ``fleet_row()``, the machine, what its family's latency
+    measures (``Family.latency_measure``), the findings per severity and the session's start
+    (its metadata's ``started``, else the file's time; None for a session on an emulator's
+    virtual clock, whose ``started`` is no wall-clock time: ``clock`` says so)."""
+    from conform.capture.recorder import CALLERS_CLOCK
+
     row.update(a.fleet_row())
     row["machine"] = machine
+    try:
+        row["latency"] = family(str(row["family"])).latency_measure
+    except Exception:  # noqa: BLE001 - a family the registry does not know: the engine's words
+        row["latency"] = Family.latency_measure
     sev = dict.fromkeys(SEVERITIES, 0)
     for f in getattr(a, "findings", []):
         sev[f.severity] = sev.get(f.severity, 0) + 1
     row["severities"] = sev
+    if meta.get("clock_source") == CALLERS_CLOCK:
+        row["started"], row["clock"] = None, "virtual"
+        return
     started = _iso_seconds(meta.get("started"))
     if started is not None:
         row["started"] = started
@@ -168,7 +228,8 @@ def _session_report(row: JsonObject, a: AnalysisResult, report_dir: str | None, 
 
 
 def _other_family(p: Path, parquet_dir: str | None, options: JsonObject,
-                  row: JsonObject, report_dir: str | None = None) -> JsonObject | None:
+                  row: JsonObject, report_dir: str | None = None,
+                  machine: str | None = None) -> JsonObject | None:
     """A capture of another family's traffic (conform.families.capture_hook decides, as for
     one file), analysed by that family: its ``fleet_row()`` fills the row and its tables go
     to ``DIR/<family>/<table>/machine=M/<session>.parquet``. None: the default family's."""
@@ -183,7 +244,7 @@ def _other_family(p: Path, parquet_dir: str | None, options: JsonObject,
     if d.family == "unknown":
         row["error"] = f"protocol unknown ({d.why})"
         return row
-    machine = machine_of(p, {"conform.session": meta})
+    machine = machine or machine_of(p, {"conform.session": meta})
     base = Path(parquet_dir or ".") / d.family
     tmp = base / f".{_safe(machine)}-{_safe(p.stem)}"
     a = _attempt(row, lambda: family(d.family).analyze(  # a family may stream its tables there
@@ -220,19 +281,24 @@ def _attempt(row: JsonObject, run: Callable[[], _A]) -> _A | None:
 
 
 def run_local(paths: list[str], parquet_dir: str | None, options: JsonObject,
-              jobs: int | None = None, report_dir: str | None = None) -> list[JsonObject]:
-    """Every file on a pool of local processes (all cores by default)."""
+              jobs: int | None = None, report_dir: str | None = None,
+              machines: list[str | None] | None = None) -> list[JsonObject]:
+    """Every file on a pool of local processes (all cores by default); ``machines``: each
+    file's machine where it is named before (``name_machines``)."""
     jobs = jobs or os.cpu_count() or 1
-    if jobs == 1 or len(paths) == 1:
-        return [analyze_one(p, parquet_dir, options, report_dir) for p in paths]
     n = len(paths)
+    machines = machines or [None] * n
+    if jobs == 1 or n == 1:
+        return [analyze_one(p, parquet_dir, options, report_dir, m)
+                for p, m in zip(paths, machines, strict=True)]
     with ProcessPoolExecutor(max_workers=min(jobs, n)) as pool:
         return list(pool.map(analyze_one, paths, [parquet_dir] * n, [options] * n,
-                             [report_dir] * n))
+                             [report_dir] * n, machines))
 
 
 def run_dask(paths: list[str], parquet_dir: str | None, options: JsonObject,
-             scheduler: object, report_dir: str | None = None) -> list[JsonObject]:
+             scheduler: object, report_dir: str | None = None,
+             machines: list[str | None] | None = None) -> list[JsonObject]:
     """Every file as a task on Dask distributed (``scheduler``: an address or a cluster)."""
     try:
         from dask.distributed import Client
@@ -244,8 +310,9 @@ def run_dask(paths: list[str], parquet_dir: str | None, options: JsonObject,
     except (OSError, TimeoutError, ValueError) as exc:
         raise UserError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
     try:
-        futures = client.map(analyze_one, paths, parquet_dir=parquet_dir, options=options,
-                             report_dir=report_dir, pure=False)
+        n = len(paths)
+        futures = client.map(analyze_one, paths, [parquet_dir] * n, [options] * n,
+                             [report_dir] * n, machines or [None] * n, pure=False)
         return client.gather(futures)
     finally:
         client.close()
@@ -257,15 +324,16 @@ def analyze_fleet(inputs: Iterable[str], *, parquet_dir: str | None = None,
     """Analyse every capture in ``inputs``; the fleet summary (see ``summarise``). With
     ``report_dir`` each session's own report is written under it (``sessions/``) and its
     row links it (``report``); ``write_fleet_report`` adds the fleet's."""
-    paths = [str(p.resolve()) for p in expand_inputs(inputs)]
+    files, machines = name_machines(list(inputs))
+    paths = [str(p.resolve()) for p in files]
     for d in (parquet_dir, report_dir):
         if d:
             Path(d).mkdir(parents=True, exist_ok=True)
     opts = dict(options or {})
     if scheduler is not None:
-        rows = run_dask(paths, parquet_dir, opts, scheduler, report_dir)
+        rows = run_dask(paths, parquet_dir, opts, scheduler, report_dir, machines)
     else:
-        rows = run_local(paths, parquet_dir, opts, jobs, report_dir)
+        rows = run_local(paths, parquet_dir, opts, jobs, report_dir, machines)
     return summarise(rows)
 
 
@@ -277,13 +345,14 @@ def summarise(rows: list[JsonObject]) -> JsonObject:
     cols = fleet_columns()
     totals = [c.key for c in cols if c.total]
     rows = sorted(rows, key=lambda r: (str(r["machine"]), str(r["session"])))
+    measures = list(dict.fromkeys(str(r["latency"]) for r in rows if r.get("latency")))
     machines: dict[str, JsonObject] = {}
     for r in rows:
         m = machines.setdefault(r["machine"], {
             "machine": r["machine"], "sessions": 0, "errors": 0, "damaged": 0,
             "duration_s": 0.0, "exchanges": 0, **dict.fromkeys(totals, 0),
             "severities": dict.fromkeys(SEVERITIES, 0),
-            "rtt_p95_ms_worst": None, "rtt_p99_ms_worst": None})
+            "rtt_p95_ms_worst": None, "rtt_p99_ms_worst": None, "latency": {}})
         m["sessions"] += 1
         if r["state"] == "error":
             m["errors"] += 1
@@ -293,11 +362,14 @@ def summarise(rows: list[JsonObject]) -> JsonObject:
             m[k] += r.get(k) or 0
         for k, n in (r.get("severities") or {}).items():
             m["severities"][k] = m["severities"].get(k, 0) + n
+        worst = m["latency"].setdefault(str(r.get("latency")), {"p95": None, "p99": None})
         for k in ("rtt_p95_ms", "rtt_p99_ms"):
             v = r.get(k)
             if v is not None:
                 key = k + "_worst"
                 m[key] = v if m[key] is None else max(m[key], v)
+                q = k[4:7]
+                worst[q] = v if worst[q] is None else max(worst[q], v)
     for m in machines.values():
         d = m["duration_s"]
         m["exchanges_per_s"] = m["exchanges"] / d if d > 0 else None
@@ -312,9 +384,20 @@ def summarise(rows: list[JsonObject]) -> JsonObject:
                       **{k: sum(r.get(k) or 0 for r in rows) for k in totals},
                       "exchanges": sum(r.get("exchanges") or 0 for r in rows),
                       "severities": sev},
-           "columns": [asdict(c) for c in cols]}
+           "columns": [asdict(c) for c in cols], "latencies": measures,
+           "notes": _clock_notes(rows)}
     out["verdict"] = verdict(out)
     return out
+
+
+def _clock_notes(rows: list[JsonObject]) -> list[str]:
+    """What the time axis leaves out: sessions recorded on an emulator's virtual clock."""
+    virtual = [str(r["session"]) for r in rows if r.get("clock") == "virtual"]
+    if not virtual:
+        return []
+    names = ", ".join(virtual[:5]) + (" …" if len(virtual) > 5 else "")
+    return [f"{count(len(virtual), 'session')} ran on an emulator's virtual clock, whose start "
+            f"is no wall-clock time, so not placed in time: {names}"]
 
 
 def verdict(s: JsonObject) -> dict[str, str]:
@@ -365,7 +448,7 @@ def write_fleet_report(summary: JsonObject, out_dir: str | Path) -> dict[str, Pa
     paths = {"json": d / "fleet.json", "markdown": d / "summary.md", "html": d / "index.html"}
     plots = fleet_plots(doc)
     paths["json"].write_text(json.dumps(doc, indent=1), "utf-8")
-    ctx = {"s": doc, "fmt": _fmt, "count": count, "plots": plots}
+    ctx = {"s": doc, "fmt": _fmt, "count": count, "plots": plots, "rtt": _rtt}
     paths["markdown"].write_text(env.get_template("fleet.md.j2").render(**ctx), "utf-8")
     paths["html"].write_text(env.get_template("fleet.html.j2").render(**ctx), "utf-8")
     return paths
@@ -385,6 +468,13 @@ def fleet_datasets(parquet_dir: str | Path) -> list[str]:
 def count(n: int, noun: str) -> str:
     """``1 machine``, ``2 machines``: a count and its noun, in the right number."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _rtt(r: JsonObject, measure: str) -> str:
+    """A session's latency percentiles under its family's measure's column, else nothing."""
+    if r.get("latency") != measure:
+        return ""
+    return " / ".join(_fmt(r.get(k), ".1f") for k in ("rtt_p50_ms", "rtt_p95_ms", "rtt_p99_ms"))
 
 
 def _fmt(v: object, spec: str = ".2f") -> str:

@@ -39,6 +39,7 @@ from conform.errors import UserError
 
 PART_SUFFIX = ".part"
 CLOCK_SOURCE = "time.monotonic anchored to time.time at start (seconds since Unix epoch)"
+CALLERS_CLOCK = "caller's clock"  # an emulator's virtual clock: its times are not wall-clock times
 
 
 class RecordingError(UserError):
@@ -120,7 +121,7 @@ class Recorder:
         self._sink = McapSink(self._file, chunk_size=chunk_size,
                               topics=self._session.fields.channels())
         t0 = self.clock()
-        meta.setdefault("clock_source", CLOCK_SOURCE if clock is None else "caller's clock")
+        meta.setdefault("clock_source", CLOCK_SOURCE if clock is None else CALLERS_CLOCK)
         meta.setdefault("tool", "conform")
         meta.setdefault("tool_version", __version__)
         meta.setdefault("format_version", FORMAT_VERSION)

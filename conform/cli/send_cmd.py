@@ -73,14 +73,31 @@ def cli(job: str, target: str, variant: str | None, baud: int, timeout: float | 
 
 def _job_of(fam: Family, job: str) -> None:
     """A job in which the family finds no move its unit executes is another family's (a
-    vector file for a g-code unit): refused before anything is sent, as check-sender's
-    ``--job`` is (the family's ``check_sender.moves``, where it has one)."""
+    vector file for a g-code unit, or the reverse): refused before anything is sent, as
+    check-sender's ``--job`` is (the family's ``check_sender.moves``, where it has one),
+    naming the families whose moves it holds."""
+    from conform.families import families
     from conform.sendercheck.options import read_job
 
     moves = getattr(fam.check_sender, "moves", None)
-    if moves is not None and not moves(read_job(job) or []):
-        raise UserError(f"{job}: no line of it is a move a {fam.name} unit executes; is it a "
-                        "job of another family? Nothing was sent")
+    lines = read_job(job) or []
+    if moves is None or moves(lines):
+        return
+    others = [f.name for f in families() if f.name != fam.name and _job_moves(f, lines)]
+    looks = f" it looks like a {' or '.join(others)} job:" if others else ""
+    raise UserError(f"{job}:{looks} no line of it is a move a {fam.name} unit executes; is it "
+                    "a job of another family? Nothing was sent")
+
+
+def _job_moves(fam: Family, lines: list[str]) -> int:
+    """How many of ``lines`` are moves ``fam``'s unit executes (0 when it cannot tell)."""
+    try:
+        shapes = fam.check_sender
+        if shapes is None:
+            return 0
+        return shapes.moves(lines) if shapes.moves else len(shapes.units(lines))
+    except Exception:  # noqa: BLE001 - a family without check-sender, or a job it cannot read
+        return 0
 
 
 def _family_of(target: str, variant: str | None, baud: int) -> tuple[Family, str | None]:

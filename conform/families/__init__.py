@@ -418,6 +418,11 @@ class Family:
     fleet_columns: Sequence[FleetColumn] = ()
     """The columns its analyses add to a fleet summary (``conform.analysis.fleet``)."""
 
+    latency_measure: str = "command to answer"
+    """What its ``fleet_row()``'s latency percentiles (``rtt_p50_ms`` ...) measure, in a
+    fleet report's words (``round trip``, ``line to ok``): sessions whose families measure
+    differently are never put in one latency column (``conform.analysis.fleet``)."""
+
     # -- the diagnosis (conform.diagnosis): optional; a family without them is diagnosed as
     # -- "not available" (the defaults below), the engine reaching them through getattr
 

@@ -95,6 +95,7 @@ def render_html(results: RunResults) -> str:
         problems=problems, n_problems=sum(len(s.checks) for s in problems),
         deviations=deviations, n_deviations=sum(len(s.checks) for s in deviations),
         columns=columns, subject_rows=subject_rows, n_checks=len(results.checks),
+        cites=view.citations(subject_rows),
         causes=view.causes(results),
         grades=[g.value for g in GRADE_ORDER], mutants=results.mutants,
     )
@@ -180,12 +181,17 @@ def render_markdown(results: RunResults) -> str:
             out.append("")
     columns, rows = view.subject_matrix(results)
     out += ["", "## Commands × variants", "",
-            "Each cell: the variant's own clause and the grades of its checks.", "",
+            "Each cell: the variant's own clause (a long one: its number in the list under "
+            "the table) and the grades of its checks.", "",
             "| command | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
+    cites = view.citations(rows)
     for row in rows:
         out.append(f"| {_md_cell(row.subject)} | "
-                   + " | ".join(_md_cell(f"{c.clause}: {c.text()}" if c.clause else c.text())
+                   + " | ".join(_md_cell(f"{c.cited}: {c.text()}" if c.cited else c.text()
+                                         + (f" [{cites[c.clause]}]" if c.clause in cites else ""))
                                 for c in row.cells) + " |")
+    if cites:
+        out += ["", *(f"{n}. {_md_cell(clause)}" for clause, n in cites.items())]
     if results.mutants:
         killed = sum(1 for m in results.mutants if m.get("killed"))
         out += ["", f"## Mutants: {killed}/{len(results.mutants)} killed", "",

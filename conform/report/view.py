@@ -272,11 +272,34 @@ class Cell:
     worst: str | None
     clause: str = ""
 
+    @property
+    def cited(self) -> str:
+        """The clause as the cell shows it: a manual's section (``GVE64 §13.5.2``) is short
+        enough; a longer citation (source files and functions) is left to the row's
+        footnote (``citations``), so the grades stay on the page."""
+        return self.clause if len(self.clause) <= SHORT_CLAUSE else ""
+
     def text(self) -> str:
         if not self.counts:
             return "—"
         return " ".join(f"{n} {g}" for g in (x.value for x in GRADE_ORDER)
                         if (n := self.counts.get(g)))
+
+
+SHORT_CLAUSE = 24
+"""The longest clause a matrix cell shows beside its grades (characters)."""
+
+
+def citations(rows: list[Row]) -> dict[str, int]:
+    """The clauses too long for a matrix cell (``Cell.cited``), numbered from 1 in the order
+    the rows first cite them: the cell carries the number, the list under the table the
+    citation."""
+    out: dict[str, int] = {}
+    for row in rows:
+        for cell in row.cells:
+            if cell.clause and not cell.cited:
+                out.setdefault(cell.clause, len(out) + 1)
+    return out
 
 
 def _worst(counts: Counter[str]) -> str | None:

@@ -10,46 +10,11 @@ import re
 import shlex
 import xml.etree.ElementTree as ET
 from pathlib import Path
-
-import jinja2
+from typing import Any
 
 from conform.report.render import write_files
 from conform.sendercheck.family import ERROR, FAIL, GRADES, NA, WARN, Verdict
 from conform.sendercheck.grade import CheckResults
-
-_HTML = """<!doctype html><html><head><meta charset="utf-8"><title>check-sender {{ verdict }}: {{ command }}</title>
-<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}
-td,th{border:1px solid #ccc;padding:3px 6px;font-size:90%;vertical-align:top}
-.FAIL{background:#f8c8c8}.DEVIATION{background:#fbe7b0}.PASS{background:#d4f0d4}
-.ERROR{background:#e0c0f0}.NOT-APPLICABLE{color:#999}.INCOMPLETE{background:#ffe5e5}
-.badge{padding:0 .4em;border-radius:3px}</style></head><body>
-<h1>check-sender <span class="{{ verdict }} badge">{{ verdict }}</span></h1>
-<p><code>{{ command }}</code></p>
-<p>variant {{ r.variant }} ({{ r.family }}), {{ "%.1f"|format(r.duration) }} s, exit status
-{{ r.exit_code }}; {% for g, n in counts.items() %}{{ g }} {{ n }}{% if not loop.last %}, {% endif %}{% endfor %}</p>
-{% if r.interrupted %}<p class="abort"><b>INCOMPLETE:</b> {{ r.interrupted }}</p>{% endif %}
-{% if to_fix %}<h2>What to fix</h2><ul>{% for v in to_fix %}<li class="{{ v.grade }}"><b>{{ v.rule }}</b>
-({{ v.level }}, {{ v.clause }}) in <a href="#{{ v.scenario }}">{{ v.scenario }}</a>: {{ v.detail|plain }}</li>
-{% endfor %}</ul>{% endif %}
-<h2>Rules × scenarios</h2><table><tr><th>rule</th><th>level</th><th>clause</th>
-{% for s in r.scenarios %}<th>{{ s.name }}</th>{% endfor %}</tr>
-{% for rule, cells in matrix %}<tr><td>{{ rule.rule }}<br><small>{{ rule.title }}</small></td>
-<td>{{ rule.level }}</td><td>{{ rule.clause }}</td>
-{% for v in cells %}<td class="{{ v.grade }}" title="{{ v.detail|plain }}">{{ v.grade }}</td>{% endfor %}</tr>
-{% endfor %}</table>
-<h2>Scenarios</h2>{% for s in r.scenarios %}<h3 id="{{ s.name }}">{{ s.name }}: {{ s.title }}</h3>
-<p>{{ "%.2f"|format(s.session.duration) }} s, exit status {{ s.session.exit_code }}{% if s.session.hung %}
-(stopped at the {{ s.session.timeout }} s timeout){% endif %};
-{% if s.session.comparison %}{{ s.session.comparison.summary() }}; {% endif %}
-capture <code>{{ s.session.capture }}</code></p>
-<ul>{% for v in s.verdicts if v.grade in shown %}<li class="{{ v.grade }}"><b>{{ v.grade }}</b>
-{{ v.rule }} ({{ v.clause }}): {{ v.detail|plain }}
-{% for e in v.evidence %}<br><small>{{ e|plain }}</small>{% endfor %}</li>{% endfor %}</ul>
-{% endfor %}
-<h2>Findings</h2><table><tr><th>scenario</th><th>kind</th><th>severity</th><th>clause</th><th>message</th></tr>
-{% for f in r.findings[:2000] %}<tr><td>{{ f.scenario }}</td><td>{{ f.kind }}</td><td>{{ f.severity }}</td>
-<td>{{ f.clause }}</td><td>{{ f.message|plain }}</td></tr>{% endfor %}</table></body></html>
-"""
 
 
 def _matrix(r: CheckResults) -> list:
@@ -81,14 +46,30 @@ def _words(m: re.Match[str]) -> str:
 
 
 def render_html(r: CheckResults) -> str:
-    env = jinja2.Environment(autoescape=True)
+    """The page, on the engine's template environment and page head (the analysis reports'
+    look, whatever the family)."""
+    from conform.analysis.report import template_env
+
+    env = template_env()
     env.filters["plain"] = plain
     counts = {g.value: r.counts().get(g.value, 0) for g in GRADES}
     to_fix = [v for v in r.verdicts if v.grade in (FAIL, ERROR) and v.level == "MUST"] or \
         [v for v in r.verdicts if v.grade in (FAIL, ERROR)]
-    return env.from_string(_HTML).render(r=r, counts=counts, matrix=_matrix(r), to_fix=to_fix,
-                                         shown=(FAIL, ERROR, WARN, "PASS"), verdict=verdict(r),
-                                         command=shlex.join(r.command))
+    run_line = (f"variant {r.variant} ({r.family}), {r.duration:.1f} s, exit status "
+                f"{r.exit_code}; " + ", ".join(f"{g} {n}" for g, n in counts.items()))
+    return env.get_template("check_sender.html.j2").render(
+        r=r, run_line=run_line, matrix=_matrix(r), to_fix=to_fix, scenario_line=scenario_line,
+        shown=(FAIL, ERROR, WARN, "PASS"), verdict=verdict(r), command=shlex.join(r.command))
+
+
+def scenario_line(s: Any) -> str:
+    """A scenario's line: its time, exit status (and timeout), the job against the ground
+    truth where the family compares one, and its capture; no empty part."""
+    ss = s.session
+    parts = [f"{ss.duration:.2f} s, exit status {ss.exit_code}"
+             + (f" (stopped at the {ss.timeout:g} s timeout)" if ss.hung else ""),
+             ss.comparison.summary() if ss.comparison else "", f"capture {ss.capture}"]
+    return "; ".join(p for p in parts if p and p.strip())
 
 
 def verdict(r: CheckResults) -> str:

@@ -147,6 +147,7 @@ class GrblFamily(Family):
     pytest_plugin = None
     # a fleet summary's grbl columns (GrblAnalysis.fleet_row): motion lines answered ok,
     # hazards and planner starvations
+    latency_measure = "line to ok/error"   # fleet_row()'s latency percentiles
     fleet_columns = (
         FleetColumn("vectors_accepted", "motion lines", total=True, rate="vectors_per_s",
                     rate_label="motion lines/s", machines=False, sessions=False),

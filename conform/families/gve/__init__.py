@@ -137,6 +137,7 @@ class GveFamily(Family):
 
     # a fleet summary's GVE columns: vectors the unit accepted, hazards (findings of that
     # severity) and the replayed queue's starvations and standstill (analysis/output.py)
+    latency_measure = "round trip"   # fleet_row()'s latency percentiles
     fleet_columns = (
         FleetColumn("vectors_accepted", "vectors accepted", total=True, rate="vectors_per_s",
                     rate_label="vectors/s", machines=False, sessions=False),

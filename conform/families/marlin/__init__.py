@@ -43,6 +43,7 @@ class MarlinFamily(Family):
     name = "marlin"
     title = "Marlin 2.1 (3D printers, plotters, small CNC and lasers)"
     default_rank = 300
+    latency_measure = "line to ok"   # fleet_row()'s latency percentiles (ok_p50_ms ...)
     table_files = ("variants", "messages", "commands", "caps")
     characterize_about = (
         "the build's configuration: firmware and protocol version, the M115 capabilities, "

@@ -105,4 +105,5 @@ MARLIN = Family(
     injector=_injector, reopen=_reopen, facts=sender_run,
     end_counts=lambda unit: {"bytes_lost": unit.lost}, decode=False, backdate=False,
     linger=0.2, fast=("clean", "noisy"), baud=250000,
+    moves=lambda lines: len(scenarios.moves(lines)),
 )
