@@ -151,6 +151,14 @@ def fast(d: Path) -> list[Entry]:
     add("marlin-cable-pulled", "marlin", "link-lost",
         drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
               Faults(cut=(0.3, 2.3)), tail=1.0, t_max=12.0), MARLIN)
+    # a sender that stops numbering part way: a hazard while every line is answered; the
+    # stop cause once an unnumbered line goes missing (the unit, reporting its temperatures,
+    # alive, never asks for it)
+    add("marlin-numbering-stopped", "marlin", "numbering-stopped",
+        drive(marlin_unit(), marlin_job(60, until=25), marlin_sender(), tail=1.0), MARLIN)
+    add("marlin-unnumbered-line-lost", "marlin", "numbering-stopped",
+        drive(marlin_unit(), marlin_job(60, until=25, report=True), marlin_sender(),
+              Faults(alter={40: b""}), tail=3.0, t_max=8.0), MARLIN)
     return out
 
 
@@ -161,6 +169,7 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
     import random
 
     rng = random.Random(seed)
+    later = random.Random(seed + 1)     # kinds added later draw apart: the others stay put
     d.mkdir(parents=True, exist_ok=True)
     out: list[Entry] = []
 
@@ -257,6 +266,14 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
         add(f"v{i}-marlin-kill", "marlin", "unit-alarm",
             drive(marlin_unit(), marlin_job(100), marlin_sender(),
                   Faults(unit_calls={t: lambda unit, at: unit._kill(at)}), tail=3.0), MARLIN)
+        until = later.randrange(3, 60)
+        add(f"v{i}-marlin-numbering", "marlin", "numbering-stopped",
+            drive(marlin_unit(), marlin_job(later.randrange(until + 1, 90), until=until),
+                  marlin_sender(), tail=1.0), MARLIN)
+        add(f"v{i}-marlin-unnumbered-lost", "marlin", "numbering-stopped",
+            drive(marlin_unit(), marlin_job(80, until=until, report=True), marlin_sender(),
+                  Faults(alter={later.randrange(until + 1, 80): b""}), tail=3.0,
+                  t_max=round(later.uniform(6.0, 12.0), 3)), MARLIN)
         add(f"v{i}-marlin-busy", "marlin", "unit-busy",
             drive(marlin_unit(), marlin_job(100), marlin_sender(),
                   Faults(unit_calls={t: lambda unit, at: unit.stall(at, 1e4)}), tail=3.0,

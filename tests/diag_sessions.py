@@ -264,10 +264,15 @@ def marlin_sender(**kw) -> Sender:
                   retry=lambda a: a.startswith(b"Resend:"), **kw)
 
 
-def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
+def marlin_job(n: int = 60, numbered: bool = True, until: int | None = None,
+               report: bool = False) -> list[bytes]:
     """``n`` moves ending with M400 (wait for the moves to end), numbered with checksums
-    after an M110 as printcore numbers them, or plain."""
+    after an M110 as printcore numbers them, or plain; ``until``: only the first lines
+    numbered, the rest sent plain (a sender that stops numbering); ``report``: M155 S1 first
+    (the unit reports its temperatures every second on its own)."""
     body = [b"G90"] + [b"G1 X%d Y%d F6000" % (i % 30, i % 7) for i in range(n)] + [b"M400"]
+    if report:
+        body.insert(0, b"M155 S1")
     if not numbered:
         return [b + b"\n" for b in body]
     from functools import reduce
@@ -275,6 +280,9 @@ def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
 
     out = []
     for k, b in enumerate([b"M110 N0", *body]):
+        if until is not None and k >= until:
+            out.append(b + b"\n")
+            continue
         line = b"N%d %s" % (k, b)
         out.append(line + b"*%d\n" % reduce(xor, line, 0))
     return out

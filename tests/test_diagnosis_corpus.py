@@ -10,7 +10,7 @@ import subprocess
 import sys
 
 import pytest
-from diag_corpus import REPO, fast, judge, matrix, proxied, samples, varied
+from diag_corpus import REPO, false_claims, fast, judge, matrix, proxied, samples, varied
 
 from conform.diagnosis import diagnose
 
@@ -156,3 +156,57 @@ def test_bench_prints_the_matrix_and_ends_with_json():
     assert doc["wrong"] == [] and doc["sessions"] >= 30
     assert {"grbl", "gve", "marlin"} <= set(doc["families"])
     assert doc["timing"]["analyze_cpu_s"] > 0 and doc["timing"]["diagnose_cpu_s"] > 0
+
+
+def _marlin(tmp_path, name, job, faults=None, **kw):
+    from diag_sessions import drive, marlin_sender, marlin_unit, record
+
+    ses = drive(marlin_unit(), job, marlin_sender(), faults, **kw)
+    return diagnose(str(record(tmp_path / f"{name}.mcap", ses, "marlin-2.1"))).to_json()
+
+
+def test_a_host_that_stops_numbering_is_a_hazard_of_a_completed_job(tmp_path):
+    """Numbered lines, then unnumbered ones, every one answered: completed, the numbering
+    stopping a hazard that names the last numbered line and the first unnumbered one."""
+    from diag_sessions import marlin_job
+
+    doc = _marlin(tmp_path, "stops", marlin_job(60, until=25), tail=1.0)
+    assert doc["outcome"]["kind"] == "completed" and doc["causes"] == []
+    h = doc["hazards"][0]
+    assert h["kind"] == "numbering-stopped"
+    said = " ".join(h["evidence"])
+    assert "line 25 `N24 G1" in said and "line 26 `G1 X" in said and "38 job line(s)" in said
+    assert "queue.cpp get_serial_commands" in said
+    assert not false_claims(doc)
+
+
+def test_unnumbered_queries_beside_a_numbered_job_are_no_stop_of_numbering(tmp_path):
+    """printcore's send_now M105 and an unnumbered M112-like query go beside numbered job
+    lines without a number, rightly."""
+    from diag_sessions import marlin_job
+
+    job = marlin_job(40)
+    for k in (10, 20, 30):
+        job.insert(k, b"M105\n")
+    doc = _marlin(tmp_path, "queries", job, tail=1.0)
+    assert doc["outcome"]["kind"] == "completed"
+    assert "numbering-stopped" not in [h["kind"] for h in doc["hazards"]]
+
+
+def test_an_unnumbered_line_missed_ends_the_job_on_the_numbering(tmp_path):
+    """The numbering stopped, then a line never reaches the unit (which goes on reporting
+    its temperatures): the session stalls on it and the numbering's stop leads, with the
+    line and the unit's bytes after it as evidence."""
+    from diag_sessions import Faults, marlin_job
+
+    doc = _marlin(tmp_path, "lost", marlin_job(60, until=25, report=True),
+                  Faults(alter={40: b""}), tail=3.0, t_max=8.0)
+    assert doc["outcome"]["kind"] == "stalled"
+    c = doc["causes"][0]
+    assert c["kind"] == "numbering-stopped" and "line 41 `G1" in c["summary"]
+    assert any("without a number" in x for x in c["evidence"])
+    assert any("the unit sent bytes after it" in x for x in c["evidence"])
+    # the same line missed with the numbering kept: no numbering cause at all
+    doc = _marlin(tmp_path, "kept", marlin_job(60, report=True), Faults(alter={40: b""}),
+                  tail=3.0, t_max=8.0)
+    assert "numbering-stopped" not in [c["kind"] for c in doc["causes"] + doc["hazards"]]

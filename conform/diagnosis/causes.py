@@ -28,7 +28,7 @@ from conform.diagnosis.facts import Event, Exchange, Facts
 
 CAUSE_KINDS = ("sender-stopped", "unit-silent", "link-lost", "buffer-overflow", "deadlock",
                "starvation", "noise", "protocol-misuse", "unit-alarm", "overflow-risk",
-               "lost-line", "unit-busy")
+               "lost-line", "unit-busy", "numbering-stopped")
 
 ADVICE = {
     "sender-stopped": "The unit was ready and waiting: look at the sender (crash, closed "
@@ -49,6 +49,10 @@ ADVICE = {
     "unit-busy": "The unit kept saying it was working and never finished: look at what the "
                  "line waits for (a heater that never reaches its target, a wait for the user, "
                  "a very long move) before blaming the link.",
+    "numbering-stopped": "The sender stopped numbering its lines (with their checks) part way: "
+                         "from then on the unit cannot tell a line lost or damaged on the way, "
+                         "nor ask for it again. Make the sender number every job line (queries "
+                         "and emergency commands may go unnumbered beside them).",
     "lost-line": "A line or its answer was lost on the way: check the cable and the sender's "
                  "recovery (ask the unit before sending it again).",
     "deadlock": "Each side waited for the other: the unit held its work while the host "
@@ -289,6 +293,21 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                 f"host waited from {_fmt(s.t_start)}.",
                 [f"{len(never)} line(s) never answered in the capture"],
                 lost + risk[:2])
+        guard = [ev for ev in _events(f, ("unguarded",), 0.0, s.t_end)
+                 if never and ev.t <= never[0].t_sent <= (ev.t_end or ev.t) + 1e-9]
+        if guard:
+            alive = _any_between(f.unit_times, never[0].t_sent + wait, s.t_end)
+            add("numbering-stopped", 0.9 if alive else 0.7,
+                f"{_line(never[0])} went without a number (the host had stopped numbering "
+                f"at {_fmt(guard[0].t)}) and was never answered; "
+                + ("the unit went on sending, so it did not get the line whole, and without "
+                   "a number it could not tell one was missing nor ask for it again."
+                   if alive else "the unit sent nothing more, so whether the line was "
+                   "missed or the unit stopped the wire cannot tell; without a number a "
+                   "missed line is never asked for again."),
+                [f"{_line(never[0])} sent at {_fmt(never[0].t_sent)} without a number",
+                 "the unit sent bytes after it, none answering it" if alive else
+                 "the unit sent nothing after it"], guard)
         if noise:
             add("noise", 0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
                 f"{_line(first)} unanswered.", [], noise)
@@ -391,6 +410,7 @@ EVENT_CAUSE = {  # family event kind -> cause kind, base confidence, per-event s
     "alarm": ("unit-alarm", 0.85, 0.0),
     "link": ("link-lost", 0.6, 0.05),
     "hold": ("deadlock", 0.3, 0.0),
+    "unguarded": ("numbering-stopped", 0.5, 0.0),
 }
 
 SUMMARY = {
@@ -405,6 +425,9 @@ SUMMARY = {
     "unit-alarm": "The unit raised an alarm at {t}: {first}.",
     "link-lost": "The link dropped at {t}: {first}.",
     "deadlock": "The unit held its work at {t}: {first}.",
+    "numbering-stopped": "The sender stopped numbering its lines at {t}: {n} job line(s) "
+                         "went without a number, which the unit can neither check nor ask "
+                         "for again: one lost or damaged on the way would go unnoticed.",
 }
 
 

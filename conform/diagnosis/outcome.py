@@ -40,8 +40,8 @@ OUTCOMES = {
     "findings-only": "the capture is longer than the diagnosis keeps line by line: only the "
                      "analysis's findings are judged",
 }
-STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "noise",
-               "unit-silent", "link-lost", "sender-stopped")
+STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "numbering-stopped",
+               "noise", "unit-silent", "link-lost", "sender-stopped")
 
 
 @dataclass
