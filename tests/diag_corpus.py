@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 from pathlib import Path
 
 from diag_sessions import (
@@ -281,8 +282,9 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
     return out
 
 
-def samples() -> list[Entry]:
-    """The project's sample captures and the real firmware's recorded sessions."""
+def samples(d: Path | None = None) -> list[Entry]:
+    """The project's sample captures and the real firmware's recorded sessions (the grbl
+    transcripts made captures in ``d``, a new temporary folder by default)."""
     cap = REPO / "captures"
     out: list[Entry] = [(p.stem, "gve", "completed", p) for p in sorted(cap.glob("*.mcap"))
                         if not p.stem.startswith("grbl-")]
@@ -290,7 +292,33 @@ def samples() -> list[Entry]:
     marlin = RECORDINGS / "marlin-2.1.2.4"
     out += [(f"marlin-2.1.2.4-{p.stem}", "marlin", "completed", p)
             for p in sorted(marlin.glob("*.mcap"))]
-    return out
+    return out + grbl_recordings(d or Path(tempfile.mkdtemp(prefix="conform-diag-grbl-")))
+
+
+# what each real grbl 1.1f recording (a session of probes, no job file) really was, read from
+# the transcript: every line answered, the unit Idle at the end (``completed``), or every line
+# answered with no status report after the last (``ended``)
+GRBL_RECORDED = {
+    "errors": "completed",          # error codes provoked; resets mid-move (ALARM:3), $X
+    "modal-reset": "completed",     # modal groups set, soft resets while Idle, M2/M30
+    "settings-edges": "ended",      # every $N setting tried; no status poll at all
+    "status-fields": "completed",   # status report fields; ends Idle after M2
+    "system": "completed",          # $ commands, sleep then a reset, $X; ends Idle
+}
+
+
+def grbl_recordings(d: Path) -> list[Entry]:
+    """The real grbl 1.1f's recorded transcripts (recordings/grbl-1.1f) as captures,
+    labelled with how each session really went (``GRBL_RECORDED``)."""
+    from diag_sessions import from_transcript
+
+    folder = RECORDINGS / "grbl-1.1f"
+    if not folder.is_dir():
+        return []
+    d.mkdir(parents=True, exist_ok=True)
+    return [(f"grbl-1.1f-{p.stem}", "grbl", GRBL_RECORDED[p.stem],
+             from_transcript(p, d / f"{p.stem}.mcap", GRBL, "grbl"))
+            for p in sorted(folder.glob("*.transcript"))]
 
 
 def proxied(d: Path) -> list[Entry]:
@@ -372,7 +400,10 @@ def lead_of(doc: dict, label: str) -> str:
     return lead["kind"]
 
 
-REAL_LOSSES = {"careless-noisy"}    # captures/README.md: a vector lost there on purpose
+# sessions whose lines really went unanswered: captures/README.md, a vector lost there on
+# purpose; the real grbl's system recording puts it to sleep ($SLP) and sends $G and $X,
+# which a sleeping grbl never answers (until the reset that follows)
+REAL_LOSSES = {"careless-noisy", "grbl-1.1f-system"}
 
 
 LOSS_WORDS = ("were lost", "was lost", "never answered", "never came", "bytes lost")

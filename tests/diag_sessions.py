@@ -213,6 +213,22 @@ def record(path: Path, ses: Session, variant: str, method: str = "proxy",
     return path
 
 
+def from_transcript(src: Path, path: Path, variant: str, family_name: str) -> Path:
+    """A recorded text transcript (conform/emulator/judge.py reads them) as a capture: each
+    host write and each unit line a read at its recorded time, the unit's lines given the
+    family's line ending (the text form cannot hold a CR)."""
+    from conform.emulator.judge import read_transcript, with_line_ending
+
+    tr = with_line_ending(read_transcript(src), family(family_name).line_ending)
+    rec = Recorder(path, {"capture_method": "transcript", "source": src.name}, variant=variant,
+                   baud=BAUD, decode=False, clock=lambda: T_BASE)
+    for e in tr.events:
+        rec.chunk("host" if e.host else "unit", e.data, t_read=T_BASE + e.t,
+                  t_first=T_BASE + e.t - (len(e.data) - 1) * 10 / BAUD)
+    rec.close()
+    return path
+
+
 # ---------------------------------------------------------------- the two families' senders
 
 

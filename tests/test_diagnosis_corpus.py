@@ -6,11 +6,24 @@ diagnosis once given to a real session has its case here."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
 import pytest
-from diag_corpus import REPO, false_claims, fast, judge, matrix, proxied, samples, varied
+from diag_corpus import (
+    GRBL_RECORDED,
+    RECORDINGS,
+    REPO,
+    false_claims,
+    fast,
+    grbl_recordings,
+    judge,
+    matrix,
+    proxied,
+    samples,
+    varied,
+)
 
 from conform.diagnosis import diagnose
 
@@ -43,11 +56,63 @@ def test_held_out_variations(tmp_path):
     assert len(wrong) <= len(rows) // 20, [(r["name"], r["got"], r["headline"]) for r in wrong]
 
 
-def test_samples_and_real_firmware_recordings_are_completed():
-    rows = judge(samples())
+def test_samples_and_real_firmware_recordings_are_completed(tmp_path):
+    rows = judge(samples(tmp_path))
     names = {r["name"] for r in rows}
     assert {"grbl-counting", "grbl-send-response", "good-rs232"} <= names
     _check(rows)
+
+
+def _recordings() -> None:
+    """Skip without the real firmware's recordings; under CI their absence fails."""
+    if (RECORDINGS / "grbl-1.1f").is_dir() and (RECORDINGS / "marlin-2.1.2.4").is_dir():
+        return
+    why = f"no real-firmware recordings in {RECORDINGS} (or $CONFORM_RECORDINGS)"
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(why + ": CI must have them")
+    pytest.skip(why)
+
+
+def test_real_grbl_recordings_diagnose_as_they_ran(tmp_path):
+    """The real grbl 1.1f's transcripts made captures: each diagnosed as the session went
+    (no job stopped by a reset it went on after, no loss claimed for a line grbl refused for
+    its own reasons)."""
+    _recordings()
+    rows = judge(grbl_recordings(tmp_path))
+    assert sorted(r["name"] for r in rows) == sorted(f"grbl-1.1f-{k}" for k in GRBL_RECORDED)
+    _check(rows)
+    by = {r["name"]: r for r in rows}
+    # once "Stopped by the sender ... soft reset" at the first of many resets between probes
+    assert not by["grbl-1.1f-modal-reset"]["headline"].startswith("Stopped")
+    assert not by["grbl-1.1f-system"]["headline"].startswith("Stopped")
+
+
+def test_a_line_grbl_refuses_for_its_own_reasons_proves_no_loss(tmp_path):
+    """error:11 to a line longer than grbl's line buffer as sent, error:22 to `G1 X1` after a
+    soft reset cleared the feed rate: the firmware's own answers, no damage on the way (once
+    "lost-line ... it arrived damaged" on the real grbl's errors recording)."""
+    _recordings()
+    src = RECORDINGS / "grbl-1.1f" / "errors.transcript"
+    from diag_sessions import from_transcript
+
+    doc = diagnose(str(from_transcript(src, tmp_path / "errors.mcap", "grbl-1.1f",
+                                       "grbl"))).to_json()
+    kinds = [c["kind"] for c in doc["causes"] + doc["hazards"]]
+    assert "lost-line" not in kinds and "buffer-overflow" not in kinds, kinds
+    assert not [ev for ev in doc["timeline"] if ev["kind"] == "loss"]
+
+
+def test_a_hold_the_unit_came_out_of_is_no_deadlock(tmp_path):
+    """Held with lines waiting, then resumed and the lines taken: no deadlock hazard (the
+    real grbl's modal-reset recording holds and resumes with ~)."""
+    _recordings()
+    from diag_sessions import from_transcript
+
+    src = RECORDINGS / "grbl-1.1f" / "modal-reset.transcript"
+    doc = diagnose(str(from_transcript(src, tmp_path / "m.mcap", "grbl-1.1f",
+                                       "grbl"))).to_json()
+    assert any(ev["kind"] == "hold" for ev in doc["timeline"])
+    assert "deadlock" not in [c["kind"] for c in doc["causes"] + doc["hazards"]]
 
 
 def test_a_completed_grbl_job_with_a_full_planner_is_no_lost_link(tmp_path):

@@ -329,7 +329,7 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         polled = _polled(f, t_line)
         host_gone = bool(closed) or (
             polled and not _any_between(f.host_times, t_line + 1e-6, s.t_end))
-        if host_gone:
+        if host_gone and (s.at_end or closed):     # one that went on after only paused
             add("sender-stopped", 0.95 if closed else 0.85,
                 f"The sender stopped at {_fmt(t_line)} while it waited on answers: "
                 + ("it closed its port." if closed else "its polls stopped with its lines."),
@@ -437,6 +437,9 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
         evs = [ev for ev in f.events if ev.kind == ev_kind and id(ev) not in claimed]
         if ev_kind == "link":
             evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
+        if ev_kind == "hold":     # a hold the unit came out of, taking the lines, held nothing
+            evs = [ev for ev in evs if not any(e.t_sent <= ev.t < (e.t_answer or -1.0)
+                                               for e in f.exchanges)]
         if ev_kind == "overflow" and any(ev.kind == "loss" for ev in f.events):
             continue            # the proven loss's cause carries the risk that came before
         for burst in _bursts(evs):
