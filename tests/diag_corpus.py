@@ -403,6 +403,26 @@ def lead_of(doc: dict, label: str) -> str:
 # sessions whose lines really went unanswered: captures/README.md, a vector lost there on
 # purpose; the real grbl's system recording puts it to sleep ($SLP) and sends $G and $X,
 # which a sleeping grbl never answers (until the reset that follows)
+def agreed(doc: dict, label: str) -> bool:
+    """Whether what leads, taken as the diagnosis gives it whatever the label (the stop
+    cause, else the outcome), agrees with ``label``: the cause is the labelled one; the outcome
+    is the session's own, or it completed and its first hazard names the labelled fault."""
+    if doc["causes"]:
+        return doc["causes"][0]["kind"] == label
+    kind = doc["outcome"]["kind"]
+    if label in CLEAN:
+        return kind == label
+    return kind in CLEAN and bool(doc["hazards"]) and doc["hazards"][0]["kind"] == label
+
+
+CALIBRATION_CORPUS = "fast + samples + varied(3, seed 7)"
+
+
+def calibration_corpus(d: Path) -> list[Entry]:
+    """The corpus the confidence table is measured on (conform/diagnosis/calibration.py)."""
+    return fast(d / "fast") + samples(d / "samples") + varied(d / "varied", 3, seed=7)
+
+
 REAL_LOSSES = {"careless-noisy", "grbl-1.1f-system"}
 
 
@@ -423,7 +443,8 @@ def judge(entries: list[Entry]) -> list[dict]:
     for name, family, label, path in entries:
         doc = diagnose(str(path)).to_json()
         rows.append({"name": name, "family": family, "label": label,
-                     "got": lead_of(doc, label),
+                     "got": lead_of(doc, label), "key": doc["lead"]["key"],
+                     "agreed": agreed(doc, label),
                      "outcome": doc["outcome"]["kind"], "headline": doc["headline"],
                      "false_claims": false_claims(doc) if label in CLEAN and
                      name not in REAL_LOSSES else [],

@@ -9,12 +9,15 @@ import json
 import os
 import subprocess
 import sys
+import tomllib
 
 import pytest
 from diag_corpus import (
+    CALIBRATION_CORPUS,
     GRBL_RECORDED,
     RECORDINGS,
     REPO,
+    calibration_corpus,
     false_claims,
     fast,
     grbl_recordings,
@@ -25,7 +28,7 @@ from diag_corpus import (
     varied,
 )
 
-from conform.diagnosis import diagnose
+from conform.diagnosis import calibration, diagnose
 
 
 def _check(rows: list[dict]) -> None:
@@ -45,6 +48,51 @@ def test_in_process_corpus(tmp_path):
     assert m["completed"] == {"completed": 5} and m["ended"] == {"ended": 4}
     for family in ("grbl", "gve", "marlin"):
         assert any(r["family"] == family and r["label"] != "completed" for r in rows)
+    # the confidence table was measured on a corpus holding these sessions: each lead they
+    # give is in it, with at least their sessions and their disagreements
+    table = calibration.table()
+    for key, (k, n) in calibration.count((r["key"], r["agreed"]) for r in rows).items():
+        assert key in table, f"{key}: not in conform/diagnosis/calibration.toml (re-measure: " \
+            "python bench/bench_diagnosis.py --calibrate)"
+        assert table[key][1] >= n and table[key][1] - table[key][0] >= n - k, (key, table[key])
+
+
+@pytest.mark.slow
+def test_the_confidence_table_is_what_its_corpus_gives(tmp_path):
+    """conform/diagnosis/calibration.toml is exactly what its corpus measures now (else:
+    python bench/bench_diagnosis.py --calibrate)."""
+    _recordings()
+    doc = tomllib.loads(calibration.TABLE.read_text())
+    assert doc["corpus"] == CALIBRATION_CORPUS
+    rows = judge(calibration_corpus(tmp_path))
+    assert calibration.count((r["key"], r["agreed"]) for r in rows) == calibration.table()
+    assert doc["sessions"] == len(rows)
+
+
+def test_confidence_is_measured_and_says_its_count(tmp_path):
+    """A stop cause's confidence is its lead's precision on the corpus with the sessions it
+    rests on; the rule's own score stays beside it; the outcome of a clean session carries
+    its own."""
+    from diag_sessions import Faults, drive, gve_job, gve_sender, gve_unit, record
+
+    ses = drive(gve_unit(), gve_job(80), gve_sender(), Faults(mute_unit_at=0.08), tail=3.0)
+    d = diagnose(str(record(tmp_path / "s.mcap", ses, "gve64-v19")))
+    c = d.causes[0]
+    k, n = calibration.table()[c.key]
+    assert c.measured == (k, n) and f"(confidence {k / n:.2f}, n={n})" in d.headline()
+    doc = d.to_json()
+    assert doc["causes"][0]["confidence"] == round(k / n, 3) and "score" in doc["causes"][0]
+    assert doc["lead"] == {"key": c.key, "confidence": round(k / n, 3), "sessions": n}
+    clean = diagnose(str(REPO / "captures" / "grbl-counting.mcap")).to_json()
+    assert clean["outcome"]["measured"]["sessions"] == \
+        calibration.table()["outcome/" + clean["outcome"]["kind"]][1]
+
+
+def test_a_lead_the_corpus_never_gave_says_it_is_not_measured():
+    from conform.diagnosis.causes import Cause
+
+    c = Cause("noise", 0.45, 0.0, 1.0, [], "", "", rule="no-such-rule")
+    assert c.key not in calibration.table() and c.shown() == "score 0.45, not measured"
 
 
 @pytest.mark.slow

@@ -51,9 +51,20 @@ class Outcome:
     evidence: list[str] = field(default_factory=list)
     by: str | None = None           # stopped: "sender" or "link"; aborted: "unit"
     lead: str | None = None         # the cause kind that must lead (None: none does)
+    measured: tuple[int, int] | None = None     # (agreed, sessions) in the labelled corpus
+
+    @property
+    def key(self) -> str:
+        """Its key in the calibration table (conform/diagnosis/calibration.toml)."""
+        return f"outcome/{self.kind}" + (f"/{self.by}" if self.by else "")
 
     def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        out = {k: v for k, v in asdict(self).items() if v is not None and k != "measured"}
+        if self.measured is not None:
+            k, n = self.measured
+            out["confidence"] = round(k / n, 3)
+            out["measured"] = {"agreed": k, "sessions": n}
+        return out
 
     def title(self) -> str:
         if self.kind == "stopped":
