@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import bisect
 import statistics
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from conform.diagnosis.facts import Event, Exchange, Facts
@@ -461,6 +462,21 @@ SUMMARY = {
 }
 
 
+def _answered_after(f: Facts) -> Callable[[float], bool]:
+    """``t`` -> whether a line sent by ``t`` was answered after ``t`` (the latest answer among
+    the lines sent by then, as a running maximum)."""
+    sent, latest, top = [], [], -1.0
+    for e in f.exchanges:
+        top = max(top, e.t_answer if e.t_answer is not None else -1.0)
+        sent.append(e.t_sent)
+        latest.append(top)
+
+    def after(t: float) -> bool:
+        k = bisect.bisect_right(sent, t)
+        return k > 0 and latest[k - 1] > t
+    return after
+
+
 def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
     out = []
     for ev_kind, (kind, base, step) in EVENT_CAUSE.items():
@@ -468,8 +484,8 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
         if ev_kind == "link":
             evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
         if ev_kind == "hold":     # a hold the unit came out of, taking the lines, held nothing
-            evs = [ev for ev in evs if not any(e.t_sent <= ev.t < (e.t_answer or -1.0)
-                                               for e in f.exchanges)]
+            resumed = _answered_after(f)
+            evs = [ev for ev in evs if not resumed(ev.t)]
         if ev_kind == "overflow" and any(ev.kind == "loss" for ev in f.events):
             continue            # the proven loss's cause carries the risk that came before
         for burst in _bursts(evs):
