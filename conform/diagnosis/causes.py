@@ -24,6 +24,7 @@ import bisect
 import statistics
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 from conform.diagnosis.facts import Event, Exchange, Facts
 
@@ -465,11 +466,9 @@ SUMMARY = {
 def _answered_after(f: Facts) -> Callable[[float], bool]:
     """``t`` -> whether a line sent by ``t`` was answered after ``t`` (the latest answer among
     the lines sent by then, as a running maximum)."""
-    sent, latest, top = [], [], -1.0
-    for e in f.exchanges:
-        top = max(top, e.t_answer if e.t_answer is not None else -1.0)
-        sent.append(e.t_sent)
-        latest.append(top)
+    sent = [e.t_sent for e in f.exchanges]
+    latest = list(accumulate((-1.0 if e.t_answer is None else e.t_answer
+                              for e in f.exchanges), max))
 
     def after(t: float) -> bool:
         k = bisect.bisect_right(sent, t)
@@ -483,8 +482,8 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
         evs = [ev for ev in f.events if ev.kind == ev_kind and id(ev) not in claimed]
         if ev_kind == "link":
             evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
-        if ev_kind == "hold":     # a hold the unit came out of, taking the lines, held nothing
-            resumed = _answered_after(f)
+        if ev_kind == "hold" and evs:   # a hold the unit came out of, taking the lines,
+            resumed = _answered_after(f)    # held nothing
             evs = [ev for ev in evs if not resumed(ev.t)]
         if ev_kind == "overflow" and any(ev.kind == "loss" for ev in f.events):
             continue            # the proven loss's cause carries the risk that came before
