@@ -106,10 +106,10 @@ class Cause:
         return f"confidence {k / n:.2f}, n={n}"
 
     def to_json(self) -> dict[str, object]:
-        k, n = self.measured or (None, None)
+        m = self.measured
         return {"kind": self.kind,
-                "confidence": round(self.confidence if not n else k / n, 3),
-                "measured": None if not n else {"agreed": k, "sessions": n},
+                "confidence": round(self.confidence if m is None else m[0] / m[1], 3),
+                "measured": None if m is None else {"agreed": m[0], "sessions": m[1]},
                 "score": round(self.confidence, 3), "rule": self.rule,
                 "t_start": round(self.t_start, 6), "t_end": round(self.t_end, 6),
                 "evidence": self.evidence, "advice": self.advice, "summary": self.summary,

@@ -99,7 +99,7 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
                                     b == 0x21 and 0 <= t_abs - u < 5.0
                                     for u, b in a.realtime) else ""),
                                 "interface.md §Realtime commands (0x18 soft reset)"))
-    resets = [t_abs - t0 for t_abs, byte in a.realtime if byte == SOFT_RESET]
+    resets = tuple(t_abs - t0 for t_abs, byte in a.realtime if byte == SOFT_RESET)
     events += _refused_valid(ex, load_grbl().variant(vid), resets)
     events += _deaf(a, t0)
     for e in ex:
@@ -149,7 +149,7 @@ def _deaf(a: Any, t0: float) -> list[Event]:
     return out
 
 
-def _refused_valid(ex: list[Exchange], v: Any, resets: list[float] = ()) -> list[Event]:
+def _refused_valid(ex: list[Exchange], v: Any, resets: tuple[float, ...] = ()) -> list[Event]:
     """Proof of a loss on the wire: an ``error:N`` to a line grbl's parser takes as sent (in
     the modal state the lines before it left, back to the defaults at each soft reset:
     gcode.c gc_init from mc_reset): only damage on the way explains it. Lines refused for the
