@@ -319,6 +319,9 @@ def test_an_unnumbered_line_missed_ends_the_job_on_the_numbering(tmp_path):
     assert c["kind"] == "numbering-stopped" and "line 41 `G1" in c["summary"]
     assert any("without a number" in x for x in c["evidence"])
     assert any("the unit sent bytes after it" in x for x in c["evidence"])
+    # the unit's reports a second apart are no lost link (nothing was sent into the gap)
+    assert "link-lost" not in [x["kind"] for x in doc["causes"]]
+    assert [x["measured"] for x in doc["causes"][1:]] == [None] * (len(doc["causes"]) - 1)
     # the same line missed with the numbering kept: no numbering cause at all
     doc = _marlin(tmp_path, "kept", marlin_job(60, report=True), Faults(alter={40: b""}),
                   tail=3.0, t_max=8.0)

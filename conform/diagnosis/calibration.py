@@ -7,7 +7,8 @@ how many of them the label agreed (the cause was the injected one; the outcome w
 session's own, or the session completed despite the fault its first hazard names). The
 confidence said is ``agreed / sessions`` with ``n=sessions``: the precision of that lead on
 the corpus. A lead the corpus never produced says its rule's score instead, and that it was
-not measured; hazards are not calibrated (the corpus labels what ended a session).
+not measured; the causes after the first and the hazards are not calibrated (the corpus
+labels what ended a session, and only the lead was measured).
 
 ``python bench/bench_diagnosis.py --calibrate`` writes the table (calibration.toml, beside this
 file) from the corpus; tests/test_diagnosis_corpus.py checks that it matches the corpus.
@@ -36,9 +37,10 @@ def table() -> dict[str, tuple[int, int]]:
 
 
 def apply(d: Any) -> None:
-    """Each stop cause and the outcome of diagnosis ``d`` given its measured precision."""
+    """The leading stop cause and the outcome of diagnosis ``d`` given their measured
+    precision (the causes after the first did not lead: what was measured is not theirs)."""
     t = table()
-    for c in d.causes:
+    for c in d.causes[:1]:
         c.measured = t.get(c.key)
     if d.outcome is not None:
         d.outcome.measured = t.get(d.outcome.key)

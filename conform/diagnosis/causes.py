@@ -341,7 +341,10 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                 f"{_line(first)} unanswered.", [], noise)
         quiet, q_from = _longest_gap(f.unit_times, s.t_start, s.t_end)
         back = _any_between(f.unit_times, q_from + quiet, s.t_end + 1e-9)
-        if unit_active and back and quiet >= stall_threshold(f) and not real_link and never:
+        # the line waited on was sent into the silence (not before it: then the silence is
+        # a gap between the unit's own reports, and nothing was sent "meanwhile")
+        into = bool(never) and never[0].t_sent >= q_from - wait
+        if unit_active and back and quiet >= stall_threshold(f) and not real_link and into:
             add("stall-unit-quiet-then-back", "link-lost",
                 0.75, f"The unit went silent for {quiet:.3f} s from "
                 f"{_fmt(q_from)} and then answered other traffic again, never "
