@@ -98,7 +98,6 @@ class Diagnosis:
             "notes": f.notes + self.notes,
         }
 
-
     def _lead_json(self) -> dict[str, object]:
         m = self.causes[0].measured if self.causes else \
             (self.outcome.measured if self.outcome is not None else None)
