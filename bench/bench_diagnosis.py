@@ -63,6 +63,24 @@ def corpus(proxied: bool, varied: int, seed: int) -> list[dict]:
     return C.judge(entries)
 
 
+def calibrate() -> None:
+    """The confidence table from the calibration corpus, written and printed."""
+    import diag_corpus as C
+
+    from conform.diagnosis import calibration
+
+    calibration.write(calibration.count([]), C.CALIBRATION_CORPUS)    # measured afresh
+    tmp = Path(tempfile.mkdtemp(prefix="conform-diag-calibrate-"))
+    rows = C.judge(C.calibration_corpus(tmp))
+    counts = calibration.count((r["key"], r["agreed"]) for r in rows)
+    calibration.write(counts, C.CALIBRATION_CORPUS)
+    print(f"confidence table ({C.CALIBRATION_CORPUS}, {len(rows)} sessions) written to "
+          f"{calibration.TABLE.relative_to(ROOT)}")
+    for key, (k, n) in counts.items():
+        print(f"  {key:55} {k / n:5.2f}  ({k}/{n})")
+    print()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--exchanges", type=int, default=1_000_000,
@@ -76,9 +94,14 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3,
                     help="timed runs of each, alternating (the median is compared)")
     ap.add_argument("--no-matrix", action="store_true", help="the timing only")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="measure the confidence table on the calibration corpus and write it "
+                         "(conform/diagnosis/calibration.toml)")
     ns = ap.parse_args()
     from diag_corpus import CLEAN
 
+    if ns.calibrate:
+        calibrate()
     rows = [] if ns.no_matrix else corpus(ns.proxied, ns.varied, ns.seed)
     labels = sorted({r["label"] for r in rows}, key=lambda x: (x not in CLEAN, x))
     got = sorted({r["got"] for r in rows}, key=lambda x: (x not in CLEAN, x))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 from pathlib import Path
 
 from diag_sessions import (
@@ -151,6 +152,14 @@ def fast(d: Path) -> list[Entry]:
     add("marlin-cable-pulled", "marlin", "link-lost",
         drive(marlin_unit(), marlin_job(300), marlin_sender(timeout=1.0),
               Faults(cut=(0.3, 2.3)), tail=1.0, t_max=12.0), MARLIN)
+    # a sender that stops numbering part way: a hazard while every line is answered; the
+    # stop cause once an unnumbered line goes missing (the unit, reporting its temperatures,
+    # alive, never asks for it)
+    add("marlin-numbering-stopped", "marlin", "numbering-stopped",
+        drive(marlin_unit(), marlin_job(60, until=25), marlin_sender(), tail=1.0), MARLIN)
+    add("marlin-unnumbered-line-lost", "marlin", "numbering-stopped",
+        drive(marlin_unit(), marlin_job(60, until=25, report=True), marlin_sender(),
+              Faults(alter={40: b""}), tail=3.0, t_max=8.0), MARLIN)
     return out
 
 
@@ -161,6 +170,7 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
     import random
 
     rng = random.Random(seed)
+    later = random.Random(seed + 1)     # kinds added later draw apart: the others stay put
     d.mkdir(parents=True, exist_ok=True)
     out: list[Entry] = []
 
@@ -257,6 +267,14 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
         add(f"v{i}-marlin-kill", "marlin", "unit-alarm",
             drive(marlin_unit(), marlin_job(100), marlin_sender(),
                   Faults(unit_calls={t: lambda unit, at: unit._kill(at)}), tail=3.0), MARLIN)
+        until = later.randrange(3, 60)
+        add(f"v{i}-marlin-numbering", "marlin", "numbering-stopped",
+            drive(marlin_unit(), marlin_job(later.randrange(until + 1, 90), until=until),
+                  marlin_sender(), tail=1.0), MARLIN)
+        add(f"v{i}-marlin-unnumbered-lost", "marlin", "numbering-stopped",
+            drive(marlin_unit(), marlin_job(80, until=until, report=True), marlin_sender(),
+                  Faults(alter={later.randrange(until + 1, 80): b""}), tail=3.0,
+                  t_max=round(later.uniform(6.0, 12.0), 3)), MARLIN)
         add(f"v{i}-marlin-busy", "marlin", "unit-busy",
             drive(marlin_unit(), marlin_job(100), marlin_sender(),
                   Faults(unit_calls={t: lambda unit, at: unit.stall(at, 1e4)}), tail=3.0,
@@ -264,8 +282,9 @@ def varied(d: Path, k: int = 3, seed: int = 7) -> list[Entry]:
     return out
 
 
-def samples() -> list[Entry]:
-    """The project's sample captures and the real firmware's recorded sessions."""
+def samples(d: Path | None = None) -> list[Entry]:
+    """The project's sample captures and the real firmware's recorded sessions (the grbl
+    transcripts made captures in ``d``, a new temporary folder by default)."""
     cap = REPO / "captures"
     out: list[Entry] = [(p.stem, "gve", "completed", p) for p in sorted(cap.glob("*.mcap"))
                         if not p.stem.startswith("grbl-")]
@@ -273,7 +292,33 @@ def samples() -> list[Entry]:
     marlin = RECORDINGS / "marlin-2.1.2.4"
     out += [(f"marlin-2.1.2.4-{p.stem}", "marlin", "completed", p)
             for p in sorted(marlin.glob("*.mcap"))]
-    return out
+    return out + grbl_recordings(d or Path(tempfile.mkdtemp(prefix="conform-diag-grbl-")))
+
+
+# what each real grbl 1.1f recording (a session of probes, no job file) really was, read from
+# the transcript: every line answered, the unit Idle at the end (``completed``), or every line
+# answered with no status report after the last (``ended``)
+GRBL_RECORDED = {
+    "errors": "completed",          # error codes provoked; resets mid-move (ALARM:3), $X
+    "modal-reset": "completed",     # modal groups set, soft resets while Idle, M2/M30
+    "settings-edges": "ended",      # every $N setting tried; no status poll at all
+    "status-fields": "completed",   # status report fields; ends Idle after M2
+    "system": "completed",          # $ commands, sleep then a reset, $X; ends Idle
+}
+
+
+def grbl_recordings(d: Path) -> list[Entry]:
+    """The real grbl 1.1f's recorded transcripts (recordings/grbl-1.1f) as captures,
+    labelled with how each session really went (``GRBL_RECORDED``)."""
+    from diag_sessions import from_transcript
+
+    folder = RECORDINGS / "grbl-1.1f"
+    if not folder.is_dir():
+        return []
+    d.mkdir(parents=True, exist_ok=True)
+    return [(f"grbl-1.1f-{p.stem}", "grbl", GRBL_RECORDED[p.stem],
+             from_transcript(p, d / f"{p.stem}.mcap", GRBL, "grbl"))
+            for p in sorted(folder.glob("*.transcript"))]
 
 
 def proxied(d: Path) -> list[Entry]:
@@ -355,7 +400,30 @@ def lead_of(doc: dict, label: str) -> str:
     return lead["kind"]
 
 
-REAL_LOSSES = {"careless-noisy"}    # captures/README.md: a vector lost there on purpose
+# sessions whose lines really went unanswered: captures/README.md, a vector lost there on
+# purpose; the real grbl's system recording puts it to sleep ($SLP) and sends $G and $X,
+# which a sleeping grbl never answers (until the reset that follows)
+def agreed(doc: dict, label: str) -> bool:
+    """Whether what leads, taken as the diagnosis gives it whatever the label (the stop
+    cause, else the outcome), agrees with ``label``: the cause is the labelled one; the outcome
+    is the session's own, or it completed and its first hazard names the labelled fault."""
+    if doc["causes"]:
+        return doc["causes"][0]["kind"] == label
+    kind = doc["outcome"]["kind"]
+    if label in CLEAN:
+        return kind == label
+    return kind in CLEAN and bool(doc["hazards"]) and doc["hazards"][0]["kind"] == label
+
+
+CALIBRATION_CORPUS = "fast + samples + varied(3, seed 7)"
+
+
+def calibration_corpus(d: Path) -> list[Entry]:
+    """The corpus the confidence table is measured on (conform/diagnosis/calibration.py)."""
+    return fast(d / "fast") + samples(d / "samples") + varied(d / "varied", 3, seed=7)
+
+
+REAL_LOSSES = {"careless-noisy", "grbl-1.1f-system"}
 
 
 LOSS_WORDS = ("were lost", "was lost", "never answered", "never came", "bytes lost")
@@ -375,7 +443,8 @@ def judge(entries: list[Entry]) -> list[dict]:
     for name, family, label, path in entries:
         doc = diagnose(str(path)).to_json()
         rows.append({"name": name, "family": family, "label": label,
-                     "got": lead_of(doc, label),
+                     "got": lead_of(doc, label), "key": doc["lead"]["key"],
+                     "agreed": agreed(doc, label),
                      "outcome": doc["outcome"]["kind"], "headline": doc["headline"],
                      "false_claims": false_claims(doc) if label in CLEAN and
                      name not in REAL_LOSSES else [],

@@ -213,6 +213,22 @@ def record(path: Path, ses: Session, variant: str, method: str = "proxy",
     return path
 
 
+def from_transcript(src: Path, path: Path, variant: str, family_name: str) -> Path:
+    """A recorded text transcript (conform/emulator/judge.py reads them) as a capture: each
+    host write and each unit line a read at its recorded time, the unit's lines given the
+    family's line ending (the text form cannot hold a CR)."""
+    from conform.emulator.judge import read_transcript, with_line_ending
+
+    tr = with_line_ending(read_transcript(src), family(family_name).line_ending)
+    rec = Recorder(path, {"capture_method": "transcript", "source": src.name}, variant=variant,
+                   baud=BAUD, decode=False, clock=lambda: T_BASE)
+    for e in tr.events:
+        rec.chunk("host" if e.host else "unit", e.data, t_read=T_BASE + e.t,
+                  t_first=T_BASE + e.t - (len(e.data) - 1) * 10 / BAUD)
+    rec.close()
+    return path
+
+
 # ---------------------------------------------------------------- the two families' senders
 
 
@@ -264,10 +280,15 @@ def marlin_sender(**kw) -> Sender:
                   retry=lambda a: a.startswith(b"Resend:"), **kw)
 
 
-def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
+def marlin_job(n: int = 60, numbered: bool = True, until: int | None = None,
+               report: bool = False) -> list[bytes]:
     """``n`` moves ending with M400 (wait for the moves to end), numbered with checksums
-    after an M110 as printcore numbers them, or plain."""
+    after an M110 as printcore numbers them, or plain; ``until``: only the first lines
+    numbered, the rest sent plain (a sender that stops numbering); ``report``: M155 S1 first
+    (the unit reports its temperatures every second on its own)."""
     body = [b"G90"] + [b"G1 X%d Y%d F6000" % (i % 30, i % 7) for i in range(n)] + [b"M400"]
+    if report:
+        body.insert(0, b"M155 S1")
     if not numbered:
         return [b + b"\n" for b in body]
     from functools import reduce
@@ -275,6 +296,9 @@ def marlin_job(n: int = 60, numbered: bool = True) -> list[bytes]:
 
     out = []
     for k, b in enumerate([b"M110 N0", *body]):
+        if until is not None and k >= until:
+            out.append(b + b"\n")
+            continue
         line = b"N%d %s" % (k, b)
         out.append(line + b"*%d\n" % reduce(xor, line, 0))
     return out

@@ -187,8 +187,8 @@ def test_cli_json_and_first_screen(tmp_path):
     assert [set(c) >= {"kind", "confidence", "t_start", "t_end", "evidence", "advice"}
             for c in doc["causes"]] == [True] * len(doc["causes"])
     assert doc["outcome"]["kind"] == "stalled" and doc["causes"][0]["kind"] == "unit-silent"
-    conf = [c["confidence"] for c in doc["causes"]]
-    assert conf[1:] == sorted(conf[1:], reverse=True)     # the outcome's cause first
+    score = [c["score"] for c in doc["causes"]]
+    assert score[1:] == sorted(score[1:], reverse=True)     # the outcome's cause first
     p = subprocess.run(run, capture_output=True, text=True, timeout=120, cwd=REPO)
     head = p.stdout.splitlines()[0]
     assert head.startswith("Stalled: most likely unit-silent") and head.endswith(".")

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from conform.diagnosis import calibration
 from conform.diagnosis.causes import ADVICE, Cause, find_stalls, rank
 from conform.diagnosis.facts import Event, Facts, ParsedLine, ResumePoint
 from conform.diagnosis.outcome import Outcome, decide, prove_losses
@@ -49,6 +50,13 @@ class Diagnosis:
     outcome: Outcome | None = None
     hazards: list[Cause] = field(default_factory=list)     # seen on the way, not the end
 
+    def lead_key(self) -> str:
+        """How it leads, as the calibration table names it: the stop cause's kind and rule,
+        else the outcome."""
+        if self.causes:
+            return self.causes[0].key
+        return self.outcome.key if self.outcome is not None else "outcome/none"
+
     def lead(self) -> Cause | None:
         """What the diagnosis puts first: the stop cause, else the first hazard."""
         return self.causes[0] if self.causes else (self.hazards[0] if self.hazards else None)
@@ -59,7 +67,7 @@ class Diagnosis:
         title = o.title() if o is not None else "Session"
         if self.causes:
             c = self.causes[0]
-            text = f"{title}: most likely {c.kind} (confidence {c.confidence:.2f}): {c.summary}"
+            text = f"{title}: most likely {c.kind} ({c.shown()}): {c.summary}"
             if o is not None and o.kind == "capture-damaged":
                 text = f"{title}: {o.summary} Within it: {c.kind}: {c.summary}"
             return text
@@ -75,6 +83,7 @@ class Diagnosis:
             "format": FORMAT, "path": self.path, "family": f.family, "variant": f.variant,
             "headline": self.headline(),
             "outcome": None if self.outcome is None else self.outcome.to_json(),
+            "lead": self._lead_json(),
             "causes": [c.to_json() for c in self.causes],
             "hazards": [c.to_json() for c in self.hazards],
             "session": {"duration_s": round(f.duration, 6), "lines": len(f.exchanges),
@@ -88,6 +97,12 @@ class Diagnosis:
             "resume": None if self.resume is None else self.resume.to_json(),
             "notes": f.notes + self.notes,
         }
+
+    def _lead_json(self) -> dict[str, object]:
+        m = self.causes[0].measured if self.causes else \
+            (self.outcome.measured if self.outcome is not None else None)
+        return {"key": self.lead_key(), "confidence": None if m is None else round(m[0] / m[1], 3),
+                "sessions": None if m is None else m[1]}
 
 
 def _family_of(path: str, variant: str | None) -> Family:
@@ -179,6 +194,12 @@ def judge(path: str, family: str, facts: Facts) -> Diagnosis:
     stop cause (what the ranking found becomes hazards, a stall at its end dropped: that is
     the host done); a damaged capture's end is not judged; otherwise the cause the outcome
     names leads."""
+    d = _judged(path, family, facts)
+    calibration.apply(d)
+    return d
+
+
+def _judged(path: str, family: str, facts: Facts) -> Diagnosis:
     prove_losses(facts)
     ranked = rank(facts)
     o = decide(facts, ranked)
@@ -190,11 +211,12 @@ def judge(path: str, family: str, facts: Facts) -> Diagnosis:
         lead = next((c for c in causes if c.kind == o.lead), None)
         if lead is None:
             lead = Cause(o.lead, 0.8, facts.duration, facts.duration, o.evidence,
-                         ADVICE[o.lead], o.summary, at_end=True)
+                         ADVICE[o.lead], o.summary, at_end=True, rule="outcome")
         else:
             causes.remove(lead)
             lead.confidence = max(lead.confidence, 0.8)
             if o.kind in ("stopped", "aborted"):
+                lead.rule = "outcome"       # the outcome's evidence, not the rule's
                 lead.summary = o.summary
                 lead.evidence = [*o.evidence, *(x for x in lead.evidence
                                                 if x not in o.evidence)]

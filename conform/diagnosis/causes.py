@@ -22,13 +22,15 @@ from __future__ import annotations
 
 import bisect
 import statistics
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 from conform.diagnosis.facts import Event, Exchange, Facts
 
 CAUSE_KINDS = ("sender-stopped", "unit-silent", "link-lost", "buffer-overflow", "deadlock",
                "starvation", "noise", "protocol-misuse", "unit-alarm", "overflow-risk",
-               "lost-line", "unit-busy")
+               "lost-line", "unit-busy", "numbering-stopped")
 
 ADVICE = {
     "sender-stopped": "The unit was ready and waiting: look at the sender (crash, closed "
@@ -49,6 +51,10 @@ ADVICE = {
     "unit-busy": "The unit kept saying it was working and never finished: look at what the "
                  "line waits for (a heater that never reaches its target, a wait for the user, "
                  "a very long move) before blaming the link.",
+    "numbering-stopped": "The sender stopped numbering its lines (with their checks) part way: "
+                         "from then on the unit cannot tell a line lost or damaged on the way, "
+                         "nor ask for it again. Make the sender number every job line (queries "
+                         "and emergency commands may go unnumbered beside them).",
     "lost-line": "A line or its answer was lost on the way: check the cable and the sender's "
                  "recovery (ask the unit before sending it again).",
     "deadlock": "Each side waited for the other: the unit held its work while the host "
@@ -83,9 +89,28 @@ class Cause:
     lines: list[int] = field(default_factory=list)
     at_end: bool = False        # the stall it explains runs to the end of the capture
     stall: bool = False         # it explains a stall (not an anomaly on its own)
+    rule: str = ""              # the rule that named it (its key in the calibration table)
+    measured: tuple[int, int] | None = None     # (agreed, sessions) in the labelled corpus
+
+    @property
+    def key(self) -> str:
+        return f"{self.kind}/{self.rule}"
+
+    def shown(self) -> str:
+        """Its confidence as said: measured (the fraction of the labelled corpus's sessions
+        led by this kind and rule whose label agreed, with their count), else the rule's own
+        score, said to be one."""
+        if self.measured is None:
+            return f"score {self.confidence:.2f}, not measured"
+        k, n = self.measured
+        return f"confidence {k / n:.2f}, n={n}"
 
     def to_json(self) -> dict[str, object]:
-        return {"kind": self.kind, "confidence": round(self.confidence, 3),
+        m = self.measured
+        return {"kind": self.kind,
+                "confidence": round(self.confidence if m is None else m[0] / m[1], 3),
+                "measured": None if m is None else {"agreed": m[0], "sessions": m[1]},
+                "score": round(self.confidence, 3), "rule": self.rule,
                 "t_start": round(self.t_start, 6), "t_end": round(self.t_end, 6),
                 "evidence": self.evidence, "advice": self.advice, "summary": self.summary,
                 "lines": self.lines}
@@ -234,21 +259,22 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     ends = _events(f, ("job-end",), 0.0, s.t_start + wait)
     out: list[Cause] = []
 
-    def add(kind: str, conf: float, summary: str, evidence: list[str], used: list[Event]
-            ) -> None:
+    def add(rule: str, kind: str, conf: float, summary: str, evidence: list[str],
+            used: list[Event]) -> None:
         claimed.update(id(ev) for ev in used)
         out.append(Cause(kind, min(conf, 0.99), s.t_start, s.t_end,
                          [f"stall {span}: the host sent no line for {gap:.3f} s", *evidence,
                           *(_ev(ev) for ev in used[:8])], ADVICE[kind], summary,
-                         sorted({e.n for e in pending} | {last.n}), s.at_end))
+                         sorted({e.n for e in pending} | {last.n}), s.at_end, rule=rule))
 
     if alarms:
         a = alarms[0]
-        add("unit-alarm", 0.9, f"The unit stopped the job itself: {a.text} at {_fmt(a.t)}, "
+        add("stall-after-alarm", "unit-alarm",
+            0.9, f"The unit stopped the job itself: {a.text} at {_fmt(a.t)}, "
             f"after {_line(last)}.", [], alarms + starved)
     real_link = [ev for ev in link if ev.extra.get("kind") in ("disconnect", "error", "close")]
     if real_link:
-        add("link-lost", 0.92, f"The link was lost at {_fmt(real_link[0].t)}: "
+        add("stall-link-event", "link-lost", 0.92, f"The link was lost at {_fmt(real_link[0].t)}: "
             f"{real_link[0].text}.", [], link)
     never = [e for e in pending if e.t_answer is None]
     deaf = _events(f, ("deaf",), before, s.t_end)
@@ -257,7 +283,8 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     busy = _events(f, ("running",), s.t_start, s.t_end + 1e-6)
     if never and busy and not real_link and not deaf and not alarms and \
             busy[-1].t >= s.t_end - max(stall_threshold(f), 2.5):
-        add("unit-busy", 0.85, f"The unit said it was working ({busy[-1].text}) up to "
+        add("stall-unit-working", "unit-busy",
+            0.85, f"The unit said it was working ({busy[-1].text}) up to "
             f"{_fmt(busy[-1].t)} and never answered {_line(never[0])}: it is busy, not lost.",
             [f"{len(busy)} report(s) of the unit working in the stall, the last at "
              f"{_fmt(busy[-1].t)}"], busy[-3:])
@@ -265,43 +292,68 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
     if deaf and not real_link:
         d = deaf[0]
         if d.extra.get("back") is not None:
-            add("link-lost", 0.85, f"The link was down from {_fmt(d.t)}: the unit answered "
+            add("stall-polls-unanswered-then-back", "link-lost",
+                0.85, f"The link was down from {_fmt(d.t)}: the unit answered "
                 f"none of the host's polls until {_fmt(d.extra['back'])} and then answered "
                 "other traffic again; what was sent meanwhile was lost on the way.",
                 ["polls it answers at once whatever it does went unanswered"], deaf)
         else:
-            add("unit-silent", 0.85, f"The unit went deaf at {_fmt(d.t)}: it answered none "
+            add("stall-polls-unanswered", "unit-silent",
+                0.85, f"The unit went deaf at {_fmt(d.t)}: it answered none "
                 "of the host's polls from then on.", [], deaf)
     if pending:
         first = never[0] if never else pending[0]
         answered_later = [e for e in ex[s.last + 1:] if e.t_answer is not None]
         if holds and unit_active and host_reads:
-            add("deadlock", 0.8, f"Both sides waited on each other from {_fmt(s.t_start)}: "
+            add("stall-hold-polled", "deadlock",
+                0.8, f"Both sides waited on each other from {_fmt(s.t_start)}: "
                 f"the unit held its work and the host waited for room, polling "
                 f"({host_reads} reads) without sending.",
                 [f"{_line(first)} waits for its answer; the unit kept answering polls"],
                 holds)
         if lost and never:
             kind = "buffer-overflow" if risk and risk[0].t <= lost[0].t else "lost-line"
-            add(kind, 0.88, ("Bytes were lost in a receive-buffer overflow" if risk else
+            add("stall-after-proven-loss", kind,
+                0.88, ("Bytes were lost in a receive-buffer overflow" if risk else
                              "A line or its answer was lost on the way")
                 + f" (proof: {lost[0].text}), so {_line(first)} was never answered and the "
                 f"host waited from {_fmt(s.t_start)}.",
                 [f"{len(never)} line(s) never answered in the capture"],
                 lost + risk[:2])
+        guard = [ev for ev in _events(f, ("unguarded",), 0.0, s.t_end)
+                 if never and ev.t <= never[0].t_sent <= (ev.t_end or ev.t) + 1e-9]
+        if guard:
+            alive = _any_between(f.unit_times, never[0].t_sent + wait, s.t_end)
+            add("stall-unnumbered-line", "numbering-stopped", 0.9 if alive else 0.7,
+                f"{_line(never[0])} went without a number (the host had stopped numbering "
+                f"at {_fmt(guard[0].t)}) and was never answered; "
+                + ("the unit went on sending, so it did not get the line whole, and without "
+                   "a number it could not tell one was missing nor ask for it again."
+                   if alive else "the unit sent nothing more, so whether the line was "
+                   "missed or the unit stopped the wire cannot tell; without a number a "
+                   "missed line is never asked for again."),
+                [f"{_line(never[0])} sent at {_fmt(never[0].t_sent)} without a number",
+                 "the unit sent bytes after it, none answering it" if alive else
+                 "the unit sent nothing after it"], guard)
         if noise:
-            add("noise", 0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
+            add("stall-after-noise", "noise",
+                0.7, f"Damaged bytes ({len(noise)} at {_fmt(noise[0].t)}) left "
                 f"{_line(first)} unanswered.", [], noise)
         quiet, q_from = _longest_gap(f.unit_times, s.t_start, s.t_end)
         back = _any_between(f.unit_times, q_from + quiet, s.t_end + 1e-9)
-        if unit_active and back and quiet >= stall_threshold(f) and not real_link and never:
-            add("link-lost", 0.75, f"The unit went silent for {quiet:.3f} s from "
+        # the line waited on was sent into the silence (not before it: then the silence is
+        # a gap between the unit's own reports, and nothing was sent "meanwhile")
+        into = bool(never) and never[0].t_sent >= q_from - wait
+        if unit_active and back and quiet >= stall_threshold(f) and not real_link and into:
+            add("stall-unit-quiet-then-back", "link-lost",
+                0.75, f"The unit went silent for {quiet:.3f} s from "
                 f"{_fmt(q_from)} and then answered other traffic again, never "
                 f"{_line(first)}: what was sent meanwhile was lost on the way.",
                 [f"no byte from the unit from {_fmt(q_from)} to {_fmt(q_from + quiet)}",
                  f"{len(pending)} line(s) never answered"], [])
         if not unit_active and not s.at_end and answered_later and not real_link and never:
-            add("link-lost", 0.7, f"Both directions went dead from {_fmt(s.t_start)} for "
+            add("stall-both-dead", "link-lost",
+                0.7, f"Both directions went dead from {_fmt(s.t_start)} for "
                 f"{gap:.3f} s: lines sent meanwhile were never answered, later ones were.",
                 [f"no byte from the unit from {_fmt(unit_quiet_from)} to {_fmt(s.t_end)}",
                  f"{len(pending)} line(s) lost, answers resumed at "
@@ -310,8 +362,8 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         polled = _polled(f, t_line)
         host_gone = bool(closed) or (
             polled and not _any_between(f.host_times, t_line + 1e-6, s.t_end))
-        if host_gone:
-            add("sender-stopped", 0.95 if closed else 0.85,
+        if host_gone and (s.at_end or closed):     # one that went on after only paused
+            add("stall-host-gone", "sender-stopped", 0.95 if closed else 0.85,
                 f"The sender stopped at {_fmt(t_line)} while it waited on answers: "
                 + ("it closed its port." if closed else "its polls stopped with its lines."),
                 [f"{len(never)} line(s) still waiting; the host sent nothing after "
@@ -327,7 +379,8 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
                           for e in ex)
         if host_gone and answered_in:
             silent_conf = min(silent_conf, 0.4)     # the unit went on answering a dead host
-        add("unit-silent", silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
+        add("stall-no-answer", "unit-silent",
+            silent_conf, f"The host waited from {_fmt(first.t_sent)} for the "
             f"answer to {_line(first)}, which "
             + (f"came only at {_fmt(first.t_answer)}" if first.t_answer is not None
                else "never came")
@@ -365,7 +418,8 @@ def _stall_cause(f: Facts, s: Stall, claimed: set[int]) -> list[Cause]:
         conf = 0.95
     if alarms:
         conf = min(conf, 0.5)       # stopping after an alarm is the sender's right answer
-    add("sender-stopped", conf, f"The sender stopped: the unit had answered every line and "
+    add("stall-unit-ready", "sender-stopped",
+        conf, f"The sender stopped: the unit had answered every line and "
         f"was ready at {_fmt(last.t_answer or last.t_sent)}, and the host sent nothing more "
         + ("until the capture ended." if s.at_end else f"for {gap:.3f} s."),
         ev_text, closed + starved)
@@ -391,6 +445,7 @@ EVENT_CAUSE = {  # family event kind -> cause kind, base confidence, per-event s
     "alarm": ("unit-alarm", 0.85, 0.0),
     "link": ("link-lost", 0.6, 0.05),
     "hold": ("deadlock", 0.3, 0.0),
+    "unguarded": ("numbering-stopped", 0.5, 0.0),
 }
 
 SUMMARY = {
@@ -405,7 +460,23 @@ SUMMARY = {
     "unit-alarm": "The unit raised an alarm at {t}: {first}.",
     "link-lost": "The link dropped at {t}: {first}.",
     "deadlock": "The unit held its work at {t}: {first}.",
+    "numbering-stopped": "The sender stopped numbering its lines at {t}: {n} job line(s) "
+                         "went without a number, which the unit can neither check nor ask "
+                         "for again: one lost or damaged on the way would go unnoticed.",
 }
+
+
+def _answered_after(f: Facts) -> Callable[[float], bool]:
+    """``t`` -> whether a line sent by ``t`` was answered after ``t`` (the latest answer among
+    the lines sent by then, as a running maximum)."""
+    sent = [e.t_sent for e in f.exchanges]
+    latest = list(accumulate((-1.0 if e.t_answer is None else e.t_answer
+                              for e in f.exchanges), max))
+
+    def after(t: float) -> bool:
+        k = bisect.bisect_right(sent, t)
+        return k > 0 and latest[k - 1] > t
+    return after
 
 
 def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
@@ -414,6 +485,9 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
         evs = [ev for ev in f.events if ev.kind == ev_kind and id(ev) not in claimed]
         if ev_kind == "link":
             evs = [ev for ev in evs if ev.extra.get("kind") in ("disconnect", "error", "close")]
+        if ev_kind == "hold" and evs:   # a hold the unit came out of, taking the lines,
+            resumed = _answered_after(f)    # held nothing
+            evs = [ev for ev in evs if not resumed(ev.t)]
         if ev_kind == "overflow" and any(ev.kind == "loss" for ev in f.events):
             continue            # the proven loss's cause carries the risk that came before
         for burst in _bursts(evs):
@@ -428,7 +502,8 @@ def _anomalies(f: Facts, claimed: set[int]) -> list[Cause]:
             summary = SUMMARY[kind].format(t=_fmt(burst[0].t), n=n, first=burst[0].text)
             out.append(Cause(kind, min(conf, 0.95), burst[0].t, t1,
                              [_ev(ev) for ev in burst[:10]], ADVICE[kind], summary,
-                             sorted({ev.line for ev in burst if ev.line is not None})))
+                             sorted({ev.line for ev in burst if ev.line is not None}),
+                             rule=f"event-{ev_kind}"))
     return out
 
 
@@ -471,7 +546,8 @@ def _full_loops(f: Facts, claimed: set[int]) -> list[Cause]:
                               *(_ev(ev) for ev in held[:4])], ADVICE["deadlock"],
                              f"Both sides waited on each other from {_fmt(t0)}: the unit "
                              f"held its full queue{why} and the host kept asking for room "
-                             f"for {t1 - t0:.3f} s.", sorted({x.n for x in run})))
+                             f"for {t1 - t0:.3f} s.", sorted({x.n for x in run}),
+                             rule="refused-full"))
         run = []
     return out
 

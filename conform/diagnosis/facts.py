@@ -24,6 +24,9 @@ EVENT_KINDS = {
     "full": "the unit said its queue or buffer was full (the host must wait for room)",
     "hold": "the unit is holding (not executing) while work waits in it",
     "loss": "a line or byte is known lost on the way (a hazard)",
+    "unguarded": "the host stopped marking its lines so that the unit can tell one lost or "
+                 "damaged and ask for it again (sequence numbers, checksums): from then on "
+                 "such a line goes unnoticed",
     "reset": "the unit restarted (asked or not)",
     "link": "the link dropped, failed or came back (a recorded link event)",
     "sender-closed": "the sender closed its port",

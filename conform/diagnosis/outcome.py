@@ -40,8 +40,8 @@ OUTCOMES = {
     "findings-only": "the capture is longer than the diagnosis keeps line by line: only the "
                      "analysis's findings are judged",
 }
-STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "noise",
-               "unit-silent", "link-lost", "sender-stopped")
+STALL_LEADS = ("deadlock", "unit-busy", "buffer-overflow", "lost-line", "numbering-stopped",
+               "noise", "unit-silent", "link-lost", "sender-stopped")
 
 
 @dataclass
@@ -51,9 +51,20 @@ class Outcome:
     evidence: list[str] = field(default_factory=list)
     by: str | None = None           # stopped: "sender" or "link"; aborted: "unit"
     lead: str | None = None         # the cause kind that must lead (None: none does)
+    measured: tuple[int, int] | None = None     # (agreed, sessions) in the labelled corpus
+
+    @property
+    def key(self) -> str:
+        """Its key in the calibration table (conform/diagnosis/calibration.toml)."""
+        return f"outcome/{self.kind}" + (f"/{self.by}" if self.by else "")
 
     def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        out = {k: v for k, v in asdict(self).items() if v is not None and k != "measured"}
+        if self.measured is not None:
+            k, n = self.measured
+            out["confidence"] = round(k / n, 3)
+            out["measured"] = {"agreed": k, "sessions": n}
+        return out
 
     def title(self) -> str:
         if self.kind == "stopped":
@@ -81,10 +92,12 @@ def settled(f: Facts) -> tuple[list[Exchange], list[Exchange]]:
     return answered, [e for e in ex if e.t_answer is None and e.n > last]
 
 
-def _terminal(f: Facts, kind: str) -> list[Event]:
-    """Events of ``kind`` after which no accepted motion line was sent (nothing went on)."""
-    motion = [e.t_sent for e in f.exchanges if e.motion and e.accepted]
-    return [ev for ev in f.events if ev.kind == kind and not any(t > ev.t for t in motion)]
+def _terminal(f: Facts, kind: str, motion_only: bool = True) -> list[Event]:
+    """Events of ``kind`` after which no accepted motion line (``motion_only`` False: no
+    accepted line at all) was sent: nothing went on."""
+    taken = [e.t_sent for e in f.exchanges if e.accepted and (e.motion or not motion_only)]
+    last = max(taken, default=float("-inf"))
+    return [ev for ev in f.events if ev.kind == kind and last <= ev.t]
 
 
 def prove_losses(f: Facts) -> None:
@@ -122,7 +135,9 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
     if not ex:
         return Outcome("no-job", "The host sent no line in the capture.",
                        [f"{len(f.host_times)} host read(s), no complete line"])
-    halts = _terminal(f, "halt")
+    # a halt the session went on after (lines sent and taken: a reset between probes, a
+    # setting tried and the unit reset) stopped nothing
+    halts = _terminal(f, "halt", motion_only=False)
     alarms = _terminal(f, "alarm")
     if halts and (not alarms or halts[0].t <= alarms[0].t + 1e-6):
         h = halts[0]
@@ -184,6 +199,7 @@ def decide(f: Facts, causes: list[Any]) -> Outcome:
     head = f"all {len(ex)} lines answered, the last at {_fmt(t_last)}"
     if ends:
         e = ends[-1]
+        idle = [i for i in idle if i.t >= e.t]      # idle after the end, not before it
         return Outcome("completed", f"The job ran to its end: {head}, the program end "
                        f"`{e.text.split('`')[1] if '`' in e.text else e.text}` answered"
                        + (f", the unit idle at {_fmt(idle[0].t)}." if idle else "."),

@@ -28,10 +28,13 @@ def text_lines(d: Any) -> list[str]:
                f"{f.duration:.3f} s")
     o = getattr(d, "outcome", None)
     if o is not None:
-        out.append(f"outcome: {o.kind}" + (f" (by the {o.by})" if o.by else ""))
+        m = o.measured
+        out.append(f"outcome: {o.kind}" + (f" (by the {o.by})" if o.by else "")
+                   + ("" if m is None or d.causes else
+                      f"; confidence {m[0] / m[1]:.2f}, n={m[1]} in the labelled corpus"))
         out += [f"  - {e}" for e in o.evidence[:4]]
     for k, c in enumerate(d.causes, 1):
-        out.append(f"{k}. {c.kind} ({c.confidence:.2f}) {c.t_start:.3f}-{c.t_end:.3f} s: "
+        out.append(f"{k}. {c.kind} ({c.shown()}) {c.t_start:.3f}-{c.t_end:.3f} s: "
                    f"{c.summary}")
         out += [f"     - {e}" for e in c.evidence[:6]]
         out.append(f"     next: {c.advice}")
@@ -39,7 +42,7 @@ def text_lines(d: Any) -> list[str]:
     if hazards:
         out += ["", "hazards on the way (not what ended the session):"]
     for c in hazards[:8]:
-        out.append(f"  {c.kind} ({c.confidence:.2f}) {c.t_start:.3f}-{c.t_end:.3f} s: "
+        out.append(f"  {c.kind} (score {c.confidence:.2f}) {c.t_start:.3f}-{c.t_end:.3f} s: "
                    f"{c.summary}")
         out += [f"     - {e}" for e in c.evidence[:3]]
     if len(hazards) > 8:

@@ -99,7 +99,8 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
                                     b == 0x21 and 0 <= t_abs - u < 5.0
                                     for u, b in a.realtime) else ""),
                                 "interface.md §Realtime commands (0x18 soft reset)"))
-    events += _refused_valid(ex, load_grbl().variant(vid))
+    resets = tuple(t_abs - t0 for t_abs, byte in a.realtime if byte == SOFT_RESET)
+    events += _refused_valid(ex, load_grbl().variant(vid), resets)
     events += _deaf(a, t0)
     for e in ex:
         words = {w for w in _words(e.text)}
@@ -148,14 +149,22 @@ def _deaf(a: Any, t0: float) -> list[Event]:
     return out
 
 
-def _refused_valid(ex: list[Exchange], v: Any) -> list[Event]:
+def _refused_valid(ex: list[Exchange], v: Any, resets: tuple[float, ...] = ()) -> list[Event]:
     """Proof of a loss on the wire: an ``error:N`` to a line grbl's parser takes as sent (in
-    the modal state the lines before it left): only damage on the way explains it. Lines
-    refused for the machine's state (alarm lock, ``$`` while moving) prove nothing."""
+    the modal state the lines before it left, back to the defaults at each soft reset:
+    gcode.c gc_init from mc_reset): only damage on the way explains it. Lines refused for the
+    machine's state (alarm lock, ``$`` while moving) prove nothing, nor does a line too long
+    for grbl's line buffer as sent (protocol.c: the overflow flag, ``error:11``)."""
     out: list[Event] = []
     state: tuple[Any, Any] = (Modal(), [0.0, 0.0, 0.0])
+    later = sorted(resets)
     for e in ex:
         text = strip_line(e.text.encode("latin-1"))[0]
+        while later and later[0] <= e.t_sent:
+            later.pop(0)
+            state = (Modal(), state[1])
+        if len(text) >= v.line_max:
+            continue
         valid, _why = _check(text, *state, v)
         if e.accepted and valid:
             state = valid

@@ -13,7 +13,12 @@ again later under its number: a later try answers it). What the findings become:
 * a number sent again that the unit did not take is no answered line: it was dropped silently;
   when the first copy was taken and its ``ok`` never came, that silence proves the ``ok`` lost;
 * ``echo:busy:`` keepalives: the unit says it is working (``running``); ``M400`` answered
-  ``ok``: every move has ended (gcode M400 ``planner.synchronize()``): ``idle``.
+  ``ok``: every move has ended (gcode M400 ``planner.synchronize()``): ``idle``;
+* a host that numbered its lines and then sends job lines without a number (``unguarded``):
+  queue.cpp checks the number and checksum only of a line that starts with ``N``, so from then
+  on a line lost or damaged on the way is taken (or missed) without a word and never asked
+  again. Queries and emergency commands sent unnumbered beside a numbered job are no such run
+  (printcore's ``send_now`` M105; M108/M112/M410 act at once only unnumbered).
 """
 
 from __future__ import annotations
@@ -24,6 +29,11 @@ from conform.diagnosis.facts import Event, Exchange, Facts
 
 MOTION = ("G0", "G1", "G2", "G3", "G5", "G28")
 HALTS = ("M112", "M410")
+# lines a host sends beside its numbered job without a number, rightly: queries, the
+# emergency commands (queue.cpp acts on them early only when unnumbered) and M110 itself
+OUT_OF_BAND = ("M105", "M114", "M115", "M119", "M27", "M31", "M155", "M876", "M108", "M112",
+               "M410", "M110")
+NUMBERED_FIRST = 2          # numbered lines before unnumbered ones count as numbering stopped
 KILL_AFTER_HALT_S = 2.0     # a kill this soon after the host's M112 is that M112's
 ALONGSIDE_MAX = 200_000     # host lines up to which `conform analyze` also diagnoses
 EVENT_OF = {"resend-storm": "noise", "never-ran": "loss", "ran-twice": "misuse",
@@ -73,6 +83,7 @@ def facts(raw: Any, path: str, *, variant: str | None = None, analysis: Any = No
             events.append(Event(x.t_ok - t0, "idle", "`M400` answered ok: every move has "
                                 "ended", "gcode M400 planner.synchronize()", line=e.n))
     events += _lost_oks(a.lines, ex)
+    events += _unnumbered(a.lines, ex)
     halts = [ev.t for ev in events if ev.kind == "halt"]
     offset = (a.lines[0].t - t0) if a.lines else 0.0     # findings count from the first line
     for f in a.findings:
@@ -122,6 +133,40 @@ def _lost_oks(lines: list[Any], ex: list[Exchange]) -> list[Event]:
                              "`ok` was lost on the way back", "queue.cpp get_serial_commands",
                              line=e.n, extra={"proof": "ok lost"}))
             first[key] = x          # one proof per number
+    return out
+
+
+def _unnumbered(lines: list[Any], ex: list[Exchange]) -> list[Event]:
+    """Runs of job lines sent without a number after the host had numbered its own
+    (``unguarded``, one event per run): the numbering stopped, for good or for a while."""
+    out: list[Event] = []
+    numbered: list[Exchange] = []
+    run: list[Exchange] = []
+
+    def close() -> None:
+        if not run:
+            return
+        last, first = numbered[-1], run[0]
+        moves = sum(e.motion for e in run)
+        out.append(Event(
+            first.t_sent, "unguarded",
+            f"the host numbered its lines up to line {last.n + 1} `{last.text}` at "
+            f"{last.t_sent:.3f} s, then sent {len(run)} job line(s) without a number, from "
+            f"line {first.n + 1} `{first.text}` at {first.t_sent:.3f} s ({moves} move(s)): "
+            "Marlin cannot ask for one of them again (no Resend without a number), so a line "
+            "lost or damaged on the way goes unnoticed",
+            "queue.cpp get_serial_commands (only a line starting with N has its number and "
+            "checksum checked)", t_end=run[-1].t_sent, line=first.n,
+            extra={"count": len(run), "moves": moves, "last_numbered": last.n}))
+        run.clear()
+
+    for x, e in zip(lines, ex, strict=True):
+        if x.n is not None:
+            close()
+            numbered.append(e)
+        elif len(numbered) >= NUMBERED_FIRST and _word(x.text) not in OUT_OF_BAND:
+            run.append(e)
+    close()
     return out
 
 
