@@ -21,10 +21,11 @@ it; causes are listed most likely first.
 from __future__ import annotations
 
 import bisect
-import statistics
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import accumulate
+
+import numpy as np
 
 from conform.diagnosis.facts import Event, Exchange, Facts
 
@@ -126,9 +127,10 @@ class Stall:
 
 def stall_threshold(f: Facts) -> float:
     """How long the host may go without a line before it is a stall."""
-    ts = [e.t_sent for e in f.exchanges]
-    gaps = [b - a for a, b in zip(ts, ts[1:], strict=False) if b > a]
-    med = statistics.median(gaps) if gaps else 0.0
+    ts = np.fromiter((e.t_sent for e in f.exchanges), float, len(f.exchanges))
+    gaps = np.diff(ts)
+    gaps = gaps[gaps > 0]
+    med = float(np.median(gaps)) if len(gaps) else 0.0    # the middle one, or the mean of two
     return max(STALL_MIN_S, STALL_FACTOR * med)
 
 
@@ -143,17 +145,19 @@ def find_stalls(f: Facts) -> list[Stall]:
     answers = sorted(e.t_answer for e in ex if e.t_answer is not None)
     sends = [e.t_sent for e in ex]
     found: list[tuple[float, float]] = []
-    for i, e in enumerate(ex):
+    # only the gaps as long as a stall are looked at one by one (a long capture has millions)
+    at = np.array(sends, float)
+    for i in np.flatnonzero(~(np.append(at[1:], f.duration) - at < limit)).tolist():
+        e = ex[i]
         nxt = ex[i + 1].t_sent if i + 1 < len(ex) else f.duration
-        if nxt - e.t_sent < limit:
-            continue
         k = bisect.bisect_right(answers, nxt)
         ready = max(e.t_sent, answers[k - 1] if k else e.t_sent)
         if nxt - ready >= limit:    # else: sent as soon as an answer made room, a wait
             found.append((ready, nxt))
-    for a, b in zip([0.0, *answers], [*answers, f.duration], strict=True):
-        if b - a < limit:
-            continue
+    starts, ends = [0.0, *answers], [*answers, f.duration]
+    gap = np.array(ends, float) - np.array(starts, float)
+    for j in np.flatnonzero(~(gap < limit)).tolist():
+        a, b = starts[j], ends[j]
         k = bisect.bisect_left(sends, b)
         start = max(a, ex[0].t_sent)    # no stall before the host's first line
         if k and b - start >= limit and any(
@@ -526,7 +530,9 @@ def _merge(causes: list[Cause]) -> list[Cause]:
 def _full_loops(f: Facts, claimed: set[int]) -> list[Cause]:
     """Stretches longer than a stall where every line was refused for want of room: the
     unit's queue did not drain (it holds) while the host kept asking: a deadlock."""
-    out = []
+    out: list[Cause] = []
+    if not any(e.full for e in f.exchanges):
+        return out                      # no line refused as full: no loop
     limit = stall_threshold(f)
     run: list[Exchange] = []
     for e in [*f.exchanges, None]:

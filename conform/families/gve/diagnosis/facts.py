@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+import pyarrow as pa
+
 from conform.diagnosis.facts import Event, Exchange, Facts
 from conform.families.gve.analysis.frames import CS_BAD, CS_MISSING
 
@@ -33,14 +36,27 @@ def _texts(a: Any, direction: str) -> list[str]:
     from conform.capture.session import escape_bytes
 
     d = a.host if direction == "host" else a.unit
-    bodies = d.lines.bodies.to_pylist() if d is not None else []
-    blob = b"\r".join(bodies)
-    if blob.isascii() and b"\\" not in blob:
+    if d is None:
+        return []
+    bodies = d.lines.bodies
+    blob = _joined(bodies)
+    if blob is not None and blob.isascii() and b"\\" not in blob:
         text = blob.decode("ascii")
         texts = text.split("\r")
         if len(texts) == len(bodies) and text.replace("\r", "").isprintable():
             return texts
-    return [escape_bytes(b) for b in bodies]
+    return [escape_bytes(b) for b in bodies.to_pylist()]
+
+
+def _joined(bodies: Any) -> bytes | None:
+    """``b"\\r".join(bodies)`` straight from the array's buffers, without a million bytes
+    objects on the way; None where the array is not plain (nulls, other offsets, empty)."""
+    bufs = bodies.buffers()
+    if not len(bodies) or bodies.null_count or bodies.type != pa.binary() or bufs[2] is None:
+        return None
+    offsets = np.frombuffer(bufs[1], np.int32)[bodies.offset:bodies.offset + len(bodies) + 1]
+    data = np.frombuffer(bufs[2], np.uint8)[offsets[0]:offsets[-1]]
+    return np.insert(data, offsets[1:-1] - offsets[0], ord("\r")).tobytes()
 
 
 def analysis_facts(a: Any, path: str) -> Facts:
@@ -54,36 +70,48 @@ def analysis_facts(a: Any, path: str) -> Facts:
         notes.append("capture too long to keep its tables: the diagnosis uses the findings "
                      "only")
     else:
-        names = ("frame", "name", "status", "answer_frame", "answer_kind", "code", "inta",
-                 "t_cmd_last", "answer_checksum", "t_ans_last", "cmd_bytes")
         host = _texts(a, "host")
         unit = _texts(a, "unit")
-        in_inta = False
-        for (frame, name, status, a_frame, a_kind, code, inta_bit, t_cmd, a_cs, t_ans,
-             size) in zip(*(ex_df[c].tolist() for c in names), strict=True):
-            answered = status == "answered"
-            text = host[frame].rstrip("\\r").rstrip("\r")
-            answer = unit[a_frame].rstrip("\\r") if answered else None
-            code = code if answered else -1
-            clean = answered and a_kind == "answer"
-            motion = name in MOTION
-            e = Exchange(frame, text, t_cmd - t0, t_ans - t0 if answered else None,
-                         answer, (clean and code == 0) if answered else None,
-                         motion, size, full=clean and code == 1 and motion)    # §13.7 code 1
-            exchanges.append(e)
-            # a damaged answer's digit says nothing: its checksum must hold where there is one
-            inta = bool(inta_bit) and clean and a_cs not in (CS_BAD, CS_MISSING)
-            if inta and not in_inta and name != "H":
+        # the columns at once (a long capture has a million lines); one pass makes the
+        # exchanges, a second visits only the lines that make an event
+        col = {c: ex_df[c].to_numpy() for c in ("name", "status", "answer_kind", "code",
+                                                  "inta", "answer_checksum")}
+        answered = col["status"] == "answered"
+        clean = answered & (col["answer_kind"] == "answer")
+        code = np.where(answered, col["code"], -1)
+        motion = np.isin(col["name"], MOTION)
+        t_sent = (ex_df["t_cmd_last"].to_numpy() - t0).tolist()
+        t_ans = (ex_df["t_ans_last"].to_numpy() - t0).tolist()
+        frames = ex_df["frame"].tolist()
+        a_frames = ex_df["answer_frame"].tolist()
+        for frame, ans_ok, a_frame, mot, ts, ta, size, ok, full in zip(
+                frames, answered.tolist(), a_frames, motion.tolist(), t_sent,
+                t_ans, ex_df["cmd_bytes"].tolist(), (clean & (code == 0)).tolist(),
+                (clean & (code == 1) & motion).tolist(), strict=True):    # §13.7 code 1
+            exchanges.append(Exchange(frame, host[frame].rstrip("\\r").rstrip("\r"), ts,
+                                      ta if ans_ok else None,
+                                      unit[a_frame].rstrip("\\r") if ans_ok else None,
+                                      ok if ans_ok else None, mot, size, full=full))
+        # a damaged answer's digit says nothing: its checksum must hold where there is one
+        inta = col["inta"].astype(bool) & clean & \
+            ~np.isin(col["answer_checksum"], (CS_BAD, CS_MISSING))
+        name = col["name"]
+        rise = inta & ~np.concatenate(([False], inta[:-1])) & (name != "H")
+        halt = np.isin(name, HALT)
+        poll = ~halt & (name == "F") & clean
+        for i in np.flatnonzero(rise | halt | poll).tolist():
+            e = exchanges[i]
+            frame, text, answer = e.n, e.text, e.answer
+            if rise[i]:
                 events.append(Event(e.t_answer or e.t_sent, "alarm",
                                     f"the unit answered `{answer}` to `{text}`: INTA, an "
                                     "input interrupt braked the motion",
                                     "GVE64 §13.7 (answer bit 3 INTA), §13.5.9", line=frame))
-            in_inta = inta
-            if name in HALT:
+            if halt[i]:
                 events.append(Event(e.t_sent, "halt", f"the host sent `{text}` ("
-                                    + ("halt the running vector" if name == "H" else "reset")
+                                    + ("halt the running vector" if name[i] == "H" else "reset")
                                     + ")", "GVE64 §13.5.9, §13.5.13", line=frame))
-            elif name == "F" and clean and answer and "," in answer:
+            elif poll[i] and answer and "," in answer:
                 try:
                     st6 = int(answer.split(",")[1][:2], 16)
                 except ValueError:
