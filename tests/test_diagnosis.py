@@ -168,6 +168,10 @@ def test_feed_hold_deadlock_and_resume_against_the_planner(tmp_path):
     assert r["last_acknowledged"] == motion[-1]
     assert r["uncertain"] == list(range(motion[done], motion[-1] + 1))
     assert r["state"]["distance"] == "G90" and r["state"]["feed"] == 3000
+    # the text names the uncertain lines as ranges, not one number per line
+    from conform.diagnosis.render import text_lines
+    line = next(x for x in text_lines(diagnose(str(tmp_path / "d.mcap"))) if x.startswith("resume:"))
+    assert f"uncertain {motion[done] + 1}-{motion[-1] + 1}" in line, line
 
 
 def test_misuse(tmp_path):

@@ -69,7 +69,7 @@ def text_lines(d: Any) -> list[str]:
             return "none" if i is None else str(i + 1)
         out += ["", f"resume: last executed line {n(r.last_executed)}, last acknowledged "
                     f"{n(r.last_acknowledged)}, uncertain "
-                    f"{', '.join(str(i + 1) for i in r.uncertain) or 'none'}",
+                    f"{_ranges([i + 1 for i in r.uncertain]) or 'none'}",
                 f"  {r.command}"]
         out += [f"  preamble: {' / '.join(r.preamble)}"] if r.preamble else []
         out += [f"  - {e}" for e in r.evidence]

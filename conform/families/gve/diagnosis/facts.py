@@ -88,9 +88,9 @@ def analysis_facts(a: Any, path: str) -> Facts:
                 frames, answered.tolist(), a_frames, motion.tolist(), t_sent,
                 t_ans, ex_df["cmd_bytes"].tolist(), (clean & (code == 0)).tolist(),
                 (clean & (code == 1) & motion).tolist(), strict=True):    # §13.7 code 1
-            exchanges.append(Exchange(frame, host[frame].rstrip("\\r").rstrip("\r"), ts,
+            exchanges.append(Exchange(frame, host[frame].removesuffix("\\r").rstrip("\r"), ts,
                                       ta if ans_ok else None,
-                                      unit[a_frame].rstrip("\\r") if ans_ok else None,
+                                      unit[a_frame].removesuffix("\\r") if ans_ok else None,
                                       ok if ans_ok else None, mot, size, full=full))
         # a damaged answer's digit says nothing: its checksum must hold where there is one
         inta = col["inta"].astype(bool) & clean & \

@@ -64,7 +64,7 @@ def resume_state(a: Any, f: Facts) -> ResumePoint | None:
     modal: dict[str, str] = {}
     checksums = False
     for r in np.flatnonzero(ok & np.isin(name, (*MODAL, "%", "J"))).tolist():
-        text = a.host_text(int(frame[r])).rstrip("\\r").rstrip("\r")
+        text = a.host_text(int(frame[r])).removesuffix("\\r").rstrip("\r")
         if name[r] in MODAL:
             modal[str(name[r])] = split_checksum(text.encode("latin-1"))[0].decode("latin-1")
         elif name[r] == "%":
