@@ -1,0 +1,121 @@
+"""Values the unit computes, read back from states where computing them wrong would show.
+
+- ``SW/st6-bits`` (every run, motion-free): SW6 stores ST6 byte as written (GVE64 §13.5.12
+  "SW6 – zapíše do ST6 byte x"): INTA without INTCOM, then INTCOM, STOP and FREE without INTA,
+  each read back with SR6 and F. A unit that sets INTCOM whenever INTA is written, or keeps
+  a bit it was told to clear, answers another byte.
+- ``<cmd>/in-motion/...`` (full profile, motion opt-in): the position counters read while a
+  vector accelerates, cruises and brakes (A, V, the ramp of GVE64 §13.5.3), while a braking
+  HALT runs on into the next queued vector (§13.5.9: "INTA=1 RUN=0 – při brždění vektory
+  doběhly"), while a chain of continuous C vectors runs without stopping (§13.5.2), under VK
+  with a VL cap (§13.5.3, §13.5.4) and while XM changes the speed of a running vector
+  (§13.5.5); all from counters set away from zero (§13.5.6). Read at rest they only show where
+  a move ends; read under way they show the speed profile that got it there. On a link a
+  position read under way is compared with the tolerance for motion still under way, one read
+  at rest exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from conform.families.gve.conformance.from_state import state_setup
+from conform.families.gve.conformance.motion_free import _read_position
+from conform.families.gve.conformance.script import POSITION, Step
+
+RESET = Step(reset=True)
+# the ST6 bytes written, by bit name (status.toml st6_bit): INTA alone, INTCOM with STOP and
+# FREE and without INTA, then nothing
+_ST6_WRITES = (("INTA",), ("INTCOM", "STOP", "FREE"), ())
+
+
+def _st6(b: Any, names: tuple[str, ...]) -> int:
+    return sum(1 << b.spec.status.bit(n) for n in names)
+
+
+def st6_checks(b: Any) -> None:
+    """``SW/st6-bits``: each bit of ST6 as SW6 wrote it, read back by SR6 and F."""
+    if "SW" not in b.v.commands or 6 not in b.v.status_words:
+        return
+    steps: list[Step] = [RESET]
+    for names in _ST6_WRITES:
+        steps += [b.raw(f"!0SW6,{_st6(b, names):02X}", subject=True),
+                  b.cmd_step("SR", [6], subject=False), b.cmd_step("F", [], subject=False)]
+    b.add("SW", "st6-bits", "SW6 writes ST6 as given: INTA alone (INTCOM stays 0), then INTCOM, "
+          "STOP and FREE without INTA; SR6 and F read each byte back", steps,
+          clause=f"{b.clause('SW')}, {b.clause('SR').split(',')[0]}")
+
+
+def _vec(b: Any, *values: int) -> str:
+    """A vector for the variant's axes (the first ``len(axes)`` values, zeros after)."""
+    n = len(b.v.axes)
+    return ",".join(str(x) for x in (*values, 0, 0, 0, 0)[:n])
+
+
+def _pf(b: Any, wait: float) -> Step:
+    return b.cmd_step("PF", [], subject=True, kind=POSITION, wait=wait)
+
+
+def _reads_under_way(b: Any, waits: tuple[float, ...]) -> list[Step]:
+    return [_pf(b, w) for w in waits]
+
+
+def _at_rest(b: Any, wait: float) -> list[Step]:
+    return [Step(wait=wait), *_read_position(b), b.cmd_step("F", [], subject=False),
+            b.cmd_step("SR", [6], subject=False)]
+
+
+def in_motion_checks(b: Any) -> None:
+    """The ``in-motion`` checks (full profile with the motion opt-in only: they move)."""
+    v = b.v
+    if not (b.deep and b.motion):
+        return
+    setup = [RESET, *state_setup(b)]  # counters away from zero: a sum done wrong shows
+    # one long L: accelerating (A10: 10 000 pulses/s², 0.5 s to V5000), cruising, braking
+    b.add("L", "in-motion/profile", "A10 V5000 and one long L from non-zero counters: PF read "
+          "while it accelerates, cruises and brakes, then every position form at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0L{_vec(b, 6000, -3000, 1500, -750)}"),
+           *_reads_under_way(b, (0.1, 0.25, 0.3, 0.4, 0.4, 0.3)), *_at_rest(b, 1.0)],
+          clause=f"{b.clause('L')}, {b.clause('A').split(',')[0]}, {b.clause('PF').split(',')[0]}")
+    # continuous C vectors: the chain runs without stopping between them, a vector sent while
+    # the one before runs joins it if it arrives before that one starts braking
+    b.add("C", "in-motion/chain", "three C vectors queued at once, then one sent while they "
+          "run: PF read along the chain, every position form at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"),
+           b.raw(f"!0C{_vec(b, 2000, 1000, 0, 300)}"), b.raw(f"!0C{_vec(b, 2000, -1000, 500, 0)}"),
+           b.raw(f"!0C{_vec(b, -1000, 0, 0, 300)}"),
+           *_reads_under_way(b, (0.3, 0.4, 0.4)),
+           b.raw(f"!0C{_vec(b, 1500, 0, -700, 0)}", wait=0.1),
+           *_reads_under_way(b, (0.2, 0.3, 0.3, 0.3)), *_at_rest(b, 2.0)],
+          clause=f"{b.clause('C')}, {b.clause('PF').split(',')[0]}")
+    # HALT too late to stop within the running vector: the brake runs on into the next one
+    # (§13.5.9, SR6 "INTA=1 RUN=0/1"); then G runs the rest
+    b.add("H", "in-motion/brake-spill", "H 0.7 s into three 3000-pulse C vectors at V5000 A10 "
+          "(rest needs 1250 pulses, 750 are left): where the brake ends, ST6 and F; G then "
+          "runs the rest, PF read under way and at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"), *[b.raw(f"!0C{_vec(b, 3000, 0, 0, 0)}")] * 3,
+           dataclasses.replace(b.halt(), wait=0.7, subject=True),
+           *_read_position(b), b.cmd_step("F", [], subject=False),
+           b.cmd_step("SR", [6], subject=False), b.cmd_step("G", []),
+           *_reads_under_way(b, (0.2, 0.4)), *_at_rest(b, 2.5)],
+          clause=f"{b.clause('H')}, {b.clause('G').split(',')[0]}")
+    # VK: the path speed along the Euclidean length, capped by VL so no axis outruns its limit
+    if "VK" in v.commands and "VL" in v.commands:
+        limits = ",".join(["5000", "1500", "5000", "5000"][: len(v.axes)])
+        b.add("VK", "in-motion/vl-cap", "VK, VL with Y at 1500, V5000 and an L of 3000,4000: PF "
+              "read under way shows the capped path speed; VN and VL back, at rest",
+              [*setup, b.raw("!0A10"), b.raw("!0VK"), b.raw(f"!0VL{limits}"), b.raw("!0V5000"),
+               b.raw(f"!0L{_vec(b, 3000, 4000, 0, 0)}"), *_reads_under_way(b, (0.3, 0.5, 0.5)),
+               *_at_rest(b, 2.5), b.raw("!0VN"),
+               b.raw("!0VL" + ",".join([str(v.max_rate)] * len(v.axes)))],
+              clause=f"{b.clause('VK')}, {b.clause('VL').split(',')[0]}")
+    # XM on a running vector: the speed changes under way
+    if "XM" in v.commands:
+        b.add("XM", "in-motion", "XM50 while a long C runs at V5000, then XM100: PF read under "
+              "way after each; at rest",
+              [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0C{_vec(b, 8000, 0, 0, 0)}"),
+               b.raw("!0XM50", wait=0.7, subject=True), *_reads_under_way(b, (0.2, 0.3)),
+               b.raw("!0XM100", subject=True), *_reads_under_way(b, (0.2, 0.3)),
+               *_at_rest(b, 2.5)],
+              clause=b.clause("XM"))
