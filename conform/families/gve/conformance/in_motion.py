@@ -119,3 +119,12 @@ def in_motion_checks(b: Any) -> None:
                b.raw("!0XM100", subject=True), *_reads_under_way(b, (0.2, 0.3)),
                *_at_rest(b, 2.5)],
               clause=b.clause("XM"))
+    # a C sent while the only queued one cruises, long before it would brake: it joins the
+    # running one, which does not slow down at its end (§13.5.2)
+    b.add("C", "in-motion/join-late", "one long C at V5000 alone, a second C sent 0.4 s in: PF "
+          "read where the first would brake if the second had not joined it; at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0C{_vec(b, 5000, 0, 0, 0)}"),
+           b.raw(f"!0C{_vec(b, 3000, 1000, 0, 0)}", wait=0.4, subject=True),
+           *_reads_under_way(b, (0.4, 0.2, 0.2, 0.2, 0.3)), *_at_rest(b, 1.5)],
+          clause=f"{b.clause('C')}, {b.clause('PF').split(',')[0]}")
+
