@@ -128,3 +128,26 @@ def in_motion_checks(b: Any) -> None:
            *_reads_under_way(b, (0.4, 0.2, 0.2, 0.2, 0.3)), *_at_rest(b, 1.5)],
           clause=f"{b.clause('C')}, {b.clause('PF').split(',')[0]}")
 
+    # the shapes of a C chain: B the speed at each junction, $ the threshold below which a
+    # vector only accelerates towards B, T the pause between non-continuous vectors (L)
+    b.add("B", "in-motion/junctions", "B2000 and $800 for a chain of C vectors, long and short "
+          "(600 pulses), then T20 and two L vectors: PF read under way; at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw("!0B2000", subject=True),
+           b.raw("!0$800", subject=True), b.raw(f"!0C{_vec(b, 3000, 0, 0, 0)}"),
+           b.raw(f"!0C{_vec(b, 600, 200, 0, 0)}"), b.raw(f"!0C{_vec(b, 600, -200, 0, 0)}"),
+           b.raw(f"!0C{_vec(b, 2000, 0, 100, 0)}"), *_reads_under_way(b, (0.3, 0.4, 0.3, 0.3, 0.3)),
+           Step(wait=1.5), b.raw("!0T20", subject=True), b.raw(f"!0L{_vec(b, 1000, 0, 0, 0)}"),
+           b.raw(f"!0L{_vec(b, 0, 1000, 0, 0)}"), *_reads_under_way(b, (0.2, 0.3, 0.2)),
+           *_at_rest(b, 1.5)],
+          clause=f"{b.clause('B')}, {b.clause('$').split(',')[0]}, {b.clause('T').split(',')[0]}")
+    # XU, XD, XA on queued vectors while the first of them runs
+    if all(c in v.commands for c in ("XU", "XD", "XA")):
+        b.add("XA", "in-motion", "V4000 and three queued C vectors; XU, XD, then V2000 and XA "
+              "while they run: PF read after each; at rest",
+              [*setup, b.raw("!0A10"), b.raw("!0V4000"),
+               *[b.raw(f"!0C{_vec(b, 2500, 500, 0, 0)}")] * 3,
+               b.raw("!0XU", wait=0.6, subject=True), *_reads_under_way(b, (0.3,)),
+               b.raw("!0XD", subject=True), b.raw("!0XD", subject=True),
+               *_reads_under_way(b, (0.3,)), b.raw("!0V2000"), b.raw("!0XA", subject=True),
+               *_reads_under_way(b, (0.2, 0.4, 0.4)), *_at_rest(b, 3.0)],
+              clause=b.clause("XA"))
