@@ -21,7 +21,7 @@ import dataclasses
 from typing import Any
 
 from conform.families.gve.conformance.from_state import state_setup
-from conform.families.gve.conformance.motion_free import _read_position
+from conform.families.gve.conformance.motion_free import _cites, _read_position
 from conform.families.gve.conformance.script import POSITION, Step
 
 RESET = Step(reset=True)
@@ -44,7 +44,7 @@ def st6_checks(b: Any) -> None:
                   b.cmd_step("SR", [6], subject=False), b.cmd_step("F", [], subject=False)]
     b.add("SW", "st6-bits", "SW6 writes ST6 as given: INTA alone (INTCOM stays 0), then INTCOM, "
           "STOP and FREE without INTA; SR6 and F read each byte back", steps,
-          clause=f"{b.clause('SW')}, {b.clause('SR').split(',')[0]}")
+          clause=_cites(b, 'SW', 'SR'))
 
 
 def _vec(b: Any, *values: int) -> str:
@@ -77,7 +77,7 @@ def in_motion_checks(b: Any) -> None:
           "while it accelerates, cruises and brakes, then every position form at rest",
           [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0L{_vec(b, 6000, -3000, 1500, -750)}"),
            *_reads_under_way(b, (0.1, 0.25, 0.3, 0.4, 0.4, 0.3)), *_at_rest(b, 1.0)],
-          clause=f"{b.clause('L')}, {b.clause('A').split(',')[0]}, {b.clause('PF').split(',')[0]}")
+          clause=_cites(b, 'L', 'A', 'PF'))
     # continuous C vectors: the chain runs without stopping between them, a vector sent while
     # the one before runs joins it if it arrives before that one starts braking
     b.add("C", "in-motion/chain", "three C vectors queued at once, then one sent while they "
@@ -88,7 +88,7 @@ def in_motion_checks(b: Any) -> None:
            *_reads_under_way(b, (0.3, 0.4, 0.4)),
            b.raw(f"!0C{_vec(b, 1500, 0, -700, 0)}", wait=0.1),
            *_reads_under_way(b, (0.2, 0.3, 0.3, 0.3)), *_at_rest(b, 2.0)],
-          clause=f"{b.clause('C')}, {b.clause('PF').split(',')[0]}")
+          clause=_cites(b, 'C', 'PF'))
     # HALT too late to stop within the running vector: the brake runs on into the next one
     # (§13.5.9, SR6 "INTA=1 RUN=0/1"); then G runs the rest
     b.add("H", "in-motion/brake-spill", "H 0.7 s into three 3000-pulse C vectors at V5000 A10 "
@@ -99,7 +99,7 @@ def in_motion_checks(b: Any) -> None:
            *_read_position(b), b.cmd_step("F", [], subject=False),
            b.cmd_step("SR", [6], subject=False), b.cmd_step("G", []),
            *_reads_under_way(b, (0.2, 0.4)), *_at_rest(b, 2.5)],
-          clause=f"{b.clause('H')}, {b.clause('G').split(',')[0]}")
+          clause=_cites(b, 'H', 'G', 'SR'))
     # VK: the path speed along the Euclidean length, capped by VL so no axis outruns its limit
     if "VK" in v.commands and "VL" in v.commands:
         limits = ",".join(["5000", "1500", "5000", "5000"][: len(v.axes)])
@@ -109,7 +109,7 @@ def in_motion_checks(b: Any) -> None:
                b.raw(f"!0L{_vec(b, 3000, 4000, 0, 0)}"), *_reads_under_way(b, (0.3, 0.5, 0.5)),
                *_at_rest(b, 2.5), b.raw("!0VN"),
                b.raw("!0VL" + ",".join([str(v.max_rate)] * len(v.axes)))],
-              clause=f"{b.clause('VK')}, {b.clause('VL').split(',')[0]}")
+              clause=_cites(b, 'VK', 'VL'))
     # XM on a running vector: the speed changes under way
     if "XM" in v.commands:
         b.add("XM", "in-motion", "XM50 while a long C runs at V5000, then XM100: PF read under "
@@ -126,7 +126,7 @@ def in_motion_checks(b: Any) -> None:
           [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0C{_vec(b, 5000, 0, 0, 0)}"),
            b.raw(f"!0C{_vec(b, 3000, 1000, 0, 0)}", wait=0.4, subject=True),
            *_reads_under_way(b, (0.4, 0.2, 0.2, 0.2, 0.3)), *_at_rest(b, 1.5)],
-          clause=f"{b.clause('C')}, {b.clause('PF').split(',')[0]}")
+          clause=_cites(b, 'C', 'PF'))
 
     # the shapes of a C chain: B the speed at each junction, $ the threshold below which a
     # vector only accelerates towards B, T the pause between non-continuous vectors (L)
@@ -139,7 +139,7 @@ def in_motion_checks(b: Any) -> None:
            Step(wait=1.5), b.raw("!0T20", subject=True), b.raw(f"!0L{_vec(b, 1000, 0, 0, 0)}"),
            b.raw(f"!0L{_vec(b, 0, 1000, 0, 0)}"), *_reads_under_way(b, (0.2, 0.3, 0.2)),
            *_at_rest(b, 1.5)],
-          clause=f"{b.clause('B')}, {b.clause('$').split(',')[0]}, {b.clause('T').split(',')[0]}")
+          clause=_cites(b, 'B', '$', 'T'))
     # XU, XD, XA on queued vectors while the first of them runs
     if all(c in v.commands for c in ("XU", "XD", "XA")):
         b.add("XA", "in-motion", "V4000 and three queued C vectors; XU, XD, then V2000 and XA "
