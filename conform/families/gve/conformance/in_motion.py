@@ -89,6 +89,16 @@ def in_motion_checks(b: Any) -> None:
            b.raw(f"!0C{_vec(b, 1500, 0, -700, 0)}", wait=0.1),
            *_reads_under_way(b, (0.2, 0.3, 0.3, 0.3)), *_at_rest(b, 2.0)],
           clause=_cites(b, 'C', 'PF'))
+    # a chain whose speeds change: a slower V for the next vectors (entered above their peak),
+    # a vector too short to brake in before the end, one too short to reach its speed
+    b.add("C", "in-motion/speed-changes", "C vectors at V5000, then V2000 for the next ones, "
+          "a 40-pulse one at the end, then at V8000 one of 300: PF read along the chain; at rest",
+          [*setup, b.raw("!0A10"), b.raw("!0V5000"), b.raw(f"!0C{_vec(b, 4000, 0, 0, 0)}"),
+           b.raw("!0V2000"), b.raw(f"!0C{_vec(b, 1500, 300, 0, 0)}"),
+           b.raw(f"!0C{_vec(b, 40, 0, 0, 0)}"), b.raw("!0V8000"),
+           b.raw(f"!0C{_vec(b, 300, 0, 0, 0)}"),
+           *_reads_under_way(b, (0.3, 0.4, 0.3, 0.3, 0.3, 0.3, 0.3)), *_at_rest(b, 1.5)],
+          clause=_cites(b, "C", "V", "PF"))
     # HALT too late to stop within the running vector: the brake runs on into the next one
     # (§13.5.9, SR6 "INTA=1 RUN=0/1"); then G runs the rest
     b.add("H", "in-motion/brake-spill", "H 0.7 s into three 3000-pulse C vectors at V5000 A10 "
