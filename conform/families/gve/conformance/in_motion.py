@@ -161,3 +161,35 @@ def in_motion_checks(b: Any) -> None:
                *_reads_under_way(b, (0.3,)), b.raw("!0V2000"), b.raw("!0XA", subject=True),
                *_reads_under_way(b, (0.2, 0.4, 0.4)), *_at_rest(b, 3.0)],
               clause=b.clause("XA"))
+
+
+def input_checks(b: Any) -> None:
+    """``I1/inputs-polarity`` (every run; the inputs are the emulator's, a link skips it): each port's
+    inputs asserted and released with both polarities, I1 and I2 read after each change, then
+    the interrupts enabled on the asserted inputs: the cause bits of the right word (ST4 for
+    port 1, ST5 for port 2), INTA, and nothing of the other port (GVE64 §13.5.12)."""
+    v = b.v
+    if not all(c in v.commands for c in ("I1", "I2", "SR", "SW")):
+        return
+    ports = {1: v.input_bits.get("port1", []), 2: v.input_bits.get("port2", [])}
+    reads = [b.cmd_step("I1", [], subject=True, kind=""), b.cmd_step("I2", [], subject=True, kind="")]
+    words = [b.cmd_step("SR", [w], subject=False) for w in (4, 5, 6) if w in v.status_words]
+    steps: list[Step] = [RESET]
+    # polarity: the first bit of each port active high (ST2/ST3 bit set), the others low
+    for port, bits in ports.items():
+        if bits and 2 + port - 1 in v.status_words:
+            steps.append(b.raw(f"!0SW{port + 1},{1 << bits[0]:02X}"))
+    for port, bits in ports.items():
+        for bit in bits[:1] + bits[-1:]:
+            steps += [Step(input=(port, bit, True)), *reads]
+    for port, bits in ports.items():  # enable the interrupts of what is asserted
+        if bits and port - 1 in v.status_words:
+            mask = (1 << bits[0]) | (1 << bits[-1])
+            steps += [b.raw(f"!0SW{port - 1},{mask:02X}", subject=True), *words]
+    for port, bits in ports.items():
+        for bit in bits[:1] + bits[-1:]:
+            steps += [Step(input=(port, bit, False)), *reads]
+    steps += words
+    b.add("I1", "inputs-polarity", "inputs of both ports asserted with both "
+          "polarities and released, I1 and I2 read after each; the interrupts enabled on them: "
+          "ST4, ST5 and ST6 read back", steps, clause=_cites(b, "I1", "SR", "SW"))
