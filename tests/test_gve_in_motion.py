@@ -27,6 +27,13 @@ class _Ramp(Unit):
         return self._set_modal("_A", args[0] + 1)
 
 
+class _Port2Polarity(Unit):
+    """Port 2's inputs read as active low whatever ST3 says."""
+
+    def _polarity_bit(self, port: int, bit: int) -> bool:
+        return False if port == 2 else super()._polarity_bit(port, bit)
+
+
 def _run(spec, cls, patterns):
     variant = spec.variant("gve64-v19")
     dialect = spec.dialect()
@@ -43,7 +50,7 @@ def test_st6_bits_runs_everywhere_the_in_motion_reads_only_in_full_with_motion(s
     quick = _keys(generate(spec, "gve64-v19"))
     still = _keys(generate(spec, "gve64-v19", deep=True, motion=False))
     full = _keys(generate(spec, "gve64-v19", deep=True, motion=True))
-    assert "SW/st6-bits" in quick and "SW/st6-bits" in still
+    assert {"SW/st6-bits", "I1/inputs-polarity"} <= quick & still
     moving = {k for k in full if "/in-motion" in k}
     assert {"L/in-motion/profile", "H/in-motion/brake-spill", "C/in-motion/chain"} <= moving
     assert not {k for k in quick | still if "/in-motion" in k}
@@ -60,3 +67,10 @@ def test_a_steeper_ramp_fails_the_reads_under_way_not_those_at_rest(spec):
     assert got["L/in-motion/profile"].grade is Grade.FAIL, got["L/in-motion/profile"].detail
     assert got["L/position-1"].grade is Grade.PASS
     assert got["L/position-2"].grade is Grade.PASS
+
+
+def test_port_2_polarity_ignored_fails_inputs_polarity(spec):
+    got = _run(spec, _Port2Polarity, ["*/I1/inputs-polarity", "*/I1/inputs", "*/SR/interrupt"])
+    assert got["I1/inputs-polarity"].grade is Grade.FAIL, got["I1/inputs-polarity"].detail
+    assert got["I1/inputs"].grade is Grade.PASS  # port 1 at its reset polarity shows nothing
+    assert got["SR/interrupt"].grade is Grade.PASS
