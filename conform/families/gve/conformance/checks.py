@@ -17,6 +17,11 @@ from typing import Any
 
 from conform.conformance.results import INFO, MUST
 from conform.families.gve.conformance.from_state import from_held_checks, from_state_checks
+from conform.families.gve.conformance.in_motion import (
+    in_motion_checks,
+    input_checks,
+    st6_checks,
+)
 from conform.families.gve.conformance.motion_free import (
     SETTLE_S,
     motion_free_checks,
@@ -294,6 +299,9 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
     from_state_checks(b, {cid: _valid_form(b, cid) for cid in universe if cid in v.commands})
     from_held_checks(b)
     motion_free_checks(b)
+    st6_checks(b)
+    input_checks(b)
+    in_motion_checks(b)
     question_checks(b)
     _example_checks(b)
     return b.out
