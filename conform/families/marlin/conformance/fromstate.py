@@ -271,6 +271,35 @@ def bed_long_heat(s: Session) -> Outcome:
     return not problems, want, "; ".join(problems) or "as expected"
 
 
+def timer_running(seconds: int, want: str) -> Callable[[Session], Outcome]:
+    """M77, M75 (the timer from 0), G4 S<seconds>, M31 while the timer runs: the time so far
+    (libs/stopwatch.cpp Stopwatch::duration adds the running part; libs/duration_t.h
+    toString: ``<m>m <s>s`` from a minute on)."""
+    def run(s: Session) -> Outcome:
+        try:
+            s.talk(b"M77\n")
+            s.talk(b"M75\n")
+            s.talk(f"G4 S{seconds}\n".encode(), timeout=seconds + 5.0)
+            got = s.talk(b"M31\n")
+        finally:
+            s.talk(b"M77\n")
+        return got.lines[:1] == [want], f"{want} (the timer still running)", got.text()
+    return run
+
+
+_CRC = re.compile(r"crc (\d+)\)")
+
+
+def crc_agrees(s: Session) -> Outcome:
+    """M500 then M501: the crc M501 computes over what it reads is the one M500 printed for
+    what it wrote (settings.cpp save / _load, both over the same bytes), a uint16_t."""
+    saved = _CRC.findall(" ".join(s.talk(b"M500\n").lines))
+    loaded = _CRC.findall(" ".join(s.talk(b"M501\n", timeout=4.0).lines))
+    ok = len(saved) == 1 and loaded[:1] == saved and 0 <= int(saved[0]) <= 0xFFFF
+    return ok, "the same crc (0 .. 65535) in M500's and M501's line", \
+        f"M500 crc {saved}, M501 crc {loaded}"
+
+
 def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
     cmd = {k: x.cite for k, x in spec.commands.items()}
     temp = spec.variant(vid).cite
@@ -304,8 +333,17 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
         MarlinCheck(f"{vid}/temperature.cpp/heat/m190-r-cools", cmd["M190"] + "; " +
                     temp["temp_bed_residency"], "M190 R below the bed's temperature: the ok "
                     "once the bed is in the window", bed_cools, heat=True),
+        MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-running", cmd["M31"] + "; " + cmd["M75"],
+                    "M31 while the print timer runs: the time so far",
+                    timer_running(2, "echo:Print time: 2s")),
+        MarlinCheck(f"{vid}/M500-M504.cpp/eeprom/crc-agrees", cmd["M500"] + "; " +
+                    cmd["M501"], "M500 then M501: one crc, 16 bits",
+                    restoring(crc_agrees, store=True), eeprom=True),
     ]
     if profile == "full":
+        out.append(MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-minutes", cmd["M31"] + "; "
+                               "libs/duration_t.h toString", "M31 after 61 s: 1m 1s",
+                               timer_running(61, "echo:Print time: 1m 1s")))
         out.append(MarlinCheck(f"{vid}/temperature.cpp/heat/m190-s-long", cmd["M190"] + "; " +
                                temp["temp_bed_residency"] + "; MIN_COOLING_SLOPE_TIME_BED 60 "
                                "(wants_to_cool only)", "M190 S 80 °C up: no slope cut-off while "
