@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from copy import deepcopy
 
 from conform.families.marlin.conformance.check import MarlinCheck, Outcome
 from conform.families.marlin.conformance.check import ok_kind as _ok_kind
@@ -23,8 +24,10 @@ from conform.families.marlin.conformance.checks import (
 )
 from conform.families.marlin.conformance.depth import (
     _POS,
+    NEW,
     State,
     _assign,
+    base_state,
     put,
     restoring,
     set_case,
@@ -291,13 +294,29 @@ _CRC = re.compile(r"crc (\d+)\)")
 
 
 def crc_agrees(s: Session) -> Outcome:
-    """M500 then M501: the crc M501 computes over what it reads is the one M500 printed for
-    what it wrote (settings.cpp save / _load, both over the same bytes), a uint16_t."""
-    saved = _CRC.findall(" ".join(s.talk(b"M500\n").lines))
-    loaded = _CRC.findall(" ".join(s.talk(b"M501\n", timeout=4.0).lines))
-    ok = len(saved) == 1 and loaded[:1] == saved and 0 <= int(saved[0]) <= 0xFFFF
-    return ok, "the same crc (0 .. 65535) in M500's and M501's line", \
-        f"M500 crc {saved}, M501 crc {loaded}"
+    """M500 then M501, from two different settings: each time the crc M501 computes over
+    what it reads is the one M500 printed for what it wrote (settings.cpp save / _load, both
+    over the same bytes), a uint16_t; different settings give different crcs."""
+    crcs = []
+    for state in (base_state(), State(deepcopy(NEW), "FR:100%", "echo:E0 Flow: 100%")):
+        put(s, state)
+        saved = _CRC.findall(" ".join(s.talk(b"M500\n").lines))
+        loaded = _CRC.findall(" ".join(s.talk(b"M501\n", timeout=4.0).lines))
+        crcs.append((saved, loaded))
+    ok = all(len(a) == 1 and b[:1] == a and 0 <= int(a[0]) <= 0xFFFF for a, b in crcs) and \
+        crcs[0][0] != crcs[1][0]
+    return ok, "M500's crc again in M501's line (0 .. 65535); another for other settings", \
+        "; ".join(f"M500 crc {a}, M501 crc {b}" for a, b in crcs)
+
+
+def timer_edges(s: Session) -> Outcome:
+    """duration_t::toString on either side of a minute."""
+    got = []
+    for seconds, want in ((59, "59s"), (60, "1m 0s")):
+        ok, _, text = timer_running(seconds, f"echo:Print time: {want}")(s)
+        got.append((ok, text.split(" | ")[0]))
+    return all(ok for ok, _ in got), "59s | 1m 0s", \
+        " | ".join(text for _, text in got)
 
 
 def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
@@ -337,13 +356,17 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
                     "M31 while the print timer runs: the time so far",
                     timer_running(2, "echo:Print time: 2s")),
         MarlinCheck(f"{vid}/M500-M504.cpp/eeprom/crc-agrees", cmd["M500"] + "; " +
-                    cmd["M501"], "M500 then M501: one crc, 16 bits",
+                    cmd["M501"], "M500 then M501 from two states: one crc each, 16 bits, "
+                    "not the same",
                     restoring(crc_agrees, store=True), eeprom=True),
     ]
     if profile == "full":
         out.append(MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-minutes", cmd["M31"] + "; "
                                "libs/duration_t.h toString", "M31 after 61 s: 1m 1s",
                                timer_running(61, "echo:Print time: 1m 1s")))
+        out.append(MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-edges", cmd["M31"] + "; "
+                               "libs/duration_t.h toString (%is, %im %is)",
+                               "M31 at 59 s and at 60 s", timer_edges))
         out.append(MarlinCheck(f"{vid}/temperature.cpp/heat/m190-s-long", cmd["M190"] + "; " +
                                temp["temp_bed_residency"] + "; MIN_COOLING_SLOPE_TIME_BED 60 "
                                "(wants_to_cool only)", "M190 S 80 °C up: no slope cut-off while "
