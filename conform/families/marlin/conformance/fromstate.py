@@ -182,7 +182,7 @@ def in_window(code: str) -> Callable[[Session], Outcome]:
     def run(s: Session) -> Outcome:
         now, why = _hot(s, code)
         residency = s.v.temp_residency if code == "M109" else s.v.temp_bed_residency
-        lo, hi = residency * 4 / 3 - 0.5, residency * 4 / 3 + 1.5
+        lo, hi = residency * 4 / 3 - 0.2, residency * 4 / 3 + 1.5
         want = f"ok {lo:.1f} .. {hi:.1f} s after {code} R<now>, W: counting down to 0"
         if now is None:
             return False, want, why
@@ -319,6 +319,23 @@ def timer_edges(s: Session) -> Outcome:
         " | ".join(text for _, text in got)
 
 
+def r_below_reach(s: Session) -> Outcome:
+    """M109 R 15 °C below the hotend's temperature at rest (it cannot cool below the room):
+    the wait gives up when the temperature fell less than MIN_COOLING_SLOPE_DEG in
+    MIN_COOLING_SLOPE_TIME (60 s), so the ok comes ~60 s after."""
+    now, why = _hot(s, "M109")
+    want = "ok 59 .. 62 s after M109 R<now - 15> (the cooling-slope cut-off)"
+    if now is None:
+        return False, want, why
+    try:
+        _, ok_t, t0 = _wait(s, f"M109 R{max(round(now) - 15, 0)}", 90.0)
+    finally:
+        s.talk(b"M104 S0\n")
+    took = None if ok_t is None else ok_t - t0
+    return took is not None and 59.0 <= took <= 62.0, want, \
+        "no ok" if took is None else f"ok after {took:.2f} s"
+
+
 def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinCheck]:
     cmd = {k: x.cite for k, x in spec.commands.items()}
     temp = spec.variant(vid).cite
@@ -364,6 +381,12 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
         out.append(MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-minutes", cmd["M31"] + "; "
                                "libs/duration_t.h toString", "M31 after 61 s: 1m 1s",
                                timer_running(61, "echo:Print time: 1m 1s")))
+        out.append(MarlinCheck(f"{vid}/temperature.cpp/heat/m109-r-slope", cmd["M109"] + "; "
+                               "temperature.cpp wait_for_hotend (wants_to_cool: break when "
+                               "old_temp - temp < MIN_COOLING_SLOPE_DEG 1.5 after "
+                               "MIN_COOLING_SLOPE_TIME 60 s)", "M109 R below what the hotend "
+                               "can reach: ok after the 60 s slope period", r_below_reach,
+                               heat=True))
         out.append(MarlinCheck(f"{vid}/M75-M78.cpp/timer/m31-edges", cmd["M31"] + "; "
                                "libs/duration_t.h toString (%is, %im %is)",
                                "M31 at 59 s and at 60 s", timer_edges))
