@@ -4,13 +4,16 @@ profile, every opt-in, no state machine), against the target of 90 % killed.
 
     pip install -e '.[mutation]'
     python bench/bench_mutation.py [--family gve|grbl|marlin ...] [--sample N] [--seed S]
-                                   [--jobs J] [--out DIR] [--all-files] [--mutant ID ...]
+                                   [--jobs J] [--out DIR] [--all-files] [--every-variant]
+                                   [--mutant ID ...]
 
 A mutant is KILLED when the run reports a FAIL or an ERROR, stops, crashes or runs out of
 time (10x the unmutated run's CPU time); it SURVIVED when the run passes as the unmutated
 one does. ``--sample N`` mutants per family are drawn with ``--seed`` from all mutation points
 of the unit modules the unmutated run imports (``--all-files``: of every file in unit/, the
-control socket's and fault injection's too). Equivalent mutants are listed, each with why, in
+control socket's and fault injection's too; ``--every-variant``: each mutant is tested by every
+variant's checks in turn, each on its own emulator, so that code only a build with some option
+runs is reached too). Equivalent mutants are listed, each with why, in
 ``<out>/<family>-equivalent.toml`` and left out of the denominator:
 score = killed / (sampled - equivalent). Written per family: ``<family>-survivors.txt`` (each
 survivor's id and changed line) and ``<family>-results.json`` (every mutant). ``--mutant ID``
@@ -80,17 +83,19 @@ def run_child(job: dict, wall_limit: float) -> dict:
     return out
 
 
-def baseline(family: str) -> tuple[dict, float]:
+def baseline(family: str, every_variant: bool = False) -> tuple[dict, float]:
     """The unmutated runs: the plain one (which unit modules it imports), then the one whose
     emulator runs the copy of those modules, which must pass as well (its CPU time sets the
     timeout)."""
-    plain = run_child({"family": family, "stop": False}, wall_limit=900)
+    plain = run_child({"family": family, "stop": False, "every_variant": every_variant},
+                      wall_limit=900)
     if plain.get("outcome") != "survived":
         fail(f"{family}: the unmutated run does not pass ({plain.get('why')}); mutants cannot be "
              "judged against it")
     t0 = time.perf_counter()
     out = run_child({"family": family, "stop": False, "shadow": True,
-                     "modules": plain["unit_modules"]}, wall_limit=900)
+                     "modules": plain["unit_modules"], "every_variant": every_variant},
+                    wall_limit=900)
     wall = time.perf_counter() - t0
     if out.get("outcome") != "survived" or out.get("not_pass") != plain.get("not_pass"):
         fail(f"{family}: the run against the unit's unmutated copy does not pass as the plain run "
@@ -109,8 +114,8 @@ def unit_files(family: str, base: dict, all_files: bool) -> tuple[list[Path], li
     return kept, [p.name for p in files if p not in kept]
 
 
-def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: list[str]
-          ) -> list[dict]:
+def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: list[str],
+          every_variant: bool = False) -> list[dict]:
     """Run each point's mutant in its own interpreter; one record per point."""
     records: list[dict] = []
 
@@ -125,7 +130,8 @@ def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: 
         except SyntaxError as exc:
             return rec | {"outcome": "invalid", "why": f"not Python: {exc.msg}"}
         job = {"family": family, "shadow": True, "modules": modules,
-               "module": module_name(point.path), "code": code, "cpu_limit": cpu_limit}
+               "module": module_name(point.path), "code": code, "cpu_limit": cpu_limit,
+               "every_variant": every_variant}
         out = run_child(job, wall_limit=cpu_limit * 10 + 60)   # the CPU limit judges; this catches a stuck child
         return rec | {k: out.get(k) for k in ("outcome", "why", "not_pass", "cpu_s")}
 
@@ -165,7 +171,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
         fail(str(exc))
     cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    base, base_wall = baseline(family)
+    base, base_wall = baseline(family, args.every_variant)
     cpu_limit = max(10, int(TIMEOUT_FACTOR * base["cpu_s"] + 0.999) + 2)
     files, skipped = unit_files(family, base, args.all_files)
     left_out: Counter[str] = Counter()
@@ -184,7 +190,8 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
           + (f"; files left out, not imported by the run: {', '.join(skipped)}" if skipped else "")
           + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
           f"timeout {cpu_limit} s CPU")
-    records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"])
+    records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"],
+                    args.every_variant)
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime)
     count = {k: sum(1 for r in records if r["outcome"] == k)
@@ -235,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="folder of the survivors, results and triage files (default bench/mutation)")
     ap.add_argument("--all-files", action="store_true",
                     help="also mutate unit/ files the unmutated run never imports")
+    ap.add_argument("--every-variant", action="store_true",
+                    help="test each mutant with every variant's checks, each on its own "
+                         "emulator (code that only a build with some option runs is reached)")
     ap.add_argument("--mutant", action="append", default=[], metavar="ID",
                     help="run only this mutant (an id from a survivors file; repeatable)")
     args = ap.parse_args(argv)
@@ -257,6 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {f: bench_family(f, args, out_dir) for f in families}
     summary = {"families": results, "sample": args.sample, "seed": args.seed, "jobs": args.jobs,
                "target": TARGET, "profile": "full", "all_files": args.all_files,
+               "every_variant": args.every_variant,
                "met": all(r["score"] >= TARGET for r in results.values())}
     print(json.dumps(summary))
     unmatched = [m for m in args.mutant if match_key(m) not in args.matched]

@@ -328,18 +328,34 @@ class Shadow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
 
 def run_checks(family: str, stop_at_failure: bool = True, shadow: Shadow | None = None,
-               modules: list[str] = ()) -> dict[str, object]:
+               modules: list[str] = (), every_variant: bool = False) -> dict[str, object]:
     """The family's checks on its emulator (default variant, full profile, no state
     machine, every opt-in as an emulator gets): the first failure's check, or the counts.
     ``shadow``: the emulator's unit is built from that copy of the unit package (``modules``:
-    the unit modules to copy), the suite's own reference units from the original."""
-    from conform.conformance.plan import Permissions
-    from conform.conformance.results import Grade
-    from conform.conformance.runner import RunOptions
+    the unit modules to copy), the suite's own reference units from the original.
+    ``every_variant``: each variant's checks on its own emulator in turn (code that only a
+    build with some option runs is reached by that variant's run), up to the first failure."""
     from conform.families import family as family_named
 
     fam = family_named(family)
-    vid = fam.default_variant
+    vids = [v.id for v in fam.variants()] if every_variant else [fam.default_variant]
+    out: dict[str, object] = {}
+    checks, not_pass = 0, {}
+    for vid in vids:
+        out = _run_variant(fam, vid, stop_at_failure, shadow, modules)
+        checks += int(out["checks"])  # type: ignore[call-overload]
+        not_pass |= out.get("not_pass") or {}  # type: ignore[operator]
+        if out["failed"]:
+            break
+    return out | {"checks": checks, "not_pass": not_pass}
+
+
+def _run_variant(fam, vid: str, stop_at_failure: bool, shadow: Shadow | None,  # noqa: ANN001
+                 modules: list[str]) -> dict[str, object]:
+    from conform.conformance.plan import Permissions
+    from conform.conformance.results import Grade
+    from conform.conformance.runner import RunOptions
+
     perms = Permissions.of(True, False, None, False)
     target, _ = fam.open_target(f"emu:{vid}", baud=115200, permissions=perms,
                                 inputs_control=None)
@@ -390,7 +406,8 @@ def child_main() -> int:
     t0 = time.process_time()
     every = [module_name(p) for p in sorted((family_dir(job["family"]) / "unit").glob("*.py"))]
     result = run_checks(job["family"], stop_at_failure=job.get("stop", True), shadow=shadow,
-                        modules=job.get("modules") or every)
+                        modules=job.get("modules") or every,
+                        every_variant=bool(job.get("every_variant")))
     prefix = f"conform.families.{job['family']}.unit"
     result |= {"loaded": shadow.loaded if shadow and job.get("module") else None,
                "cpu_s": round(time.process_time() - t0, 3),
