@@ -384,6 +384,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     from conform.families.grbl.conformance import from_state
 
     out += from_state.generate(spec, vid)
+    from conform.families.grbl.conformance import in_motion
+
+    out += in_motion.generate(spec, vid)
     return out
 
 
