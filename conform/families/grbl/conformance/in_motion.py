@@ -50,6 +50,10 @@ class Course:
     steps: tuple[Step, ...]
 
 
+# a slow first block: the blocks sent after it are queued when it ends, so the planner sees
+# them all from the next block on (a corner's speed, a block's exit speed)
+LEAD = b"G1Y0.2F60\n"
+
 _PL = "src:planner.c plan_buffer_line, planner_recalculate; stepper.c st_prep_buffer"
 _RT = "src:protocol.c protocol_exec_rt_system"
 
@@ -65,7 +69,23 @@ COURSES: tuple[Course, ...] = (
            (b"G1X0.5F400\n", *_poll(0.5, 0.04))),
     Course("chain", f"{_PL} (junction speed from $11, the exit speed carried into the next "
            "block)", "three G1 blocks queued: no stop at the corners, the speed through each",
-           (b"G1X3F400\n", b"G1X6Y2\n", b"G1X6Y5\n", b"G1X9Y5F200\n", *_poll(4.0, 0.1))),
+           (LEAD, b"G1X3F400\n", b"G1X6Y2\n", b"G1X6Y5\n", b"G1X9Y5F200\n",
+            *_poll(4.2, 0.1))),
+    Course("reversal", f"{_PL} (a junction turning back: speed 0 at the corner)",
+           "G1 out and straight back, queued behind a slow first block: the machine stops "
+           "at the corner, then returns", (LEAD, b"G1X4F400\n", b"G1X1\n", b"G1X1Y3\n",
+                                           *_poll(3.8, 0.1))),
+    Course("hold-at-corner", f"{_RT} (EXEC_FEED_HOLD); planner.c plan_cycle_reinitialize "
+           "(a hold too close to a block's end decelerates on into the next block)",
+           "! 0.5 mm before the end of a block entered at speed: the stop runs into the next "
+           "block", (LEAD, b"G1X3F400\n", b"G1X9\n", 0.85, b"!", *_poll(1.0, 0.1), b"~",
+                     *_poll(1.6, 0.1))),
+    Course("planner-full", "src:planner.c plan_check_full_buffer (BLOCK_BUFFER_SIZE 16, one "
+           "slot empty); motion_control.c mc_line (waits for a free block); gcode.c "
+           "gc_execute_line (G28: a move to the via point, then one to the stored position)",
+           "a G28 with a via point sent while the planner is full: its ok comes when two "
+           "blocks are free", (*(f"G1X{i / 2:g}F120\n".encode() for i in range(1, 19)),
+                               b"G28X12\n", *_poll(1.0, 0.1))),
     Course("arc", "src:motion_control.c mc_arc; " + _PL,
            "G2 half circle: the move takes the arc's length, not the chord's",
            (b"G2X6Y0I3J0F300\n", *_poll(2.4, 0.1))),
@@ -89,6 +109,11 @@ COURSES: tuple[Course, ...] = (
            "stop kept as the position; a second jog runs from there",
            (b"$J=G91X10F400\n", 0.8, b"?", b"\x85", *_poll(1.0, 0.1),
             b"$J=G91Y-2F300\n", *_poll(1.2, 0.1))),
+    Course("jog-cancel-at-corner", f"{_RT} (EXEC_MOTION_CANCEL); planner.c plan_reset",
+           "0x85 too close to the end of a jog block entered at speed, a new jog at once: "
+           "the new jog starts from where and how fast the cancelled one ended",
+           (b"$J=G91Y0.2F60\n", b"$J=G91X3F400\n", b"$J=G91X3F400\n", 0.9, b"\x85",
+            b"$J=G91Y-1F300\n", *_poll(1.2, 0.05))),
 )
 
 
