@@ -16,7 +16,8 @@ A step is bytes sent to both units (their answers compared) or a number of secon
 exactly. Behind a link a report taken while the machine moves (Run, Jog, Home, Hold:1)
 follows the wall clock, so only its state is compared there; a report at rest (Idle,
 Hold:0, Alarm) is compared exactly, position and all. Every row moves the machine and needs
-``--allow-motion``; none writes the EEPROM.
+``--allow-motion``; a row that writes a setting or a startup line needs ``--allow-eeprom``
+too, and on a unit behind a link what it wrote is put back after it.
 """
 
 from __future__ import annotations
@@ -109,6 +110,33 @@ COURSES: tuple[Course, ...] = (
            "stop kept as the position; a second jog runs from there",
            (b"$J=G91X10F400\n", 0.8, b"?", b"\x85", *_poll(1.0, 0.1),
             b"$J=G91Y-2F300\n", *_poll(1.2, 0.1))),
+    Course("reset-in-motion", "src:protocol.c protocol_exec_rt_system (EXEC_RESET in a "
+           "cycle: ALARM:3, mc_reset); report.c report_realtime_status (MPos: from "
+           "sys_position, kept through the reset)",
+           "a soft reset in the cruise: ALARM:3, and Alarm reports where the machine stopped",
+           (b"G1X10F400\n", 0.9, b"\x18", 0.5, b"?", b"$X\n", b"?")),
+    Course("soft-limits-inside", "src:limits.c limits_soft_check; system.c "
+           "system_check_travel_limits (machine space -$130..0 with homing toward +)",
+           "$20=1: moves inside the travel (-$130..0 from the power-up origin) run as "
+           "usual, no ALARM:2", (b"$22=1\n", b"$20=1\n", b"G0X-0.5Y-0.5Z-0.5\n",
+                                 *_poll(0.6, 0.1), b"G0X-2Z-0.2\n", *_poll(0.8, 0.1))),
+    Course("outputs-reports", f"{_RT} (EXEC_SPINDLE_OVR_STOP only in a hold, "
+           "EXEC_COOLANT_FLOOD_OVR_TOGGLE, EXEC_COOLANT_MIST_OVR_TOGGLE without ENABLE_M7); "
+           "spindle_control.c spindle_set_state and coolant_control.c coolant_set_state "
+           "force Ov: (report_ovr_counter = 0) only when they change",
+           "M3, S, M8, M9 force Ov: into the next report, a line that changes neither does "
+           "not; 0x9E while idle and 0xA1 change nothing; 0xA0 toggles flood",
+           (b"?", b"?", b"M3S500\n", b"?", b"G21\n", b"?", b"?", b"S600\n", b"?",
+            b"M8\n", b"?", b"G21\n", b"?", b"M9\n", b"?", b"\x9e", b"?", b"\xa1", b"?",
+            b"\xa0", b"?", b"\xa0", b"?", b"M5\n", b"?")),
+    Course("spindle-minimum", "src:spindle_control.c spindle_compute_pwm_value ($31: a "
+           "speed at or below it runs at $31, S0 is off)",
+           "$31=100: S50 runs at 100, S0 at 0, S150 at 150 (FS:)",
+           (b"$31=100\n", b"M3S50\n", b"?", b"S0\n", b"?", b"S150\n", b"?", b"M5\n")),
+    Course("startup-line-error", "src:system.c system_execute_startup (a line that fails "
+           "prints >line:error:N and the next one still runs)",
+           "$N0=G1X0 stored with a feed set fails after a reset (no feed: error:22); $N1=G20 "
+           "runs after it", (b"F100\n", b"$N0=G1X0\n", b"$N1=G20\n", b"\x18", 0.3, b"$G\n")),
     Course("jog-cancel-at-corner", f"{_RT} (EXEC_MOTION_CANCEL); planner.c plan_reset",
            "0x85 too close to the end of a jog block entered at speed, a new jog at once: "
            "the new jog starts from where and how fast the cancelled one ended",
@@ -127,6 +155,7 @@ def _normalize(linked: bool) -> Callable[[list[str]], list[str]]:
 
 def _run(course: Course) -> Callable[[Session], Outcome]:
     def run(s: Session) -> Outcome:
+        from conform.families.grbl.conformance.from_state import _put_back, needs
         from conform.families.grbl.conformance.machine import Pair
         from conform.families.grbl.unit.model import GrblUnit
 
@@ -134,11 +163,15 @@ def _run(course: Course) -> Callable[[Session], Outcome]:
         try:
             r = Session(ref, s.spec, s.v)
             pair = Pair(s, r, _normalize(not s.target.emulated))
-            if pair.linked:
-                pair.start()           # the reference where the target stands
-            else:
+            if not pair.linked:
                 r.fresh()              # both at power-up
-            return _follow(pair, course.steps)
+                return _follow(pair, course.steps)
+            pair.start()               # the reference where the target stands
+            try:
+                passed, expected, actual = _follow(pair, course.steps)
+            finally:   # a unit behind a link keeps the startup lines a course wrote
+                left = _put_back(pair) if needs(_sent(course))[1] else ""
+            return passed, expected, actual + left
         finally:
             ref.close()
     return run
@@ -169,7 +202,14 @@ def _follow(pair: Pair, steps: Sequence[Step]) -> Outcome:
     return True, "every answer as the reference unit's", f"{len(shown)} steps agreed"
 
 
+def _sent(course: Course) -> tuple[bytes, ...]:
+    return tuple(x for x in course.steps if isinstance(x, bytes))
+
+
 def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
-    """One check per course; each moves the machine."""
-    return [GrblCheck(f"{vid}/in_motion/course/{c.name}", c.cite, c.title, _run(c), motion=True)
-            for c in COURSES]
+    """One check per course; each moves the machine or turns an output on, some write the
+    EEPROM (a setting, a startup line: :func:`.from_state.needs`)."""
+    from conform.families.grbl.conformance.from_state import needs
+
+    return [GrblCheck(f"{vid}/in_motion/course/{c.name}", c.cite, c.title, _run(c), motion=True,
+                      eeprom=needs(_sent(c))[1]) for c in COURSES]
