@@ -322,6 +322,9 @@ class Shadow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
                 return factory()
             finally:
                 sys.modules.update(saved)
+                for name in copies:   # a module the suite had not imported yet: the suite's
+                    if name not in saved:   # own later import must load the original, not
+                        sys.modules.pop(name, None)   # keep the copy (the mutant)
                 for mod, attr, value in rebound:
                     setattr(mod, attr, value)
                 for cell, value in cells:
