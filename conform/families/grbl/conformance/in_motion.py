@@ -118,8 +118,10 @@ COURSES: tuple[Course, ...] = (
     Course("soft-limits-inside", "src:limits.c limits_soft_check; system.c "
            "system_check_travel_limits (machine space -$130..0 with homing toward +)",
            "$20=1: moves inside the travel (-$130..0 from the power-up origin) run as "
-           "usual, no ALARM:2", (b"$22=1\n", b"$20=1\n", b"G0X-0.5Y-0.5Z-0.5\n",
-                                 *_poll(0.6, 0.1), b"G0X-2Z-0.2\n", *_poll(0.8, 0.1))),
+           "usual, no ALARM:2; $22=0 turns $20 off too (settings.c case 22), and a setting "
+           "other than $13 forces no WCO: (system_flag_wco_change)",
+           (b"$22=1\n", b"$20=1\n", b"G0X-0.5Y-0.5Z-0.5\n", *_poll(0.6, 0.1), b"G0X-2Z-0.2\n",
+            *_poll(0.8, 0.1), b"$22=0\n", b"$$\n", b"?", b"$12=0.004\n", b"?", b"$JX\n")),
     Course("outputs-reports", f"{_RT} (EXEC_SPINDLE_OVR_STOP only in a hold, "
            "EXEC_COOLANT_FLOOD_OVR_TOGGLE, EXEC_COOLANT_MIST_OVR_TOGGLE without ENABLE_M7); "
            "spindle_control.c spindle_set_state and coolant_control.c coolant_set_state "
