@@ -10,10 +10,12 @@ profile, every opt-in, no state machine), against the target of 90 % killed.
 A mutant is KILLED when the run reports a FAIL or an ERROR, stops, crashes or runs out of
 time (10x the unmutated run's CPU time); it SURVIVED when the run passes as the unmutated
 one does. ``--sample N`` mutants per family are drawn with ``--seed`` from all mutation points
-of the unit modules the unmutated run imports (``--all-files``: of every file in unit/, the
-control socket's and fault injection's too; ``--every-variant``: each mutant is tested by every
-variant's checks in turn, each on its own emulator, so that code only a build with some option
-runs is reached too). Equivalent mutants are listed, each with why, in
+of the unit modules the unmutated run imports and whose functions the emulator's unit runs (a
+module only the suite's side runs, such as grbl's adopt.py, is left out and named;
+``--all-files``: every file in unit/, the control socket's and fault injection's too;
+``--every-variant``: each mutant is tested by every variant's checks in turn, each on its own
+emulator, so that code only a build with some option runs is reached too). Equivalent mutants
+are listed, each with why, in
 ``<out>/<family>-equivalent.toml`` and left out of the denominator:
 score = killed / (sampled - equivalent). Written per family: ``<family>-survivors.txt`` (each
 survivor's id and changed line) and ``<family>-results.json`` (every mutant). ``--mutant ID``
@@ -102,16 +104,28 @@ def baseline(family: str, every_variant: bool = False) -> tuple[dict, float]:
              f"does ({out.get('why') or out.get('not_pass')}); the copy is not faithful")
     if out.get("not_pass"):
         print(f"  {family}: unmutated run grades other than PASS: {out['not_pass']}")
-    return out | {"unit_modules": plain["unit_modules"]}, wall
+    traced = run_child({"family": family, "stop": False, "shadow": True, "trace": True,
+                        "modules": plain["unit_modules"], "every_variant": every_variant},
+                       wall_limit=900)
+    if traced.get("outcome") != "survived":
+        fail(f"{family}: the traced run of the unit's copy does not pass ({traced.get('why')})")
+    return out | {"unit_modules": plain["unit_modules"], "unit_ran": traced["unit_ran"]}, wall
 
 
-def unit_files(family: str, base: dict, all_files: bool) -> tuple[list[Path], list[str]]:
+def unit_files(family: str, base: dict, all_files: bool
+               ) -> tuple[list[Path], list[str], list[str]]:
+    """The files mutated; those the run never imports; those it imports for the suite's own
+    side only (none of their functions runs in the emulator's unit: a mutant there could never
+    be seen by any check, as the unit under test does not run it)."""
     files = sorted((family_dir(family) / "unit").glob("*.py"))
     if all_files:
-        return files, []
-    loaded = set(base["unit_modules"])
-    kept = [p for p in files if module_name(p) in loaded]
-    return kept, [p.name for p in files if p not in kept]
+        return files, [], []
+    loaded, ran = set(base["unit_modules"]), set(base["unit_ran"])
+    unloaded = [p.name for p in files if module_name(p) not in loaded]
+    unrun = [p.name for p in files if module_name(p) in loaded and module_name(p) not in ran
+             and p.name != "__init__.py"]
+    kept = [p for p in files if p.name not in unloaded and p.name not in unrun]
+    return kept, unloaded, unrun
 
 
 def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: list[str],
@@ -173,7 +187,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
     t0 = time.perf_counter()
     base, base_wall = baseline(family, args.every_variant)
     cpu_limit = max(10, int(TIMEOUT_FACTOR * base["cpu_s"] + 0.999) + 2)
-    files, skipped = unit_files(family, base, args.all_files)
+    files, skipped, suite_side = unit_files(family, base, args.all_files)
     left_out: Counter[str] = Counter()
     points = enumerate_points(files, family, left_out)
     by_key = {p.key: p for p in points}
@@ -188,6 +202,8 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
     print(f"{family}: {len(points)} mutation points in {len(files)} files (left out, as they "
           f"cannot change what the unit does: {dict(left_out) or 'none'})"
           + (f"; files left out, not imported by the run: {', '.join(skipped)}" if skipped else "")
+          + (f"; files left out, imported by the suite but none of their code runs in the "
+             f"emulator's unit: {', '.join(suite_side)}" if suite_side else "")
           + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
           f"timeout {cpu_limit} s CPU")
     records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"],
@@ -212,7 +228,8 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
            "score_ratio": round(score / TARGET, 4), "points": len(points),
            "cpu_s": round(cpu, 1), "wall_s": round(time.perf_counter() - t0, 1),
            "cpu_per_mutant_s": round(cpu / max(1, len(records)), 2),
-           "points_left_out": dict(left_out),
+           "points_left_out": dict(left_out), "files_not_imported": skipped,
+           "files_suite_side": suite_side,
            "baseline_cpu_s": base["cpu_s"], "baseline_wall_s": round(base_wall, 2)}
     if not args.mutant:
         write_outputs(out_dir, family, records, equivalent,

@@ -26,9 +26,11 @@ import difflib
 import hashlib
 import importlib.abc
 import importlib.util
+import inspect
 import json
 import resource
 import sys
+import threading
 import time
 import tomllib
 from collections import Counter
@@ -320,6 +322,9 @@ class Shadow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
                 return factory()
             finally:
                 sys.modules.update(saved)
+                for name in copies:   # a module the suite had not imported yet: the suite's
+                    if name not in saved:   # own later import must load the original, not
+                        sys.modules.pop(name, None)   # keep the copy (the mutant)
                 for mod, attr, value in rebound:
                     setattr(mod, attr, value)
                 for cell, value in cells:
@@ -394,6 +399,22 @@ def _run_variant(fam, vid: str, stop_at_failure: bool, shadow: Shadow | None,  #
             "not_pass": other, "unit_of": unit_of}
 
 
+def _trace_copy(ran: set[str]) -> None:
+    """Record in ``ran`` each module of the unit's copy (the emulator's unit) that has any of
+    its functions called, its import aside: a module the suite imports from ``unit/`` for its
+    own use (a helper of the reference side) is copied too, but none of its code runs in the
+    unit under test, so no check could ever see its mutants."""
+    def profile(frame, event, _arg):  # noqa: ANN001, ANN202
+        if event == "call" and frame.f_code.co_flags & inspect.CO_OPTIMIZED:   # a function's
+            # body, not a module's or a class's (run by the import itself)
+            name = frame.f_globals.get("__name__") or ""   # code of the module's own file:
+            # not what a decorator made for it (a dataclass's generated methods)
+            if name.startswith(SHADOW) and frame.f_code.co_filename == frame.f_globals.get("__file__"):
+                ran.add(name)
+    sys.setprofile(profile)
+    threading.setprofile(profile)
+
+
 def child_main() -> int:
     """``--child``: one job as JSON on stdin (``family``; ``shadow``: the emulator runs a copy
     of the unit, ``modules`` the unit modules copied (default: all), ``module``/``code`` the one whose source
@@ -405,9 +426,17 @@ def child_main() -> int:
     shadow = Shadow(job["family"], job.get("module"), job.get("code")) if job.get("shadow") else None
     t0 = time.process_time()
     every = [module_name(p) for p in sorted((family_dir(job["family"]) / "unit").glob("*.py"))]
+    ran: set[str] = set()
+    if job.get("trace"):
+        _trace_copy(ran)
     result = run_checks(job["family"], stop_at_failure=job.get("stop", True), shadow=shadow,
                         modules=job.get("modules") or every,
                         every_variant=bool(job.get("every_variant")))
+    if job.get("trace"):
+        sys.setprofile(None)
+        threading.setprofile(None)
+        result["unit_ran"] = sorted(f"conform.families.{job['family']}.unit" + name[len(SHADOW):]
+                                    for name in ran)
     prefix = f"conform.families.{job['family']}.unit"
     result |= {"loaded": shadow.loaded if shadow and job.get("module") else None,
                "cpu_s": round(time.process_time() - t0, 3),

@@ -209,14 +209,18 @@ def _line_limit(s: Session) -> Outcome:
 
 
 def _rx_ring(s: Session) -> Outcome:
-    """While grbl dwells, the ring fills; what does not fit is lost (serial.c)."""
+    """While grbl dwells, the ring fills; what does not fit is lost (serial.c). The bytes
+    are 4-byte lines up to the ring's size, then empty lines (each answered ok, protocol.c):
+    the ring's last free byte holds one of them, the next is lost, so a ring one byte larger
+    or smaller answers one ok more or fewer."""
     size = s.v.rx_buffer
-    filler = b"G90\n" * ((size + 64) // 4)
+    filler = b"G90\n" * (size // 4) + b"\n" * (size % 4 + 4)
     s.target.send(b"G4P0.5\n" + filler)
-    got = s.collect(answers=1 + size // 4, timeout=3.0, linger=0.5)
+    want = 1 + size // 4 + size % 4
+    got = s.collect(answers=want, timeout=3.0, linger=0.5)
     oks = sum(1 for x in got.lines if x == "ok")
-    want = 1 + size // 4
-    return oks == want, f"{want} ok (the dwell + {size} bytes of lines; the rest lost)", f"{oks} ok"
+    return oks == want, (f"{want} ok (the dwell + {size} bytes of lines, the last of them "
+                         "empty; the rest lost)"), f"{oks} ok"
 
 
 def _check_mode(s: Session) -> Outcome:
@@ -388,6 +392,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     from conform.families.grbl.conformance import from_state
 
     out += from_state.generate(spec, vid)
+    from conform.families.grbl.conformance import in_motion
+
+    out += in_motion.generate(spec, vid)
     return out
 
 
