@@ -483,3 +483,14 @@ def test_matrix_cells_hold_grades_and_long_citations_go_under_the_table(tmp_path
                  capsys)[0] == 0
     cells = [c for c in _matrix_cells((out / "index.html").read_text()) if c != "—"]
     assert cells and all(re.fullmatch(r"GVE\d+ §[\d.]+ (\d+ [A-Z-]+ ?)+", c) for c in cells), cells
+
+
+# -- spec show: a command the tables do not have is refused alike in every family -----------
+
+@pytest.mark.parametrize("variant, word", [("marlin-2.1", "M999999"), ("marlin-2.1-adv", "G999"),
+                                           ("grbl-1.1f", "G99"), ("gve64-v19", "QQ"),
+                                           ("gve124", "nope")])
+def test_spec_show_of_an_unknown_command_is_refused_in_every_family(variant, word, capsys):
+    code, out, err = _code(["spec", "show", variant, word], capsys)
+    assert code == 2 and not out, out
+    assert err.count("\n") == 1 and f"{word}" in err and f"in {variant}'s tables" in err, err
