@@ -494,3 +494,34 @@ def test_spec_show_of_an_unknown_command_is_refused_in_every_family(variant, wor
     code, out, err = _code(["spec", "show", variant, word], capsys)
     assert code == 2 and not out, out
     assert err.count("\n") == 1 and f"{word}" in err and f"in {variant}'s tables" in err, err
+
+
+# -- an empty answer is no answer: a port that is not there, a glob or range that selects nothing
+
+@pytest.mark.parametrize("path, said", [("/dev/ttyNOPE", "no such port"),
+                                        (str(REPO), "not a serial port")])
+def test_ports_of_a_path_that_is_no_port_is_refused(path, said, capsys):
+    code, out, err = _code(["ports", path], capsys)
+    assert code == 2 and not out and f"{path}: {said}" in err and err.count("\n") == 1, err
+
+
+def test_run_list_of_a_glob_that_matches_nothing_is_refused(capsys):
+    code, out, err = _code(["run", "--list", "--check", "zzz/*"], capsys)
+    assert code == 2 and not out and "no check matches zzz/*" in err, err
+
+
+@pytest.mark.parametrize("extra, said", [([], "give --report DIR too"),
+                                         (["--report", "R"], "outside the capture (0 to")])
+def test_analyze_time_range_that_draws_nothing_is_refused(extra, said, tmp_path, capsys):
+    extra = [str(tmp_path / x) if x == "R" else x for x in extra]
+    code, _, err = _code(["analyze", GOOD, "-q", "--time-range", "999:1000", *extra], capsys)
+    assert code == 2 and said in err and err.count("\n") == 1, err
+    assert not (tmp_path / "R" / "index.html").exists()
+
+
+@pytest.mark.parametrize("value", ["1,2", "80,80,400,500"])
+def test_send_steps_per_mm_takes_one_number_or_three(value, capsys):
+    code, _, err = _code(["send", str(REPO / "captures" / "jobs" / "part.nc"), "--target",
+                          "emu:gve64-v19", "-q", "--steps-per-mm", value], capsys)
+    assert code == 2 and f"--steps-per-mm: one number for every axis or three (X,Y,Z), not " \
+        f"'{value}'" in err, err
