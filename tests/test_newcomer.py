@@ -525,3 +525,20 @@ def test_send_steps_per_mm_takes_one_number_or_three(value, capsys):
                           "emu:gve64-v19", "-q", "--steps-per-mm", value], capsys)
     assert code == 2 and f"--steps-per-mm: one number for every axis or three (X,Y,Z), not " \
         f"'{value}'" in err, err
+
+
+@pytest.mark.parametrize("where, said", [("file/x.json", "a file is in the way"),
+                                         ("adir", "is a folder")])
+def test_emulate_serve_truth_that_cannot_be_written_is_refused_before_serving(where, said,
+                                                                               tmp_path, capsys):
+    (tmp_path / "file").write_text("x\n")
+    (tmp_path / "adir").mkdir()
+    code, out, err = _code(["emulate", "serve", "gve64-v19", "--truth", str(tmp_path / where)],
+                           capsys)
+    assert code == 2 and not out and said in err and err.count("\n") == 1, err
+
+
+def test_analyze_says_which_options_another_familys_capture_does_not_use(capsys):
+    code, _, err = _code(["analyze", str(REPO / "captures" / "grbl-counting.mcap"), "-q",
+                          "--dialect", "A10=every-line"], capsys)
+    assert code == 0 and "--dialect A10=every-line: not used" in err, err

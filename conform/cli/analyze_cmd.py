@@ -115,9 +115,12 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                         "give --report DIR too")
     other = analyze_other_family(file, variant, report_dir, parquet_dir, as_json)
     if other:  # another family's traffic, or unknown traffic
-        if window:
-            click.echo(f"--time-range {time_range}: not used: this capture's report draws its "
-                       "plots over the whole session", err=True)
+        unused = [f"--time-range {time_range}"] * bool(window) + [f"--dialect {dialect}"] * bool(
+            dialect)   # the default family's options; another family's analysis takes neither
+        if unused:
+            click.echo(f"{' and '.join(unused)}: not used: they apply to "
+                       f"{default_family().name} captures; this one is another family's",
+                       err=True)
         _fail(getattr(other, "findings", []), fail_on)
         return
 

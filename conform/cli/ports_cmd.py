@@ -60,7 +60,9 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
       conform ports --probe
       conform ports --probe /dev/pts/4 socket://localhost:5024
     """
-    for path in paths:   # a URL (socket://, rfc2217://) is pyserial's to open
+    # a listing names what it was given; a path that is no port is refused (--probe says of
+    # each port why nothing answered). A URL (socket://, rfc2217://) is pyserial's to open.
+    for path in [] if do_probe else paths:
         if "://" not in path and not Path(path).is_char_device():
             from conform.errors import UserError
 
