@@ -307,7 +307,7 @@ for _v, (_cap, _job, _prof) in _FAMILY.items():
         f"conform send {_job} --target /dev/ttyNOPE --variant {_v}",
         f"conform characterize emu:{_v} -o {{T}}/file/x.toml",
         f"conform characterize emu:{_v} -o {{T}}/u.toml --variant {_others[1]}",
-        f"conform check-sender --variant {_v} --scenario nope -- true {{port}}",
+        f"conform check-sender --variant {_v} --scenario nope -- true {{{{port}}}}",
         f"conform check-sender --variant {_v} --job {_FAMILY[_others[0]][1]} -- true {{{{port}}}}",
         f"conform check-sender --variant {_v} --report {{T}}/file/x -- true {{{{port}}}}",
         f"conform analyze {_cap} --variant {_others[0]}",
