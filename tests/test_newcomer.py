@@ -483,3 +483,62 @@ def test_matrix_cells_hold_grades_and_long_citations_go_under_the_table(tmp_path
                  capsys)[0] == 0
     cells = [c for c in _matrix_cells((out / "index.html").read_text()) if c != "—"]
     assert cells and all(re.fullmatch(r"GVE\d+ §[\d.]+ (\d+ [A-Z-]+ ?)+", c) for c in cells), cells
+
+
+# -- spec show: a command the tables do not have is refused alike in every family -----------
+
+@pytest.mark.parametrize("variant, word", [("marlin-2.1", "M999999"), ("marlin-2.1-adv", "G999"),
+                                           ("grbl-1.1f", "G99"), ("gve64-v19", "QQ"),
+                                           ("gve124", "nope")])
+def test_spec_show_of_an_unknown_command_is_refused_in_every_family(variant, word, capsys):
+    code, out, err = _code(["spec", "show", variant, word], capsys)
+    assert code == 2 and not out, out
+    assert err.count("\n") == 1 and f"{word}" in err and f"in {variant}'s tables" in err, err
+
+
+# -- an empty answer is no answer: a port that is not there, a glob or range that selects nothing
+
+@pytest.mark.parametrize("path, said", [("/dev/ttyNOPE", "no such port"),
+                                        (str(REPO), "not a serial port")])
+def test_ports_of_a_path_that_is_no_port_is_refused(path, said, capsys):
+    code, out, err = _code(["ports", path], capsys)
+    assert code == 2 and not out and f"{path}: {said}" in err and err.count("\n") == 1, err
+
+
+def test_run_list_of_a_glob_that_matches_nothing_is_refused(capsys):
+    code, out, err = _code(["run", "--list", "--check", "zzz/*"], capsys)
+    assert code == 2 and not out and "no check matches zzz/*" in err, err
+
+
+@pytest.mark.parametrize("extra, said", [([], "give --report DIR too"),
+                                         (["--report", "R"], "outside the capture (0 to")])
+def test_analyze_time_range_that_draws_nothing_is_refused(extra, said, tmp_path, capsys):
+    extra = [str(tmp_path / x) if x == "R" else x for x in extra]
+    code, _, err = _code(["analyze", GOOD, "-q", "--time-range", "999:1000", *extra], capsys)
+    assert code == 2 and said in err and err.count("\n") == 1, err
+    assert not (tmp_path / "R" / "index.html").exists()
+
+
+@pytest.mark.parametrize("value", ["1,2", "80,80,400,500"])
+def test_send_steps_per_mm_takes_one_number_or_three(value, capsys):
+    code, _, err = _code(["send", str(REPO / "captures" / "jobs" / "part.nc"), "--target",
+                          "emu:gve64-v19", "-q", "--steps-per-mm", value], capsys)
+    assert code == 2 and f"--steps-per-mm: one number for every axis or three (X,Y,Z), not " \
+        f"'{value}'" in err, err
+
+
+@pytest.mark.parametrize("where, said", [("file/x.json", "a file is in the way"),
+                                         ("adir", "is a folder")])
+def test_emulate_serve_truth_that_cannot_be_written_is_refused_before_serving(where, said,
+                                                                               tmp_path, capsys):
+    (tmp_path / "file").write_text("x\n")
+    (tmp_path / "adir").mkdir()
+    code, out, err = _code(["emulate", "serve", "gve64-v19", "--truth", str(tmp_path / where)],
+                           capsys)
+    assert code == 2 and not out and said in err and err.count("\n") == 1, err
+
+
+def test_analyze_says_which_options_another_familys_capture_does_not_use(capsys):
+    code, _, err = _code(["analyze", str(REPO / "captures" / "grbl-counting.mcap"), "-q",
+                          "--dialect", "A10=every-line"], capsys)
+    assert code == 0 and "--dialect A10=every-line: not used" in err, err

@@ -109,11 +109,20 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
     if wrong:
         raise UserError(f"{file}: {wrong}")
 
+    window = _time_range(time_range)
+    if window and not report_dir:
+        raise UserError(f"--time-range {time_range}: draws the report's plots over that range; "
+                        "give --report DIR too")
     other = analyze_other_family(file, variant, report_dir, parquet_dir, as_json)
     if other:  # another family's traffic, or unknown traffic
+        unused = [f"--time-range {time_range}"] * bool(window) + [f"--dialect {dialect}"] * bool(
+            dialect)   # the default family's options; another family's analysis takes neither
+        if unused:
+            click.echo(f"{' and '.join(unused)}: not used: they apply to "
+                       f"{default_family().name} captures; this one is another family's",
+                       err=True)
         _fail(getattr(other, "findings", []), fail_on)
         return
-    window = _time_range(time_range)
 
     try:
         size = os.path.getsize(file)
@@ -129,6 +138,10 @@ def cli(files: tuple[str, ...], report_dir: str | None, parquet_dir: str | None,
                     step=lambda name: task.update(step=name), whatif_replays=not no_whatif,
                     parquet=parquet_dir)  # the tables are written as the capture streams
         a.time_range = window
+        duration = a.metrics.get("duration_s") or 0.0
+        if window and not (window[0] <= duration and window[1] >= 0):
+            raise UserError(f"--time-range {time_range}: outside the capture (0 to "
+                            f"{duration:.3f} s); nothing would be drawn")
         said: list[str] = []       # the diagnosis, for the first screen and the report's top
         task.update(step="diagnosis")
         headline_for(file, a, default_family().name, said.append)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import click
 
@@ -59,6 +60,15 @@ def cli(paths: tuple[str, ...], do_probe: bool, baud: int, timeout: float, as_js
       conform ports --probe
       conform ports --probe /dev/pts/4 socket://localhost:5024
     """
+    # a listing names what it was given; a path that is no port is refused (--probe says of
+    # each port why nothing answered). A URL (socket://, rfc2217://) is pyserial's to open.
+    for path in [] if do_probe else paths:
+        if "://" not in path and not Path(path).is_char_device():
+            from conform.errors import UserError
+
+            what = "not a serial port (a device or pty)" if Path(path).exists() else \
+                "no such port"
+            raise UserError(f"{path}: {what}: `conform ports` lists them")
     listed = {p.device: p for p in listed_ports()}
     ports = [listed.get(p, Port(p, "given on the command line")) for p in paths] if paths \
         else list(listed.values())

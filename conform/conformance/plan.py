@@ -92,6 +92,9 @@ def list_checks(fam: Family, targets: Sequence[str], variant: str | None, *,
                                  patterns=patterns, machine=not no_machine, **family_values):
             listed.append({"id": c.id, "level": c.level, "clause": c.clause, "title": c.title,
                            "variant": vid})
+    if not listed and patterns:   # an empty list is no answer to a glob that matches nothing
+        raise UserError(f"no check matches {' '.join(patterns)} (`conform run --list` lists "
+                        "them all)")
     return listed
 
 

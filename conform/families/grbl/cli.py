@@ -54,8 +54,8 @@ def show(variant: str, what: str | None, console: Console) -> None:
     if part and part not in PARTS:
         found = one(g, what or "")
         if found is None:
-            raise UserError(f"{v.id}: nothing called {what!r} (one of: {', '.join(PARTS)}, "
-                            "or a command, setting, error or alarm such as $H, $110, error:9)")
+            raise UserError(f"no command, setting, error or alarm {what!r} in {v.id}'s tables "
+                            f"(a part: {', '.join(PARTS)}; or one such as $H, $110, error:9)")
         table = Table(title=f"{v.id}: {what}", show_header=False)
         table.add_column("field")
         table.add_column("value", overflow="fold")

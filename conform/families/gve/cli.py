@@ -117,7 +117,8 @@ def show_spec(variant: str, command: str | None, *, console: Any, as_json: bool)
         if cmd is None:
             known = spec.commands.get(command)
             if known is None:
-                raise UserError(f"no command {command!r} in the tables")
+                raise UserError(f"no command {command!r} in {v.id}'s tables (`conform spec "
+                                f"show {v.id}` lists them)")
             raise UserError(f"{v.id} has no command {command!r} (absent in this version)")
         rows = [
             ("mnemonic", cmd.mnemonic), ("addresses", ",".join(map(str, cmd.addresses))),

@@ -5,9 +5,10 @@ switch distances and an answer delay) behind a pty or TCP through the engine's s
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
-from conform.errors import UserError
+from conform.errors import UserError, writable_folder
 from conform.families.gve.conformance.profile import complete_profile
 from conform.families.gve.spec import load_spec
 
@@ -22,6 +23,10 @@ def serve(variant: str, *, dialect_pairs: tuple[str, ...] = (), profile: str | N
     from conform.families.gve.unit.control import run_control
     from conform.families.gve.unit.model import Unit
 
+    if truth_path:   # written on exit: a place it cannot go is said now, not after the session
+        if Path(truth_path).is_dir():
+            raise UserError(f"--truth {truth_path}: is a folder (expected a FILE.json)")
+        writable_folder(Path(truth_path).parent, "--truth")
     spec = load_spec()
     v = spec.variant(variant)
     dialect = spec.dialect(_dialect_choices(dialect_pairs, profile))

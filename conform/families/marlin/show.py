@@ -60,9 +60,11 @@ def command(spec: Any, v: Any, code: str) -> tuple[str, tuple[str, ...], list[tu
     row = spec.commands.get("T0" if code[0] == "T" else code)
     title = f"{v.id}: {code}"
     if row is None:
-        return title, ("field", "value"), [
-            ("in this build", "no: the unit answers echo:Unknown command: \"" + code + "\" and ok"),
-            ("source", "gcode.cpp GcodeSuite::process_parsed_command (unknown_command_warning)")]
+        # the unit answers it echo:Unknown command: "…" and ok (gcode.cpp
+        # GcodeSuite::process_parsed_command, unknown_command_warning)
+        raise UserError(f"no command {code} in {v.id}'s tables (the unit answers it "
+                        f"echo:Unknown command: \"{code}\" and ok; `conform spec show {v.id} "
+                        "commands` lists them)")
     built = spec.command(row.code, v) is not None
     out = [("in this build", "yes" if built else f"no: needs {row.option}"),
            ("kind", row.kind), ("moves", "yes" if row.motion else "no"),

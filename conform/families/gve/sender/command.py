@@ -39,6 +39,9 @@ def _floats(text: str) -> tuple[float, ...]:
         raise UserError(f"--steps-per-mm: expected numbers, not {text!r}") from None
     if not vals or any(not math.isfinite(v) or v <= 0 for v in vals):
         raise UserError(f"--steps-per-mm: expected positive numbers, not {text!r}")
+    if len(vals) not in (1, 3):
+        raise UserError(f"--steps-per-mm: one number for every axis or three (X,Y,Z), not "
+                        f"{text!r}")
     return vals
 
 
