@@ -59,7 +59,9 @@ def test_silent_port_fails_in_bounded_time(tmp_path, capsys):
     err = capsys.readouterr().err
     assert exc.value.code != 0
     assert "no answer" in err and err.count("\n") == 1, err
-    assert took < 15
+    # a few tries of half a second each (about 5 s on an idle machine): a hang would never end,
+    # and a starved worker on a loaded one took 21 s
+    assert took < 60
 
 
 def test_checksums_left_on_are_found_and_cleared(spec, tmp_path):
