@@ -220,6 +220,19 @@ def test_send_response_with_a_wake_up_and_polls_is_send_response():
     assert a.metrics["max_job_lines_in_flight"] == 1
 
 
+def test_send_response_with_answers_stamped_late_is_send_response():
+    """Through a proxy on a loaded machine an ok may be stamped after the line the sender
+    wrote on reading it (the two directions are read apart): a line now and then one ahead of
+    its answer, never two, is still send-response."""
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(20)])
+    oks = [i for i, (_t, d) in enumerate(unit) if d == b"ok\r\n"]
+    for i in oks[2:12:4]:      # three answers stamped after the next line went out
+        unit[i] = (unit[i][0] + 0.012, unit[i][1])
+    a = analyze_streams(host, sorted(unit), spec=G)
+    assert a.metrics["job_lines_back_to_back"] == 3
+    assert a.metrics["streaming_method"] == "send-response"
+
+
 def test_several_job_lines_in_flight_is_counting():
     host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(40)], window=4)
     a = analyze_streams(host, unit, spec=G)

@@ -287,13 +287,18 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
     beyond = _lines_beyond_answers(n_done[job_at])
     back_to_back = int(beyond.sum())
+    # a proxy reads the two directions apart: on a loaded machine an ok may be stamped just
+    # after the line its sender wrote on reading it, so a send-response line now and then
+    # looks one ahead of its answer; never two, and a counting sender's first fill is more
+    most_ahead = max((len(run) for run in "".join(map(str, beyond.tolist())).split("0")),
+                     default=0)
     beyond_full = sum(1 for e, b in zip(job, beyond.tolist(), strict=True)
                       if b and e.bytes_in_flight > limit)
     if not hb and not ub:
         method = "empty"
     elif not job:
         method = "none"
-    elif back_to_back == 0:
+    elif back_to_back == 0 or (most_ahead <= 1 and back_to_back <= len(job) // 4):
         method = "send-response"
     elif beyond_full <= len(job) // 4:
         method = "character-counting"
