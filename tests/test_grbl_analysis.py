@@ -220,10 +220,66 @@ def test_send_response_with_a_wake_up_and_polls_is_send_response():
     assert a.metrics["max_job_lines_in_flight"] == 1
 
 
+def test_send_response_with_answers_stamped_late_is_send_response():
+    """Through a proxy on a loaded machine an ok may be stamped after the line the sender
+    wrote on reading it (the two directions are read apart): a line now and then one ahead of
+    its answer, never two, is still send-response."""
+    host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(20)])
+    oks = [i for i, (_t, d) in enumerate(unit) if d == b"ok\r\n"]
+    for i in oks[2:12:4]:      # three answers stamped after the next line went out
+        unit[i] = (unit[i][0] + 0.012, unit[i][1])
+    a = analyze_streams(host, sorted(unit), spec=G)
+    assert a.metrics["job_lines_back_to_back"] == 3
+    assert a.metrics["streaming_method"] == "send-response"
+
+
 def test_several_job_lines_in_flight_is_counting():
     host, unit = _exchange_traffic([b"G1X%dF100" % i for i in range(40)], window=4)
     a = analyze_streams(host, unit, spec=G)
     assert a.metrics["streaming_method"] == "character-counting"
+
+
+def _grouped_counting_traffic(lines, *, window=5, batch=3, gap=0.03):
+    """A counting sender that is slow to read: its answers reach it ``batch`` at a time (one
+    read), and it writes as many lines as they made room for in one write (one read on the
+    other side too). It never has more than ``window`` lines in flight."""
+    host, unit, t = [], [], 0.0
+    sent = min(window, len(lines))
+    host.append((t, b"".join(x + b"\n" for x in lines[:sent])))
+    answered = 0
+    while answered < len(lines):
+        t += gap
+        n = min(batch, sent - answered)
+        unit.append((t, b"ok\r\n" * n))
+        answered += n
+        more = lines[sent:sent + n]
+        if more:
+            host.append((t + 0.001, b"".join(x + b"\n" for x in more)))
+            sent += len(more)
+    return host, unit
+
+
+@pytest.mark.parametrize("batch", [1, 2, 3, 5])
+def test_a_counting_sender_that_reads_answers_in_groups_is_counting(batch):
+    """The method comes from the wire's content, not the read timing: lines that follow
+    their answers in groups are still one line per answer (the old rule, lines sent right
+    after an answer, called this unbounded from a batch of 2 on)."""
+    lines = [b"G1X%dY%dF3000" % (i % 9, i % 4) for i in range(60)]
+    host, unit = _grouped_counting_traffic(lines, batch=batch)
+    a = analyze_streams(host, unit, spec=G)
+    m = a.metrics
+    assert (m["lines"], m["answered"]) == (60, 60)
+    assert m["streaming_method"] == "character-counting", m
+    assert m["max_job_lines_in_flight"] == 5 and m["max_bytes_in_flight"] <= V.rx_buffer
+
+
+def test_a_sender_that_never_waits_is_unbounded():
+    """Every line written at once, the answers trickling back: far past the buffer."""
+    lines = [b"G1X%dY%dF3000" % (i % 9, i % 4) for i in range(60)]
+    host = [(0.0, b"".join(x + b"\n" for x in lines))]
+    unit = [(0.01 * (i + 1), b"ok\r\n") for i in range(60)]
+    m = analyze_streams(host, unit, spec=G).metrics
+    assert m["streaming_method"] == "unbounded" and m["max_bytes_in_flight"] > V.rx_buffer
 
 
 def test_an_empty_capture_is_empty():

@@ -24,11 +24,11 @@ V = load_grbl().variant("grbl-1.1f")
 STEP = 0.25
 
 
-def job_file(tmp_path: Path, n: int, name: str = "job.nc") -> Path:
+def job_file(tmp_path: Path, n: int, name: str = "job.nc", feed: int = 3000) -> Path:
     """``n`` moves of STEP mm along X (collinear, so the planner keeps the speed), with a
     comment, a ';' comment and a blank line the sender strips."""
     lines = ["(a row of short moves)", "G21 G90 ; mm, absolute", ""]
-    lines += [f"G1 X{i * STEP:.3f} Y0 F3000" for i in range(1, n + 1)]
+    lines += [f"G1 X{i * STEP:.3f} Y0 F{feed}" for i in range(1, n + 1)]
     path = tmp_path / name
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -77,6 +77,14 @@ def control(tmp_path: Path, *words: str) -> str:
     p = conform("emulate", "control", str(tmp_path / "c.sock"), *words)
     assert p.returncode == 0, p.stderr
     return p.stdout.strip()
+
+
+def control_now(tmp_path: Path, *words: str) -> str:
+    """The same, from this process: at once, where a command's start-up on a loaded machine
+    could outlast the job it is meant to interrupt."""
+    from conform.emulator.control import send_control
+
+    return send_control(str(tmp_path / "c.sock"), " ".join(words), timeout=30)
 
 
 def truth(tmp_path: Path) -> dict:
@@ -167,9 +175,12 @@ def test_an_error_stops_with_one_line_naming_the_job_line(grbl, tmp_path):
 
 def test_sigterm_mid_job_halts_the_unit(grbl, tmp_path):
     proc, pty = grbl
-    job = job_file(tmp_path, 200)   # 50 mm: several seconds of motion
+    job = job_file(tmp_path, 200, feed=600)   # 50 mm at 10 mm/s: a while of motion
     send, _ = started([str(job), "--target", pty, "--allow-motion"])
-    time.sleep(1.0)
+    end = time.monotonic() + 30        # mid-job: once the unit has moved (no fixed sleep)
+    while json.loads(control_now(tmp_path, "state").removeprefix("ok "))["position"][0] <= 0:
+        assert time.monotonic() < end, "the unit never moved"
+        time.sleep(0.05)
     send.send_signal(signal.SIGTERM)
     _, err = send.communicate(timeout=60)
     assert send.returncode == 143, err
@@ -183,18 +194,17 @@ def test_sigterm_mid_job_halts_the_unit(grbl, tmp_path):
     from conform.capture.reader import open_capture
 
     host = open_capture(tmp_path / "emu.mcap").stream("host")
-    last_job_line = host.rfind(b"F3000\n")
+    last_job_line = host.rfind(b"F600\n")
     tail = host[last_job_line:]
     assert b"!" in tail and b"\x18" in tail[tail.index(b"!"):], tail   # hold, then reset
 
 
 def test_an_alarm_stops_the_send(grbl, tmp_path):
     _, pty = grbl
-    job = job_file(tmp_path, 200)
+    job = job_file(tmp_path, 200, feed=600)   # far longer than a loaded machine's delays
     job.write_text("$21=1\n" + job.read_text())   # hard limits on (the emulator's EEPROM)
     send, _ = started([str(job), "--target", pty, "--allow-motion"])
-    time.sleep(0.5)
-    assert control(tmp_path, "press", "limit-x").startswith("ok")
+    assert control_now(tmp_path, "press", "limit-x").startswith("ok")
     _, err = send.communicate(timeout=60)
     assert send.returncode == 1, err
     last = err.strip().splitlines()[-1]   # after the progress lines, one line says why
@@ -203,9 +213,10 @@ def test_an_alarm_stops_the_send(grbl, tmp_path):
 
 def test_a_pulled_cable_ends_the_send_in_bounded_time(grbl, tmp_path):
     _, pty = grbl
-    send, _ = started([str(job_file(tmp_path, 200)), "--target", pty, "--allow-motion"])
+    send, _ = started([str(job_file(tmp_path, 200, feed=600)), "--target", pty,
+                       "--allow-motion"])
     t = time.monotonic()
-    assert control(tmp_path, "fault", "unplug", "3").startswith("ok")
+    assert control_now(tmp_path, "fault", "unplug", "3").startswith("ok")
     _, err = send.communicate(timeout=60)
     assert send.returncode == 1 and "Traceback" not in err, err
     assert "link lost" in err.strip().splitlines()[-1], err

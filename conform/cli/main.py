@@ -41,11 +41,28 @@ SUBCOMMANDS: tuple[str, ...] = (
 
 class _Conform(click.Group):
     """The top-level group: its help names every registered family and its variants (read
-    when the help is shown, so no other command pays for loading the tables)."""
+    when the help is shown, so no other command pays for loading the tables). A subcommand's
+    module is imported when that command is asked for (a command line pays only for its own
+    command's imports); listing, the help or a family's own command loads them all."""
+
+    _all_loaded = False
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.commands:
+            if cmd_name in SUBCOMMANDS:
+                _add_subcommand(cmd_name)
+            else:
+                _register()
+        return super().get_command(ctx, cmd_name)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        _register()
+        return super().list_commands(ctx)
 
     def format_help_text(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         import inspect
 
+        _register()
         try:
             from conform.families import families
 
@@ -78,15 +95,24 @@ def cli() -> None:
     """
 
 
+def _add_subcommand(name: str) -> None:
+    try:
+        module = importlib.import_module(f"conform.cli.{name.replace('-', '_')}_cmd")
+    except ModuleNotFoundError as exc:
+        if exc.name == f"conform.cli.{name.replace('-', '_')}_cmd":
+            return  # not built yet
+        raise
+    cli.add_command(module.cli, name=name)
+
+
 def _register() -> None:
+    """Every subcommand, then every family's own commands (once)."""
+    if _Conform._all_loaded:
+        return
+    _Conform._all_loaded = True
     for name in SUBCOMMANDS:
-        try:
-            module = importlib.import_module(f"conform.cli.{name.replace('-', '_')}_cmd")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"conform.cli.{name.replace('-', '_')}_cmd":
-                continue  # not built yet
-            raise
-        cli.add_command(module.cli, name=name)
+        if name not in cli.commands:
+            _add_subcommand(name)
     add_family_commands(cli)
     _name_the_families()
 
@@ -101,9 +127,6 @@ def _name_the_families() -> None:
         return
     first, rest = (cli.help or "").split("\n", 1)
     cli.help = f"{first.rstrip('.')}: {'; '.join(titles)}.\n{rest}"
-
-
-_register()
 
 
 def main(argv: list[str] | None = None) -> None:

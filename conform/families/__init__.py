@@ -494,6 +494,12 @@ def table_folder(name: str, package: str) -> Path:
         override = Path(env) / name
         if override.is_dir():
             return override
+    return _shipped_tables(name, package)
+
+
+@functools.cache
+def _shipped_tables(name: str, package: str) -> Path:
+    """Where the installed tables are: found once (a unit reads its tables many times a run)."""
     shipped = Path(str(files(package).joinpath("tables")))
     if shipped.is_dir():
         return shipped

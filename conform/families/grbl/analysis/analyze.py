@@ -275,21 +275,32 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
     job_in_flight = np.arange(1, len(job) + 1) - np.searchsorted(job_done, job_sent, "left")
     max_job_lines = int(job_in_flight.max()) if len(job) else 0
     # a sender that counts waits for an answer before it sends more once the buffer is full:
-    # most of its lines follow an answer that came after its previous line. One that does not
-    # count sends in bursts, whatever comes back. (Counting bytes in flight alone would
-    # mislead: after a byte is lost, its line is never answered and every later count looks
-    # inflated.)
+    # beyond its first fill, it sends about one line per answer, in groups as the answers come
+    # (a slow sender reads several oks at once and writes as many lines in one go). One that
+    # does not count keeps sending while the buffer is full, whatever comes back. The content
+    # decides, not the read timing: the job lines sent beyond one per answer while more bytes
+    # were in flight than the buffer holds. (Bytes in flight alone would mislead: after a byte
+    # is lost or a line goes out uncounted, every later count looks inflated; such a sender
+    # still sends one line per answer.)
     n_done = np.searchsorted(t_done, t_sent, side="right")
     paced = int(np.count_nonzero(np.diff(n_done) > 0)) if len(exchanges) > 1 else 0
     share = paced / (len(exchanges) - 1) if len(exchanges) > 1 else 1.0
-    back_to_back = _lines_beyond_answers(n_done[job_at])
+    beyond = _lines_beyond_answers(n_done[job_at])
+    back_to_back = int(beyond.sum())
+    # a proxy reads the two directions apart: on a loaded machine an ok may be stamped just
+    # after the line its sender wrote on reading it, so a send-response line now and then
+    # looks one ahead of its answer; never two, and a counting sender's first fill is more
+    most_ahead = max((len(run) for run in "".join(map(str, beyond.tolist())).split("0")),
+                     default=0)
+    beyond_full = sum(1 for e, b in zip(job, beyond.tolist(), strict=True)
+                      if b and e.bytes_in_flight > limit)
     if not hb and not ub:
         method = "empty"
     elif not job:
         method = "none"
-    elif back_to_back == 0:
+    elif back_to_back == 0 or (most_ahead <= 1 and back_to_back <= len(job) // 4):
         method = "send-response"
-    elif share >= 0.5:
+    elif beyond_full <= len(job) // 4:
         method = "character-counting"
     else:
         method = "unbounded"
@@ -346,18 +357,24 @@ def is_job_line(text: str) -> bool:
     return bool(text) and (not text.startswith("$") or text.upper().startswith("$J="))
 
 
-def _lines_beyond_answers(answered_before: Any) -> int:
-    """How many job lines went out beyond one per answer: the lines sent after the same
-    number of answers form a group, and a group may hold as many lines as answers came since
-    the group before (the first line needs none). A send-response sender stays at 0 even when
-    two answers arrive in one read; a counting one fills the buffer in a burst."""
+def _lines_beyond_answers(answered_before: Any) -> Any:
+    """Which job lines went out beyond one per answer (1 for each such line, in send order):
+    the lines sent after the same number of answers form a group, and a group may hold as many
+    lines as answers came since the group before (the first line needs none); the lines past
+    that are its last ones. A send-response sender stays at 0 even when two answers arrive in
+    one read; a counting one fills the buffer in a burst, then keeps to about one per answer
+    however the answers are grouped."""
     import numpy as np
 
+    flags = np.zeros(len(answered_before), np.int64)
     if len(answered_before) < 2:
-        return 0
-    values, sizes = np.unique(answered_before, return_counts=True)
+        return flags
+    values, start, sizes = np.unique(answered_before, return_index=True, return_counts=True)
     gain = np.diff(values, prepend=values[0] - 1)
-    return int(np.maximum(sizes - gain, 0).sum())
+    for s, n, g in zip(start.tolist(), sizes.tolist(), gain.tolist(), strict=True):
+        if n > g:
+            flags[s + g:s + n] = 1
+    return flags
 
 
 def _done_at(e: Exchange) -> float:
