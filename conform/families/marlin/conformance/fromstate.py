@@ -17,11 +17,6 @@ from copy import deepcopy
 
 from conform.families.marlin.conformance.check import MarlinCheck, Outcome
 from conform.families.marlin.conformance.check import ok_kind as _ok_kind
-from conform.families.marlin.conformance.checks import (
-    _countdown,
-    _residency_problems,
-    _temperature,
-)
 from conform.families.marlin.conformance.depth import (
     _POS,
     NEW,
@@ -31,6 +26,11 @@ from conform.families.marlin.conformance.depth import (
     put,
     restoring,
     set_case,
+)
+from conform.families.marlin.conformance.heaters import (
+    _countdown,
+    _residency_problems,
+    _temperature,
 )
 from conform.families.marlin.conformance.session import Session
 from conform.families.marlin.spec import MarlinSpec
