@@ -371,6 +371,10 @@ class Family:
     """``ports --probe`` asks the families in this order: a family whose question could
     disturb another family's unit (a byte another protocol acts on at once) asks late."""
 
+    probe_disturbs_others: bool = False
+    """True when this family's question is a byte another protocol acts on at once: it is
+    asked only after every other family has been given the longer time to answer."""
+
     def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         """``conform ports --probe``: ask the port something harmless to every family's units
         (nothing that moves, holds or changes a setting) and say whether this family's unit
@@ -586,16 +590,23 @@ def identify_port(device: str, *, baud: int, timeout: float
     """Which family's unit answers on ``device``: each family's harmless question in
     ``probe_rank`` order until one names its variant (``conform ports --probe``, ``conform
     send`` given no variant). Returns that family (None when none did), its answer (else the
-    first answer heard) and what each family found."""
+    first answer heard) and what each family found. The harmless questions are asked first
+    with ``timeout``, then every family's with three times as long: a unit on a loaded host (an
+    emulator beside other work, a USB adapter's latency) may answer late, and a question that
+    disturbs other units (``probe_disturbs_others``) must not reach it before it had that time."""
     tried: list[str] = []
     heard: str | None = None
-    for fam in sorted(families(), key=lambda f: f.probe_rank):
-        got = fam.probe(device, baud=baud, timeout=timeout)
-        if got.variant:
-            return fam, got, tried
-        heard = heard or got.answer
-        tried.append(got.how)
-    return None, ProbeAnswer(None, heard, "; ".join(tried) or "no family can probe"), tried
+    for wait, everyone in ((timeout, False), (3 * timeout, True)):
+        for fam in sorted(families(), key=lambda f: f.probe_rank):
+            if fam.probe_disturbs_others and not everyone:
+                continue
+            got = fam.probe(device, baud=baud, timeout=wait)
+            if got.variant:
+                return fam, got, tried
+            heard = heard or got.answer
+            tried.append(got.how)
+    how = "; ".join(dict.fromkeys(tried)) or "no family can probe"
+    return None, ProbeAnswer(None, heard, how), tried
 
 
 def unit_on_port(device: str, *, baud: int, timeout: float = 0.5) -> tuple[Family, str]:

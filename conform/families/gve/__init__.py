@@ -211,6 +211,7 @@ class GveFamily(Family):
         return command_options(command)
 
     probe_rank = 200   # '!' opens every GVE line; other protocols may act on it at once
+    probe_disturbs_others = True
 
     def probe(self, device: str, *, baud: int, timeout: float) -> ProbeAnswer:
         from conform.families.gve.conformance.portprobe import probe
