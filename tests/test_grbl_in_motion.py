@@ -57,3 +57,20 @@ def test_every_course_needs_the_motion_opt_in_and_a_write_the_eeprom_one():
         assert check.motion
         assert check.eeprom == needs(_sent(course))[1]
     assert checks["startup-line-error"].eeprom and not checks["line"].eeprom
+
+
+def test_a_course_stopped_by_a_realtime_byte_compares_only_states_behind_a_link():
+    """Where a cancelled jog or a hold comes to rest follows when the byte arrived, which a
+    link's timing decides: behind a link such a course compares report states; at rest the
+    other courses and every course in-process compare the report whole."""
+    from conform.families.grbl.conformance.in_motion import COURSES, INTERRUPTED, _normalize
+
+    names = {c.name for c in COURSES}
+    assert INTERRUPTED <= names
+    for c in COURSES:
+        if c.name in INTERRUPTED:
+            assert any(x in (b"!", b"\x85", b"\x18") for x in c.steps if isinstance(x, bytes)), c.name
+    rest = ["<Idle|MPos:14.084,3.000,-1.000|FS:0,0>", "ok"]
+    assert _normalize(True, True)(rest) == ["<Idle>", "ok"]
+    assert _normalize(True, False)(rest) == rest
+    assert _normalize(False, True)(rest) == rest

@@ -15,7 +15,9 @@ A step is bytes sent to both units (their answers compared) or a number of secon
 :mod:`.from_state`. In-process both run on one virtual clock and every report is compared
 exactly. Behind a link a report taken while the machine moves (Run, Jog, Home, Hold:1)
 follows the wall clock, so only its state is compared there; a report at rest (Idle,
-Hold:0, Alarm) is compared exactly, position and all. Every row moves the machine and needs
+Hold:0, Alarm) is compared exactly, position and all, except in a course that stops a move
+with a realtime byte (``INTERRUPTED``): where it comes to rest follows when the byte arrived,
+so behind a link its reports are compared by state. Every row moves the machine and needs
 ``--allow-motion``; a row that writes a setting or a startup line needs ``--allow-eeprom``
 too, and on a unit behind a link what it wrote is put back after it.
 """
@@ -147,11 +149,21 @@ COURSES: tuple[Course, ...] = (
 )
 
 
-def _normalize(linked: bool) -> Callable[[list[str]], list[str]]:
+INTERRUPTED = frozenset({"hold-at-corner", "feed-hold", "hold-spindle", "jog-cancel",
+                         "reset-in-motion", "jog-cancel-at-corner"})
+"""Courses that stop a move with a realtime byte (!, 0x85, 0x18) sent at a moment of the run:
+behind a link the byte reaches the unit when the wall clock and the link deliver it, so where
+the machine comes to rest follows that moment, not the unit's logic. There every report of
+these courses is compared by its state (Hold:0, Idle, Alarm, in their order); in-process,
+on one clock, exactly."""
+
+
+def _normalize(linked: bool, interrupted: bool = False) -> Callable[[list[str]], list[str]]:
     def normalize(lines: list[str]) -> list[str]:
         if not linked:
             return lines
-        return [x.split("|", 1)[0] + ">" if x.startswith(MOVING) else x for x in lines]
+        return [x.split("|", 1)[0] + ">" if x.startswith(MOVING) or (interrupted and x.startswith("<"))
+                else x for x in lines]
     return normalize
 
 
@@ -164,7 +176,7 @@ def _run(course: Course) -> Callable[[Session], Outcome]:
         ref = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}", baud=s.target.baud)
         try:
             r = Session(ref, s.spec, s.v)
-            pair = Pair(s, r, _normalize(not s.target.emulated))
+            pair = Pair(s, r, _normalize(not s.target.emulated, course.name in INTERRUPTED))
             if not pair.linked:
                 r.fresh()              # both at power-up
                 return _follow(pair, course.steps)
