@@ -8,6 +8,20 @@ def spec():
     return load_spec()
 
 
+@pytest.fixture(scope="session")
+def marlin_mutant_report():
+    """Every Marlin deviant unit through the checks (what `conform run --mutants` runs), on the
+    variant with the most checks: swept once for the tests that read it (they run in one
+    worker: pytest_collection_modifyitems)."""
+    from conform.families.marlin import FAMILY
+
+    return FAMILY.run_mutants(["marlin-2.1-adv"])
+
+
+# fixtures of session scope that build something costly: their tests run in one worker
+SHARED = ("marlin_mutant_report",)
+
+
 @pytest.fixture
 def emulate():
     """Start ``conform emulate ARGS...``; returns (process, device path). Stopped with SIGTERM at
@@ -79,11 +93,15 @@ def pytest_configure(config):
 def pytest_collection_modifyitems(config, items):
     """Tests of a module that builds something once for the module (a fixture of module
     scope: a mutant report, a browser, a recorded storm) run in one worker, so that it is
-    built once; and the slow tests (ptys, subprocesses, real clocks) start first, so that
-    the run does not end waiting on one of them."""
+    built once, and so do the tests of a costly session fixture (SHARED); and the slow tests
+    (ptys, subprocesses, real clocks) start first, so that the run does not end waiting on
+    one of them."""
     for item in items:
         info = getattr(item, "_fixtureinfo", None)
         defs = info.name2fixturedefs.values() if info is not None else ()
-        if any(d[-1].scope == "module" for d in defs if d):
+        shared = [name for name in SHARED if name in getattr(item, "fixturenames", ())]
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(shared[0]))
+        elif any(d[-1].scope == "module" for d in defs if d):
             item.add_marker(pytest.mark.xdist_group(item.module.__name__))
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from conform.families.grbl.conformance.checks import run_checks
-from conform.families.grbl.conformance.mutants import MUTANTS, run_mutants
+from conform.families.grbl.conformance.mutants import MUTANTS
 from conform.families.grbl.spec.load import load_grbl
 
 G = load_grbl()
@@ -24,10 +24,23 @@ def test_there_are_at_least_thirty_bug_classes():
 
 
 @pytest.fixture(scope="module")
-def report():
-    rep, _ = run_mutants(G, "grbl-1.1f", lambda target, vid: run_checks(target, vid, spec=G,
-                                                                          sequences=False))
-    return {m["name"]: m for m in rep}
+def mutants_run(tmp_path_factory):
+    """`conform run --mutants` once (in-process: the command's own code, without a second
+    interpreter): the sweep every test of this module reads, so that it runs once."""
+    from click.testing import CliRunner
+
+    from conform.cli.main import cli
+
+    out = tmp_path_factory.mktemp("mutants")
+    r = CliRunner().invoke(cli, ["run", "--mutants", "--variant", "grbl-1.1f", "--json", "-q",
+                                 "--report", str(out)])
+    return r, out
+
+
+@pytest.fixture(scope="module")
+def report(mutants_run):
+    r, _ = mutants_run
+    return {m["name"]: m for m in json.loads(r.stdout)["mutants"]}
 
 
 @pytest.mark.parametrize("name", list(MUTANTS))
@@ -37,17 +50,20 @@ def test_each_mutant_is_killed_by_the_check_meant_for_it(report, name):
     assert m["expected_hit"], (m["catches"], m["caught_by"])
 
 
-def test_conform_run_mutants_and_a_mutant_target(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "conform", "run", "--mutants", "--variant",
-                        "grbl-1.1f", "--json", "--report", str(tmp_path / "all")],
-                       capture_output=True, text=True, timeout=300)
-    assert p.returncode == 0, p.stderr[-2000:]
-    doc = json.loads(p.stdout)
+def test_conform_run_mutants_and_a_mutant_target(mutants_run, tmp_path):
+    from click.testing import CliRunner
+
+    from conform.cli.main import cli
+
+    r, out = mutants_run
+    assert r.exit_code == 0, r.output[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["report"] == str(out) and (out / "results.json").is_file()
     assert len(doc["mutants"]) == len(MUTANTS) and all(m["killed"] for m in doc["mutants"])
-    q = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
-                        "emu:grbl-1.1f:m7-built", "--report", str(tmp_path / "one")],
-                       capture_output=True, text=True, timeout=300)
-    assert q.returncode == 1
+    assert doc["mutants"] == json.loads((out / "results.json").read_text())["mutants"]
+    q = CliRunner().invoke(cli, ["run", "--target", "emu:grbl-1.1f:m7-built", "--report",
+                                 str(tmp_path / "one")])
+    assert q.exit_code == 1, q.output[-2000:]
     assert "FAIL grbl-1.1f/gcode.c/example/m7-not-built" in q.stdout
     r = subprocess.run([sys.executable, "-m", "conform", "run", "--target",
                         "emu:grbl-1.1f:no-such-bug"], capture_output=True, text=True, timeout=60)

@@ -31,8 +31,8 @@ def test_reference_units_pass_every_check(vid):
     assert len(run.checks) >= 23
 
 
-def test_every_mutant_is_caught():
-    report = FAMILY.run_mutants(["marlin-2.1-adv"])   # what `conform run --mutants` runs
+def test_every_mutant_is_caught(marlin_mutant_report):
+    report = marlin_mutant_report     # what `conform run --mutants` runs (conftest.py)
     assert {m["name"] for m in report} == set(MUTANTS)
     assert [m["name"] for m in report if not m["killed"]] == []
     by = {m["name"]: m["caught_by"] for m in report}
