@@ -32,6 +32,7 @@ def child(code: str | None) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_mutant_reaches_the_emulator_and_not_the_reference():
     """GVE's checks grade the emulator's transcript against the reference unit's: a mutant
     that reached both would pass. The hand-made one (A10 the wrong way round: the @ index

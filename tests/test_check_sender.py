@@ -33,6 +33,7 @@ def _grades(results) -> dict[tuple[str, str], str]:
     return {(v.scenario, v.rule): v.grade for v in results.verdicts}
 
 
+@pytest.mark.slow
 def test_careful_sender_passes_clean_and_lost_answers(tmp_path):
     r = _run(tmp_path, "careful", ["clean", "lost-answers"])
     g = _grades(r)
@@ -158,6 +159,7 @@ def test_stop_scenario_on_a_gve124_uses_its_own_inputs(tmp_path):
     assert all(len(v) == 3 for _k, v in s.job)  # 3-axis vectors for a 3-axis unit
 
 
+@pytest.mark.slow
 def test_reference_sender_stops_on_an_interrupt(tmp_path):
     """`conform send` itself, judged: after INTA it sends no vector, waits for the brake,
     deletes the queue with D and exits 1 with a clear message."""

@@ -115,6 +115,7 @@ def _serve(variant: str, *extra: str) -> str:
     return err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", ["gve64-v19", "marlin-2.1"])   # the engine's serve, Marlin's
 def test_emulate_serve_shows_progress_and_q_silences_it(variant):
     assert re.search(r"conform emulate: serving — 0 bytes in, \d+ out", _serve(variant))

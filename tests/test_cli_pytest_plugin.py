@@ -32,6 +32,7 @@ def test_a_bad_option_is_one_usage_line(tmp_path, args, named):
     assert len(errors) == 1 and named in errors[0], out
 
 
+@pytest.mark.slow
 def test_junit_classname_and_k_by_clause(tmp_path):
     junit = tmp_path / "j.xml"
     run = _pytest(tmp_path, "--conform-target=emu:gve64-v10", "--conform-variant=gve64-v19",
@@ -46,6 +47,7 @@ def test_junit_classname_and_k_by_clause(tmp_path):
     assert "deselected" in run.stdout
 
 
+@pytest.mark.slow
 def test_k_selects_by_level(tmp_path):
     run = _pytest(tmp_path, "--conform-target=emu:gve64-v19", "-k", "13.5.9 and INFO",
                   "--conform-check=*/G/*", "-rA")

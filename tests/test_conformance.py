@@ -201,6 +201,7 @@ def test_cli_exit_codes(tmp_path, capsys):
                 "--report", str(tmp_path / "c")) == 0
 
 
+@pytest.mark.slow
 def test_pytest_plugin_runs_checks_as_items(tmp_path):
     import subprocess
     import sys

@@ -73,6 +73,7 @@ def test_advanced_ok_is_a_difference_of_the_ok_lines_only() -> None:
     assert all(d.recorded == ["ok\n"] for d in v.differences)
 
 
+@pytest.mark.slow
 def test_a_session_recorded_over_ptys_is_judged(tmp_path, emulate) -> None:
     """The user's way: a session recorded by `conform proxy` in front of a unit, then judged."""
     from tests.test_capture_live import start_proxy

@@ -57,6 +57,7 @@ def test_a_deviant_unit_fails_the_clauses_it_breaks():
     assert "$SLP" in run.checks[0].expected and "$SLP" not in run.checks[0].actual
 
 
+@pytest.mark.slow
 def test_conform_run_on_the_emulator_writes_reports(tmp_path):
     out = tmp_path / "rep"
     p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", "emu:grbl-1.1f",

@@ -56,6 +56,7 @@ def test_answers_like_grbl_over_a_pty(emulator):
         port.close()
 
 
+@pytest.mark.slow
 def test_conform_run_over_the_pty(emulator, tmp_path):
     p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", emulator,
                         "--variant", "grbl-1.1f", "--report", str(tmp_path), "-q",

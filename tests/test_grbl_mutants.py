@@ -43,6 +43,7 @@ def report(mutants_run):
     return {m["name"]: m for m in json.loads(r.stdout)["mutants"]}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(MUTANTS))
 def test_each_mutant_is_killed_by_the_check_meant_for_it(report, name):
     m = report[name]
@@ -50,6 +51,7 @@ def test_each_mutant_is_killed_by_the_check_meant_for_it(report, name):
     assert m["expected_hit"], (m["catches"], m["caught_by"])
 
 
+@pytest.mark.slow
 def test_conform_run_mutants_and_a_mutant_target(mutants_run, tmp_path):
     from click.testing import CliRunner
 
@@ -112,6 +114,7 @@ DEFAULT_RUN = {"g92-ignores-tlo", "g92-zeroes-other-axes", "g92.1-no-wco-refresh
                "g80-ignored", "g93-ignored"}
 
 
+@pytest.mark.slow
 def test_the_from_state_mutants_are_new_bug_classes(report):
     assert len(FROM_STATE) >= 14
     for name in FROM_STATE:
@@ -121,6 +124,7 @@ def test_the_from_state_mutants_are_new_bug_classes(report):
         # courses, which came after them) did not see it
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(DEFAULT_RUN))
 def test_a_default_run_on_a_real_unit_catches_it(report, name):
     from conform.families.grbl.conformance.checks import generate

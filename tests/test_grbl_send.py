@@ -111,6 +111,7 @@ def analysed(capture: Path) -> dict:
     return json.loads(p.stdout)["metrics"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method,detected", [("counting", "character-counting"),
                                              ("send-response", "send-response")])
 def test_a_job_streams_completely(grbl, tmp_path, method, detected):
@@ -156,6 +157,7 @@ def _wait_idle(pty: str, bound: float = 20.0) -> None:
     raise AssertionError(f"{pty}: not Idle within {bound:g} s")
 
 
+@pytest.mark.slow
 def test_an_error_stops_with_one_line_naming_the_job_line(grbl, tmp_path):
     _, pty = grbl
     job = tmp_path / "err.nc"

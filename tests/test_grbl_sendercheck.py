@@ -30,6 +30,7 @@ def failed(grades):
     return {k for k, g in grades.items() if g in (Grade.FAIL, Grade.DEVIATION)}
 
 
+@pytest.mark.slow
 def test_the_right_sender_survives_lost_answers_and_a_pulled_cable(tmp_path):
     g, sessions = judge(tmp_path, "good", ["lost-answers", "link-loss"], moves=50)
     assert not failed(g), g
@@ -80,6 +81,7 @@ def test_each_wrong_sender_is_caught_by_its_rule(tmp_path, mode, scenario, rules
         assert failed(g) == rules, g            # nothing else is wrong with these
 
 
+@pytest.mark.slow
 def test_an_overflowing_sender_is_caught_by_check_sender_and_analyze(tmp_path):
     """Through the commands a user types; the capture check-sender records is the evidence."""
     rep = tmp_path / "rep"

@@ -41,6 +41,7 @@ def test_a_deviant_build_is_told_apart(mutant, item, value) -> None:
     assert obs[item].observed == value and not obs[item].same
 
 
+@pytest.mark.slow
 def test_over_a_pty_the_profile_is_written(tmp_path, emulate) -> None:
     _, path = emulate("serve", "marlin-2.1", "--baud", "115200")
     out = tmp_path / "unit.toml"

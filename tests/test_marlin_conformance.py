@@ -31,6 +31,7 @@ def test_reference_units_pass_every_check(vid):
     assert len(run.checks) >= 23
 
 
+@pytest.mark.slow
 def test_every_mutant_is_caught(marlin_mutant_report):
     report = marlin_mutant_report     # what `conform run --mutants` runs (conftest.py)
     assert {m["name"] for m in report} == set(MUTANTS)

@@ -157,6 +157,7 @@ INTENDED = {
 }
 
 
+@pytest.mark.slow
 def test_every_deviant_is_caught_by_its_own_check(marlin_mutant_report):
     assert set(INTENDED) == set(DEVIANTS)
     assert len(FAM.mutants()) >= 30

@@ -19,6 +19,7 @@ def conform(*args: str) -> subprocess.CompletedProcess:
                           text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_a_job_streams_through_resends_and_lost_answers(emulate, tmp_path: Path):
     job = tmp_path / "job.gcode"
     moves = [(i * 0.5, (i % 3) * 0.5) for i in range(1, 81)]

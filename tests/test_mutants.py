@@ -14,6 +14,7 @@ def mutant_report(spec):
     return {m["name"]: m for m in report}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(MUTANTS))
 def test_mutant_is_caught_by_its_check(mutant_report, name):
     m = mutant_report[name]
@@ -22,6 +23,7 @@ def test_mutant_is_caught_by_its_check(mutant_report, name):
     assert hit & set(MUTANTS[name].catches), (name, m["caught_by"][:5])
 
 
+@pytest.mark.slow
 def test_kill_rate_is_complete(mutant_report):
     assert len(mutant_report) == len(MUTANTS) >= 14
     assert sum(m["killed"] for m in mutant_report.values()) == len(MUTANTS)

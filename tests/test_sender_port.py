@@ -43,6 +43,7 @@ def send(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.slow
 def test_silent_port_fails_in_bounded_time(tmp_path, capsys):
     """In-process, so the bound times the probing itself, not a Python start on a loaded
     machine (the command line's one-line errors have their own subprocess tests)."""
@@ -64,6 +65,7 @@ def test_silent_port_fails_in_bounded_time(tmp_path, capsys):
     assert took < 60
 
 
+@pytest.mark.slow
 def test_checksums_left_on_are_found_and_cleared(spec, tmp_path):
     job = tmp_path / "j.txt"
     job.write_text("V5000\nC100,0,0\nC100,0,0\nC0,50,0\n")
@@ -82,6 +84,7 @@ def test_checksums_left_on_are_found_and_cleared(spec, tmp_path):
         assert [a.vector for a in truth.accepted] == [(100, 0, 0, 0), (100, 0, 0, 0), (0, 50, 0, 0)]
 
 
+@pytest.mark.slow
 def test_variant_from_the_unit_no_four_axis_vector_to_a_gve124(spec, tmp_path):
     job = tmp_path / "j.txt"
     job.write_text("C100,0,0,5\n")

@@ -36,6 +36,7 @@ def test_the_engine_does_not_know_the_toy():
         assert "toyline" not in path.read_text(encoding="utf-8"), path
 
 
+@pytest.mark.slow
 def test_toy_is_found_and_runs_in_process(tmp_path):
     listed = conform("spec", "list", "--json", cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
