@@ -65,6 +65,31 @@ def test_handlers_are_installed_over_an_inherited_ignore():
         signal.signal(signal.SIGINT, previous)
 
 
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_stop_while_a_command_loads_waits_for_its_modules(monkeypatch, capsys, sig, code):
+    """A stop signal that comes while a subcommand's modules are imported is acted on once
+    they are in: raised inside an extension module's import (orjson's), it crashed the
+    interpreter (`conform proxy … &` stopped while loading ended with SIGSEGV)."""
+    import conform.cli.main as cli_main
+
+    loaded = []
+    real = cli_main._add_subcommand
+
+    def interrupted_import(name: str) -> None:
+        os.kill(os.getpid(), sig)      # delivered here, in the middle of the import
+        loaded.append(name)            # not reached when the signal raises at once
+        real(name)
+
+    monkeypatch.setattr(cli_main, "_add_subcommand", interrupted_import)
+    monkeypatch.delitem(cli_main.cli.commands, "proxy", raising=False)
+    with pytest.raises(SystemExit) as exc:
+        cli_main.main(["proxy", "--help"])
+    assert loaded == ["proxy"] and "proxy" in cli_main.cli.commands   # the import finished
+    assert exc.value.code == code                                     # and then it stopped
+    out, err = capsys.readouterr()
+    assert "interrupted" in err and "Usage" not in out
+
+
 @contextmanager
 def _recorded(variant: str, recording: Path):
     """``conform emulate serve VARIANT`` at 115 200 Bd on a pty, recording what reaches it; the

@@ -48,11 +48,19 @@ class _Conform(click.Group):
     _all_loaded = False
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        from conform.stops import Stopped, current, shield
+
         if cmd_name not in self.commands:
-            if cmd_name in SUBCOMMANDS:
-                _add_subcommand(cmd_name)
-            else:
-                _register()
+            # a stop signal while the modules load is kept and acted on once they are in: one
+            # raised inside an extension module's import (orjson's) crashed the interpreter
+            with shield():
+                if cmd_name in SUBCOMMANDS:
+                    _add_subcommand(cmd_name)
+                else:
+                    _register()
+            state = current()
+            if state is not None and state.signum is not None:
+                raise Stopped(state.signum)
         return super().get_command(ctx, cmd_name)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
