@@ -73,7 +73,8 @@ def test_flags_follow_what_the_lines_do():
     default = {n for n, c in checks.items() if not c.motion and not c.eeprom}
     assert default == {"g92", "g92-one-axis", "g92.1", "g92.2", "g43.1", "g49", "g90.1",
                        "g91.1", "modal-words", "program-end-m2", "program-end-m30",
-                       "soft-reset", "override-resets", "check-mode"}
+                       "soft-reset", "override-resets", "check-mode", "line-filter",
+                       "safety-door", "safety-door-check-mode"}
     assert checks["g28.1"].motion and checks["g28.1"].eeprom
 
 
