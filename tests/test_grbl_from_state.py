@@ -81,7 +81,7 @@ def test_flags_follow_what_the_lines_do():
 @pytest.mark.slow
 def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_path):
     """Against `conform emulate serve grbl-1.1f` standing off 0 with a G55 offset: a default
-    run does the 14 rows that write nothing and skips the rest; with the opt-ins every row
+    run does the 17 rows that write nothing and skips the rest; with the opt-ins every row
     passes from where the machine stands, and the EEPROM a row wrote is put back."""
     import json
     import subprocess
@@ -115,7 +115,7 @@ def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_
             time.sleep(1.0)
             before = eeprom(port)
         default = run("default")
-        assert sorted(default.values()) == ["PASS"] * 14 + ["SKIPPED"] * (len(ROWS) - 14)
+        assert sorted(default.values()) == ["PASS"] * 17 + ["SKIPPED"] * (len(ROWS) - 17)
         opted = run("opt-in", "--allow-motion", "--max-steps", "100000", "--allow-eeprom")
         assert set(opted.values()) == {"PASS"}, opted
         with serial.Serial(path, 115200, timeout=0.2) as port:
