@@ -162,6 +162,13 @@ COURSES: tuple[Course, ...] = (
            "$100)); system.c system_convert_axis_steps_to_mpos (steps / $100)",
            "$100=0.8: G0 X-2 moves 2 whole steps, MPos -2.500 (not -2.000)",
            (b"$100=0.8\n", b"G53G0X-2\n", *_poll(0.6, 0.2), b"$100=250\n")),
+    Course("startup-after-alarm", "src:system.c system_execute_startup (every stored line "
+           "runs, whatever the state); motion_control.c mc_probe_cycle (no contact: ALARM:5); "
+           "coolant_control.c coolant_set_state (report_ovr_counter = 0)",
+           "startup line 0 probes and touches nothing (ALARM:5), line 1 (M8) still runs in "
+           "Alarm and forces Ov: with A:F into the next report",
+           (b"$N0=G38.2Z-2F100\n", b"$N1=M8\n", b"\x18", 0.2, b"?", 0.1, b"?", 0.1, b"?", 1.8,
+            b"?", b"$X\n", b"$N0=\n", b"$N1=\n", b"M9\n")),
 )
 
 
