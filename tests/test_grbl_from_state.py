@@ -143,3 +143,15 @@ def test_the_reference_adopts_the_position_in_whole_steps():
     start_from(unit, UnitState(position=[1.013, -0.988, 0.0],
                                settings={100: 80.0, 101: 80.0, 102: 250.0}))
     assert unit.parser_position() == [81 / 80, -79 / 80, 0.0]
+
+
+def test_the_line_filter_and_the_door_byte_as_the_source_says():
+    """protocol.c protocol_main_loop drops spaces, control characters, '/' and comments; the
+    safety door byte says [MSG:Check Door] and holds in Door:0 (protocol_exec_rt_system),
+    and is ignored in check mode."""
+    ok, gc = _answers((b"G2 1\tG9/0(G91 T5)G\x0c54 ;G20\n", b"$G\n"))
+    assert ok == ["ok"] and all(w in gc[0] for w in ("G21", "G90", "G54")), gc
+    door, report = _answers((b"\x84", b"?"))
+    assert door == ["[MSG:Check Door]"] and report[0].startswith("<Door:0|"), (door, report)
+    _, quiet, in_check = _answers((b"$C\n", b"\x84", b"?"))
+    assert quiet == [] and in_check[0].startswith("<Check|"), (quiet, in_check)
