@@ -57,6 +57,8 @@ def test_inputs_over_the_control_socket(tmp_path):
         reset(port)
         # the door: a hold that ~ cannot end while the door is open (Door:1), Pn:D
         control(sock, "press", "door")
+        # protocol.c protocol_exec_rt_system EXEC_SAFETY_DOOR: report.c MESSAGE_SAFETY_DOOR_AJAR
+        assert read_lines(port, 1) == ["[MSG:Check Door]"]
         report = wait_state(port, "Door")
         assert report.startswith("<Door:1|") and "|Pn:D" in report
         port.write(b"~")

@@ -73,14 +73,15 @@ def test_flags_follow_what_the_lines_do():
     default = {n for n, c in checks.items() if not c.motion and not c.eeprom}
     assert default == {"g92", "g92-one-axis", "g92.1", "g92.2", "g43.1", "g49", "g90.1",
                        "g91.1", "modal-words", "program-end-m2", "program-end-m30",
-                       "soft-reset", "override-resets", "check-mode"}
+                       "soft-reset", "override-resets", "check-mode", "line-filter",
+                       "safety-door", "safety-door-check-mode"}
     assert checks["g28.1"].motion and checks["g28.1"].eeprom
 
 
 @pytest.mark.slow
 def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_path):
     """Against `conform emulate serve grbl-1.1f` standing off 0 with a G55 offset: a default
-    run does the 14 rows that write nothing and skips the rest; with the opt-ins every row
+    run does the 17 rows that write nothing and skips the rest; with the opt-ins every row
     passes from where the machine stands, and the EEPROM a row wrote is put back."""
     import json
     import subprocess
@@ -114,7 +115,7 @@ def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_
             time.sleep(1.0)
             before = eeprom(port)
         default = run("default")
-        assert sorted(default.values()) == ["PASS"] * 14 + ["SKIPPED"] * (len(ROWS) - 14)
+        assert sorted(default.values()) == ["PASS"] * 17 + ["SKIPPED"] * (len(ROWS) - 17)
         opted = run("opt-in", "--allow-motion", "--max-steps", "100000", "--allow-eeprom")
         assert set(opted.values()) == {"PASS"}, opted
         with serial.Serial(path, 115200, timeout=0.2) as port:
@@ -142,3 +143,15 @@ def test_the_reference_adopts_the_position_in_whole_steps():
     start_from(unit, UnitState(position=[1.013, -0.988, 0.0],
                                settings={100: 80.0, 101: 80.0, 102: 250.0}))
     assert unit.parser_position() == [81 / 80, -79 / 80, 0.0]
+
+
+def test_the_line_filter_and_the_door_byte_as_the_source_says():
+    """protocol.c protocol_main_loop drops spaces, control characters, '/' and comments; the
+    safety door byte says [MSG:Check Door] and holds in Door:0 (protocol_exec_rt_system),
+    and is ignored in check mode."""
+    ok, gc = _answers((b"G2 1\tG9/0(G91 T5)G\x0c54 ;G20\n", b"$G\n"))
+    assert ok == ["ok"] and all(w in gc[0] for w in ("G21", "G90", "G54")), gc
+    door, report = _answers((b"\x84", b"?"))
+    assert door == ["[MSG:Check Door]"] and report[0].startswith("<Door:0|"), (door, report)
+    _, quiet, in_check = _answers((b"$C\n", b"\x84", b"?"))
+    assert quiet == [] and in_check[0].startswith("<Check|"), (quiet, in_check)

@@ -395,6 +395,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     from conform.families.grbl.conformance import in_motion
 
     out += in_motion.generate(spec, vid)
+    from conform.families.grbl.conformance import answer_timing
+
+    out += answer_timing.generate(spec, vid)
     return out
 
 

@@ -120,6 +120,22 @@ ROWS: tuple[Row, ...] = (
     Row("check-mode", "src:system.c system_execute_line case 'C'; protocol.c; gcode.c gc_init",
         "$C, a line, $C again: the line changes nothing outside check mode, the reset after "
         "it clears the modes", (b"$C\n", b"G21G90G92X0\n", b"$G\n", b"$C\n")),
+    Row("line-filter", "src:protocol.c protocol_main_loop (c <= ' ' dropped: spaces and "
+        "control characters; '/' dropped, block delete not supported; '(' to ')' and ';' to the "
+        "line end are comments); " + _RPT,
+        "spaces, tabs, a form feed, '/', a ( ) comment and a ; comment are left out of the "
+        "line: G2 1<TAB>G9/0(G91 T5)G<FF>54 ;G20 runs as G21 G90 G54",
+        (b"G2 1\tG9/0(G91 T5)G\x0c54 ;G20\n",)),
+    Row("safety-door", "src:protocol.c protocol_exec_rt_system (EXEC_SAFETY_DOOR: "
+        "[MSG:Check Door], the Door state from Idle and from a hold; EXEC_CYCLE_START resumes "
+        "with the door closed); report.c report_realtime_status (Door:0)",
+        "0x84 from Idle and from a feed hold: [MSG:Check Door], Door:0; ~ back to Idle; "
+        "modes, offsets and overrides kept",
+        (b"\x84", b"?", b"~", b"?", b"!", b"?", b"\x84", b"?", b"~", b"?")),
+    Row("safety-door-check-mode", "src:protocol.c protocol_exec_rt_system (hold, door and "
+        "sleep requests are ignored in STATE_ALARM and STATE_CHECK_MODE)",
+        "0x84 in check mode: no message, the state stays Check", (b"$C\n", b"\x84", b"?",
+                                                                     b"G21\n", b"$C\n")),
     # --- with the EEPROM opt-in -------------------------------------------------------------
     Row("g10-l2-p2", f"{_G} [19] NON_MODAL_SET_COORDINATE_DATA (L2, P2 = G55); "
         "settings.c settings_write_coord_data; " + _RPT,

@@ -146,6 +146,29 @@ COURSES: tuple[Course, ...] = (
            "the new jog starts from where and how fast the cancelled one ended",
            (b"$J=G91Y0.2F60\n", b"$J=G91X3F400\n", b"$J=G91X3F400\n", 0.9, b"\x85",
             b"$J=G91Y-1F300\n", *_poll(1.2, 0.05))),
+    Course("inverse-time-fraction", "src:gcode.c gc_execute_line (G93: F is 1/minutes of the "
+           "block); planner.c plan_buffer_line (PL_COND_FLAG_INVERSE_TIME: rate = length x F)",
+           "G93 G1 F40 over 1.8 mm: a rate that is not a whole number of mm/s, 1.5 s",
+           (b"G93G1X-1.5Y1F40\n", *_poll(1.8, 0.15))),
+    Course("arc-with-spindle", "src:gcode.c gc_execute_line (a spindle change syncs the "
+           "planner, then the arc runs: mc_arc); spindle_control.c spindle_sync",
+           "G2 with M3 S in the same block: the spindle turns on, then the arc runs",
+           (b"G2X-2Y0I-1J0F300M3S1000\n", *_poll(1.0, 0.1), b"M5\n")),
+    Course("probe-no-contact", "src:motion_control.c mc_probe_cycle (G38.3: no contact is no "
+           "error; the position reached is kept, [PRB:...:0])",
+           "G38.3 that touches nothing: no alarm, the move ends at its target, [PRB:…:0], ok",
+           (b"G38.3Z-0.5F100\n", *_poll(0.6, 0.1), b"$#\n")),
+    Course("step-rounding", "src:planner.c plan_buffer_line (target_steps = lround(mm x "
+           "$100)); system.c system_convert_axis_steps_to_mpos (steps / $100)",
+           "$100=0.8: G0 X-2 moves 2 whole steps, MPos -2.500 (not -2.000)",
+           (b"$100=0.8\n", b"G53G0X-2\n", *_poll(0.6, 0.2), b"$100=250\n")),
+    Course("startup-after-alarm", "src:system.c system_execute_startup (every stored line "
+           "runs, whatever the state); motion_control.c mc_probe_cycle (no contact: ALARM:5); "
+           "coolant_control.c coolant_set_state (report_ovr_counter = 0)",
+           "startup line 0 probes and touches nothing (ALARM:5), line 1 (M8) still runs in "
+           "Alarm and forces Ov: with A:F into the next report",
+           (b"$N0=G38.2Z-2F100\n", b"$N1=M8\n", b"\x18", 0.2, b"?", 0.1, b"?", 0.1, b"?", 1.8,
+            b"?", b"$X\n", b"$N0=\n", b"$N1=\n", b"M9\n")),
 )
 
 

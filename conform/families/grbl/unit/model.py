@@ -556,6 +556,10 @@ class GrblUnit:
         elif effect == "hold":
             self._feed_hold(t, "Hold")
         elif effect == "door":
+            # protocol_exec_rt_system EXEC_SAFETY_DOOR: [MSG:Check Door] first (report.c
+            # MESSAGE_SAFETY_DOOR_AJAR), never in Alarm or check mode; then the door's hold
+            if self.state in ("Idle", "Run", "Jog", "Hold", "Door"):
+                self._say(t, rp.MSG["door"])
             self._feed_hold(t, "Door")
         elif effect == "resume":
             if self.state in ("Hold", "Door") and self.hold_sub == 0 and not self.door_open:

@@ -17,6 +17,7 @@ MSG = {
     "restore": "[MSG:Restoring defaults]",
     "sleep": "[MSG:Sleeping]",
     "spindle_restore": "[MSG:Restoring spindle]",
+    "door": "[MSG:Check Door]",
 }
 
 
