@@ -395,6 +395,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     from conform.families.grbl.conformance import in_motion
 
     out += in_motion.generate(spec, vid)
+    from conform.families.grbl.conformance import system_effects
+
+    out += system_effects.generate(spec, vid)
     return out
 
 
@@ -550,7 +553,9 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
         grade = Grade.PASS if passed else (Grade.DEVIATION if c.level == INFO else Grade.FAIL)
         detail = ""
         if passed is None:
-            grade, detail = Grade.NOT_APPLICABLE, "the unit is not in its power-up position"
+            grade, detail = Grade.NOT_APPLICABLE, (
+                actual if actual.startswith("not applicable:")
+                else "the unit is not in its power-up position")
         if not s.target.emulated:
             s.restore()
     except HarnessError as exc:
