@@ -50,7 +50,8 @@ _PL = "src:planner.c plan_buffer_line, planner_recalculate; stepper.c st_prep_bu
 _RT = "src:protocol.c protocol_exec_rt_system (EXEC_FEED_HOLD); planner.c plan_cycle_reinitialize"
 _HOME = ("src:system.c system_execute_line case 'H'; motion_control.c mc_homing_cycle; limits.c "
          "limits_go_home (seek at $25, locate at $24, pull-off $27, debounce $26; the machine "
-         "position set to -$27 toward a positive homing direction)")
+         "position set to -$27 toward a positive homing direction); shared recording "
+         "grbl-1.1f/system.transcript: '?' during $H is not answered")
 
 COURSES: tuple[Course, ...] = (
     Course("homing-cycle", _HOME,
