@@ -6,7 +6,12 @@ from __future__ import annotations
 
 from conform.conformance.target import EmuTarget
 from conform.families.grbl.conformance.checks import Session, run_checks
-from conform.families.grbl.conformance.system_effects import COURSES, ROWS, _run_course, generate
+from conform.families.grbl.conformance.system_effects import (
+    COURSES,
+    EMULATED_ONLY,
+    ROWS,
+    generate,
+)
 from conform.families.grbl.spec.load import load_grbl
 from conform.families.grbl.unit.model import GrblUnit
 
@@ -82,13 +87,15 @@ def test_flags_rows_need_the_eeprom_opt_in_courses_the_motion_one():
     assert not checks["collinear-short-blocks"].eeprom
 
 
-def test_the_homing_course_is_not_applicable_behind_a_link():
+def test_the_emulator_only_checks_are_not_applicable_behind_a_link():
     class Linked:
         emulated = False
 
     class S:
         target = Linked()
 
-    course = next(c for c in COURSES if c.name == "homing-cycle")
-    passed, _, actual = _run_course(course)(S())   # type: ignore[arg-type]
-    assert passed is None and actual.startswith("not applicable:")
+    checks = {c.id.rsplit("/", 1)[-1]: c for c in generate(G, "grbl-1.1f")}
+    assert set(EMULATED_ONLY) == {"homing-cycle", "startup-line-beyond-table"}
+    for name in EMULATED_ONLY:
+        passed, _, actual = checks[name].run(S())   # type: ignore[arg-type]
+        assert passed is None and actual.startswith("not applicable:"), name

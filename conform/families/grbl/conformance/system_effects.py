@@ -16,9 +16,10 @@ Every row and course cites the firmware function whose effect it reads. A line t
 nothing on a right unit may store something on a wrong one, so the malformed ``$`` lines run
 with the EEPROM opt-in; the courses move the machine and need ``--allow-motion``.
 
-The homing course runs only on an emulated unit: the reference's homing cycle stands for
-switches at the end of the travel, and the real cycle's length and path follow the machine's
-own switches, so on a link neither its timing nor its reports could be compared.
+Two run only on an emulated unit (:data:`EMULATED_ONLY`): the homing course (the reference's
+cycle stands for switches at the end of the travel; a real cycle's length and path follow the
+machine's own switches), and startup lines beyond the table (grbl writes them past the table
+in its EEPROM, over what is stored there).
 """
 
 from __future__ import annotations
@@ -44,6 +45,14 @@ ROWS: tuple[Row, ...] = (
         "stored (build info, startup lines, settings and modes read back as before)",
         (b"$IA\n", b"$I\n", b"$N0X\n", b"$N1A\n", b"$NX\n", b"$50=1\n", b"$255=1\n"),
         reads=(*READ_EEPROM, b"$I\n", *READ_ALL)),
+    Row("startup-line-beyond-table",
+        f"{_SYS} case 'N' (gc_execute_line runs the block; settings.c "
+        "settings_store_startup_line has no bound on the number); shared recording "
+        "grbl-1.1f/system.transcript ($N2=G20: ok, $N0/$N1 unchanged)",
+        "$N2=G20 and $N3=G21 are ok: their blocks run (G20, then G21 in $G) and $N0/$N1 "
+        "stay as they were",
+        (b"$N2=G20\n", b"$G\n", b"$N3=G21\n"), setup=(b"$N0=G55\n", b"$N1=G91\n"),
+        reads=(b"$N\n", b"$G\n")),
 )
 
 _PL = "src:planner.c plan_buffer_line, planner_recalculate; stepper.c st_prep_buffer"
@@ -91,7 +100,12 @@ COURSES: tuple[Course, ...] = (
            (b"$J=G91X10F400\n", 0.8, b"\x85", b"$J=G91Y-1F300\n", *_poll(1.6, 0.05))),
 )
 
-EMULATED_ONLY = frozenset({"homing-cycle"})
+EMULATED_ONLY = {
+    "homing-cycle": "the homing cycle's course follows the machine's switches",
+    "startup-line-beyond-table": "a startup line beyond the table is written past it in the "
+                                 "EEPROM, over what is stored there",
+}
+"""Checks run only on an emulated unit, and why not on a real one."""
 INTERRUPTED = frozenset({"hold-slow-feed", "hold-near-block-end", "jog-cancel-then-jog"})
 """As :data:`.in_motion.INTERRUPTED`: behind a link the hold's byte arrives when the wall clock
 delivers it, so these courses' reports are compared by state there; in-process exactly."""
@@ -101,14 +115,12 @@ def _sent(course: Course) -> tuple[bytes, ...]:
     return tuple(x for x in course.steps if isinstance(x, bytes))
 
 
-def _run_course(course: Course) -> Callable[[Session], Outcome]:
-    followed = _run_followed(course, INTERRUPTED)
-
+def _emulated_only(name: str, check: Callable[[Session], Outcome]
+                   ) -> Callable[[Session], Outcome]:
     def run(s: Session) -> Outcome:
-        if course.name in EMULATED_ONLY and not s.target.emulated:
-            return (None, "an emulated unit",
-                    "not applicable: the homing cycle's course follows the machine's switches")
-        return followed(s)
+        if name in EMULATED_ONLY and not s.target.emulated:
+            return None, "an emulated unit", f"not applicable: {EMULATED_ONLY[name]}"
+        return check(s)
     return run
 
 
@@ -116,9 +128,11 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     """The rows (with the EEPROM opt-in: a wrong unit might store what a right one refuses)
     and the courses (motion; EEPROM where they write a setting)."""
     out = [GrblCheck(f"{vid}/system_effects/effect/{row.name}", row.cite, row.title,
-                     _run_row(row), motion=needs(row.steps)[0], eeprom=True)
+                     _emulated_only(row.name, _run_row(row)), motion=needs(row.steps)[0],
+                     eeprom=True)
            for row in ROWS]
-    out += [GrblCheck(f"{vid}/system_effects/course/{c.name}", c.cite, c.title, _run_course(c),
-                      motion=True, eeprom=needs(_sent(c))[1]) for c in COURSES]
+    out += [GrblCheck(f"{vid}/system_effects/course/{c.name}", c.cite, c.title,
+                      _emulated_only(c.name, _run_followed(c, INTERRUPTED)), motion=True,
+                      eeprom=needs(_sent(c))[1]) for c in COURSES]
     return out
 
