@@ -398,6 +398,9 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     from conform.families.grbl.conformance import answer_timing
 
     out += answer_timing.generate(spec, vid)
+    from conform.families.grbl.conformance import system_effects
+
+    out += system_effects.generate(spec, vid)
     return out
 
 
@@ -553,7 +556,9 @@ def _one(s: Session, c: GrblCheck, motion_ok: bool, eeprom_ok: bool) -> CheckRes
         grade = Grade.PASS if passed else (Grade.DEVIATION if c.level == INFO else Grade.FAIL)
         detail = ""
         if passed is None:
-            grade, detail = Grade.NOT_APPLICABLE, "the unit is not in its power-up position"
+            grade, detail = Grade.NOT_APPLICABLE, (
+                actual if actual.startswith("not applicable:")
+                else "the unit is not in its power-up position")
         if not s.target.emulated:
             s.restore()
     except HarnessError as exc:

@@ -190,7 +190,8 @@ def _normalize(linked: bool, interrupted: bool = False) -> Callable[[list[str]],
     return normalize
 
 
-def _run(course: Course) -> Callable[[Session], Outcome]:
+def _run(course: Course, interrupted: frozenset[str] = INTERRUPTED
+         ) -> Callable[[Session], Outcome]:
     def run(s: Session) -> Outcome:
         from conform.families.grbl.conformance.from_state import _put_back, needs
         from conform.families.grbl.conformance.machine import Pair
@@ -199,7 +200,7 @@ def _run(course: Course) -> Callable[[Session], Outcome]:
         ref = EmuTarget(lambda: GrblUnit(s.v, s.spec), f"emu:{s.v.id}", baud=s.target.baud)
         try:
             r = Session(ref, s.spec, s.v)
-            pair = Pair(s, r, _normalize(not s.target.emulated, course.name in INTERRUPTED))
+            pair = Pair(s, r, _normalize(not s.target.emulated, course.name in interrupted))
             if not pair.linked:
                 r.fresh()              # both at power-up
                 return _follow(pair, course.steps)
