@@ -103,3 +103,25 @@ def test_a_receive_ring_that_drops_what_does_not_fit_loses_lines():
                                                  options={"RX_WAITS_OUTSIDE": False}),
                      "burst-over-ring")
     assert grades == {"burst-over-ring": Grade.FAIL}
+
+
+class _PausedWhileHeating(MarlinUnit):
+    """A heating wait's keepalive says M0's words (paused for user), not processing."""
+
+    def _say(self, t: float, *lines: str) -> None:
+        if self.wait is not None:
+            lines = tuple("echo:busy: paused for user" if x == "echo:busy: processing" else x
+                          for x in lines)
+        super()._say(t, *lines)
+
+
+def test_a_heating_wait_paused_for_user_fails_busy_while_heating():
+    from conform.families.marlin.conformance.checks import generate
+
+    spec = load_marlin()
+    v = spec.variant("marlin-2.1")
+    checks = [c for c in generate(spec, v.id, "full") if c.id.endswith("/busy-while-heating")]
+    runner = MarlinRunner(EmuTarget(lambda: _PausedWhileHeating(v, spec), f"emu:{v.id}"), v.id,
+                          spec=spec, options=RunOptions(profile="full"))
+    [result] = runner.run(checks).checks
+    assert result.grade is Grade.FAIL and "paused for user" in result.actual
