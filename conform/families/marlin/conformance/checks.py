@@ -371,12 +371,17 @@ def busy_while_heating(s: Session) -> Outcome:
     if got is None:
         return False, want, why
     reports, ok_t = _countdown(s, got)
-    busy = sum(1 for t, x in zip(got.times, got.lines, strict=True)
-               if s.spec.classify(x)[0] == "busy" and (ok_t is None or t <= ok_t))
+    said = [x for t, x in zip(got.times, got.lines, strict=True)
+            if s.spec.classify(x)[0] == "busy" and (ok_t is None or t <= ok_t)]
+    busy = len(said)
+    # the wait's busy state is IN_HANDLER (gcode.cpp host_keepalive: processing); paused
+    # for user is M0/M1's (PAUSED_FOR_USER), never a heater wait's
+    other = sorted(set(said) - {"echo:busy: processing"})
     span = (ok_t or got.t) - got.t0
     expect = int(span // s.v.keepalive) if on else 0
-    ok = busy >= max(1, expect - 1) if on else busy == 0
-    return ok, want, f"{busy} busy lines in a {span:.1f} s wait"
+    ok = (busy >= max(1, expect - 1) if on else busy == 0) and not other
+    return ok, want, f"{busy} busy lines in a {span:.1f} s wait" + \
+        (f" ({', '.join(other)})" if other else "")
 
 
 def m0_user_wait(s: Session) -> Outcome:
@@ -544,10 +549,11 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
-    from conform.families.marlin.conformance import depth, fromstate
+    from conform.families.marlin.conformance import depth, fromstate, reader
 
     out += depth.generate(spec, vid, profile)
     out += fromstate.generate(spec, vid, profile)
+    out += reader.generate(spec, vid, profile)
     return sorted(out, key=lambda c: ("/halt/" in c.id, c.kills))
 
 

@@ -319,18 +319,19 @@ def timer_edges(s: Session) -> Outcome:
         " | ".join(text for _, text in got)
 
 
-def r_below_reach(s: Session) -> Outcome:
-    """M109 R 15 °C below the hotend's temperature at rest (it cannot cool below the room):
-    the wait gives up when the temperature fell less than MIN_COOLING_SLOPE_DEG in
-    MIN_COOLING_SLOPE_TIME (60 s), so the ok comes ~60 s after."""
-    now, why = _hot(s, "M109")
-    want = "ok 59 .. 62 s after M109 R<now - 15> (the cooling-slope cut-off)"
+def r_below_reach(s: Session, code: str = "M109") -> Outcome:
+    """M109 (M190) R 15 °C below the hotend's (bed's) temperature at rest (it cannot cool
+    below the room): the wait gives up when the temperature fell less than
+    MIN_COOLING_SLOPE_DEG(_BED) in MIN_COOLING_SLOPE_TIME(_BED) (60 s), so the ok comes ~60 s
+    after."""
+    now, why = _hot(s, code)
+    want = f"ok 59 .. 62 s after {code} R<now - 15> (the cooling-slope cut-off)"
     if now is None:
         return False, want, why
     try:
-        _, ok_t, t0 = _wait(s, f"M109 R{max(round(now) - 15, 0)}", 90.0)
+        _, ok_t, t0 = _wait(s, f"{code} R{max(round(now) - 15, 0)}", 90.0)
     finally:
-        s.talk(b"M104 S0\n")
+        s.talk(b"M104 S0\n" if code == "M109" else b"M140 S0\n")
     took = None if ok_t is None else ok_t - t0
     return took is not None and 59.0 <= took <= 62.0, want, \
         "no ok" if took is None else f"ok after {took:.2f} s"
