@@ -569,8 +569,10 @@ class MarlinUnit:
                 self.relative = self.e_relative = code == "G91"
             else:
                 self.e_relative = code == "M83"
-        elif kind == "autoreport_temp":
-            self.temp_every = words.get("S", 0.0)
+        elif kind == "autoreport_temp" and "S" in words:
+            # M155.cpp: only S with a value (parser.seenval) sets the interval; M155 alone
+            # leaves the reports as they are
+            self.temp_every = words["S"]
             self.next_temp = t + self.temp_every if self.temp_every > 0 else math.inf
         elif kind == "autoreport_pos":
             self.pos_every = words.get("S", 0.0)
