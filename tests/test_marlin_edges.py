@@ -72,7 +72,29 @@ class _M155AloneStops(MarlinUnit):
             self.temp_every, self.next_temp = 0.0, math.inf
 
 
+class _QuickstopNeedsKeepalive(MarlinUnit):
+    """M400 cut short by a quick stop only while busy: lines are being sent."""
+
+    def _quickstop(self, t):
+        busy, done = self.cur_busy, self.cur_done
+        super()._quickstop(t)
+        if not busy and self.cur is not None:
+            self.cur_done = done
+
+
+class _SlopeAtFirstCheck(MarlinUnit):
+    """A cooling wait that gives up at the first slope check whatever the drop."""
+
+    def _plan_wait(self, h, t):
+        w = super()._plan_wait(h, t)
+        if self.heat[h][1] < self.temp(h, t) and w.set_at == math.inf:
+            w.end = t + 60.0
+        return w
+
+
 @pytest.mark.parametrize("unit_class,pattern", [
+    (_QuickstopNeedsKeepalive, "m410-no-keepalive"),
+    (_SlopeAtFirstCheck, "m109-r-slope-checks"),
     (_M504Loads, "m504-changes-nothing"),
     (_EarlyResidency, "m109-s-bounded"),
     (_ShortMovesSlow, "move-durations"),

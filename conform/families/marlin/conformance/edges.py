@@ -301,6 +301,39 @@ def homing_from_z5(s: Session) -> Outcome:
         "X:0.00 Y:0.00 Z:0.00, Count 0 0 0", "; ".join(problems) or "as expected"
 
 
+def quickstop_no_keepalive(s: Session) -> Outcome:
+    """M113 S0 (no busy: lines), G1 X50 F600 (5 s), M400 behind it, and a plain M410 1 s in:
+    M410 acts as it is read (queue.cpp critical commands, or the emergency parser), the planner
+    is emptied, and M400's planner.synchronize() (while has_blocks_queued() ||
+    cleaning_buffer_counter) ends after the 1 s quick-stop wait (at once with the emergency
+    parser), not when the move would have ended; the keepalive plays no part.
+    M410's own ok follows in its turn."""
+    was = _only(s.talk(b"M113\n"), s)
+    put(s, State(st.defaults(s.v), "FR:100%", "echo:E0 Flow: 100%"))
+    try:
+        s.talk(b"M113 S0\nG92 X0 Y0 Z0 E0\n")
+        s.talk(b"G1 X50 F600\n", linger=0.0)
+        s.target.send(b"M400\n")
+        s.wait(1.0)
+        s.target.send(b"M410\n")
+        t0 = s.target.now()
+        got = s.collect(until=lambda ls: s.oks(ls) >= 2, timeout=8.0, linger=0.1)
+        oks = [t - t0 for t, x in zip(got.times, got.lines, strict=True) if _ok_kind(s, x)]
+        pos = _where(s)
+    finally:
+        s.talk(b"M400\n", timeout=10.0)
+        s.talk(_m113_restore(was))
+    # the emergency parser's stop does not hold the loop (as in fromstate.quickstop_at_rest)
+    lo, hi = (0.0, 0.6) if s.v.on("EMERGENCY_PARSER") else (0.8, 1.6)
+    problems = []
+    if len(oks) != 2 or not lo <= oks[0] <= hi:
+        problems.append(f"oks at {', '.join(f'{x:.2f}' for x in oks) or 'none'} s after M410")
+    if pos is None or not 5.0 <= pos[0] <= 20.0:
+        problems.append(f"then {_shown(pos)}")
+    return not problems, f"M400's ok {lo:.1f} .. {hi:.1f} s after M410, then M410's; X part " \
+        "way (5 .. 20)", "; ".join(problems) or "as expected"
+
+
 # -- heat (and motion) ------------------------------------------------------------------------
 
 def _m302_back(was: list[str]) -> bytes:
@@ -343,7 +376,64 @@ def extrude_above_limit(s: Session) -> Outcome:
         f"hotend {hot:.1f} °C; {' | '.join(printed) or 'nothing printed'}; {pos}"
 
 
-def wait_bounded(code: str, cool: bool) -> Callable[[Session], Outcome]:
+SLOPE_DEG = (1.5, 1.0)     # Configuration_adv.h MIN_COOLING_SLOPE_DEG, MIN_COOLING_SLOPE_DEG_BED
+
+
+def slope_checks(s: Session) -> Outcome:
+    """The hotend heated 26 °C, then M109 R 15 °C below where it started (below the room:
+    unreachable). temperature.cpp wait_for_hotend (wants_to_cool): the first pass of the loop
+    notes the temperature, and every MIN_COOLING_SLOPE_TIME (60 s) after it the wait gives up
+    when the temperature fell less than MIN_COOLING_SLOPE_DEG (1.5 °C) since the last note.
+    From the wait's own reports (one a second): no ok at a check whose minute dropped more
+    than 1.8 °C, and the ok by the first check whose minute dropped less than 1.2 °C."""
+    now, why = _hot(s, "M109")
+    want = "the ok at the first 60 s check with a drop under 1.5 °C, not at one with more"
+    if now is None:
+        return False, want, why
+    try:
+        s.talk(f"M104 S{round(now) + 26}\n".encode())
+        hot = now
+        for _ in range(240):
+            s.wait(0.5)
+            m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
+            hot = float(m.group(1)) if m else hot
+            if hot >= now + 25.5:
+                break
+        s.target.send(f"M109 R{max(round(now) - 15, 0)}\n".encode())
+        t0 = s.target.now()
+        got = s.collect(until=lambda ls: s.oks(ls) >= 1, timeout=250.0, linger=0.1)
+    finally:
+        s.talk(b"M104 S0\n")
+    ok_t = next((t for t, x in zip(got.times, got.lines, strict=True) if _ok_kind(s, x)), None)
+    readings = [(t, float(m.group(1))) for t, x in zip(got.times, got.lines, strict=True)
+                if (m := _TEMPS.search(x)) and " W:" in x]
+    if ok_t is None or not readings:
+        return False, want, "no ok within 250 s" if ok_t is None else "no W: reports"
+
+    def at(when: float) -> float | None:
+        near = min(readings, key=lambda r: abs(r[0] - when))
+        return near[1] if abs(near[0] - when) <= 0.6 else None
+
+    first = readings[0][0]
+    problems, k = [], 1
+    while first + SLOPE_TIME * k <= ok_t + 2.0:
+        check = first + SLOPE_TIME * k
+        a, b = at(check - SLOPE_TIME), at(check)
+        if a is None or b is None:
+            break
+        drop = a - b
+        if drop > SLOPE_DEG[0] + 0.3 and abs(ok_t - check) <= 1.5:
+            problems.append(f"ok at the {k}. check although {drop:.1f} °C fell")
+        if drop < SLOPE_DEG[0] - 0.3:
+            if ok_t > check + 1.5:
+                problems.append(f"ok {ok_t - check:.1f} s after the {k}. check "
+                                f"({drop:.1f} °C fell)")
+            break
+        k += 1
+    return not problems, want, "; ".join(problems) or f"ok {ok_t - t0:.1f} s after M109 R"
+
+
+def wait_bounded(code: str, cool: bool, near: bool = False) -> Callable[[Session], Outcome]:
     """M109 / M190 (S up by 12 °C, or R down by 8 °C after heating) with the temperature
     auto-report at 1 s, its phase off the wait's own reports. temperature.cpp
     wait_for_hotend / wait_for_bed: the residency timer starts when |target - temp| <
@@ -353,7 +443,9 @@ def wait_bounded(code: str, cool: bool) -> Callable[[Session], Outcome]:
     comes no sooner than the residency after the last report more than the hysteresis away
     (a cooling wait may give up earlier only at a slope check, 60 s on), and no later than
     4/3 of the residency after the first report inside the window (once the target is
-    reached), with 1.5 s for the loop's pace."""
+    reached), with 1.5 s for the loop's pace. ``near``: the heater switched off 0.8 s before
+    an R 2 °C below where it was, so the wait starts only a little more than the window
+    above its target (on the emulator 1.2 °C: less than the slope's 1.5 °C in the minute)."""
     group, off = (1, "M104 S0") if code == "M109" else (3, "M140 S0")   # _TEMPS: T, B
     setter = "M104" if code == "M109" else "M140"
 
@@ -373,11 +465,16 @@ def wait_bounded(code: str, cool: bool) -> Callable[[Session], Outcome]:
                     s.wait(0.5)
                     m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
                     start = float(m.group(group)) if m else start
-                    if start >= now + 12:
+                    if start >= (round(now) + 14.95 if near else now + 12):
                         break
             target = round(start) - 8 if cool else round(now) + 12
             s.talk(b"M155 S1\n", linger=0.0)
-            s.wait(0.9)        # the reports 0.1 s after each of the wait's own
+            if near:
+                target = round(start) - 2
+                s.talk(f"{setter} S0\n".encode(), linger=0.0)
+                s.wait(0.8)
+            else:
+                s.wait(0.9)    # the reports 0.1 s after each of the wait's own
             s.target.send(f"{code} {'R' if cool else 'S'}{target}\n".encode())
             t0 = s.target.now()
             got = s.collect(until=lambda ls: s.oks(ls) >= 1, timeout=90.0, linger=0.1)
@@ -472,6 +569,15 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
                     "temperature.h tooColdToExtrude; planner.cpp _populate_block",
                     "M302 S<limit>, hotend past it, bed cold: G1 E1 extrudes",
                     extrude_above_limit, motion=True, heat=True),
+        MarlinCheck(f"{vid}/M410.cpp/motion/m410-no-keepalive", cmd["M410"] + "; planner.cpp "
+                    "Planner::synchronize; gcode/host/M113.cpp", "M113 S0, M400 behind a move, "
+                    "M410: M400 ends after the quick stop", restoring(quickstop_no_keepalive),
+                    motion=True),
+        MarlinCheck(f"{vid}/temperature.cpp/heat/m109-r-slope-checks", cmd["M109"] + "; "
+                    "temperature.cpp wait_for_hotend (wants_to_cool: MIN_COOLING_SLOPE_DEG "
+                    "1.5 per MIN_COOLING_SLOPE_TIME 60 s)", "M109 R below the room from 26 °C "
+                    "up: the ok at the first slope check with under 1.5 °C",
+                    slope_checks, heat=True),
         MarlinCheck(f"{vid}/temperature.cpp/heat/m109-s-bounded", cmd["M109"] + "; " +
                     temp["temp_residency"] + "; " + temp["temp_window"], "M109 S up 12 °C: "
                     "the ok within the bounds the reports give", wait_bounded("M109", False),
@@ -480,6 +586,10 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
                     temp["temp_residency"] + "; " + temp["temp_window"], "M109 R down 8 °C: "
                     "the ok within the bounds the reports give", wait_bounded("M109", True),
                     heat=True),
+        MarlinCheck(f"{vid}/temperature.cpp/heat/m109-r-near-bounded", cmd["M109"] + "; " +
+                    temp["temp_residency"] + "; " + temp["temp_window"], "M109 R just past the "
+                    "window below a cooling hotend: the ok within the bounds the reports give",
+                    wait_bounded("M109", True, near=True), heat=True),
         MarlinCheck(f"{vid}/temperature.cpp/heat/m190-r-cool-bounded", cmd["M190"] + "; " +
                     temp["temp_bed_residency"] + "; " + temp["temp_window"], "M190 R down "
                     "8 °C: the ok within the bounds the reports give",

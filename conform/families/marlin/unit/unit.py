@@ -485,7 +485,9 @@ class MarlinUnit:
         self.stepped = self._stepped_at(t)
         self.planner.clear()
         self.position = list(self.stepped)
-        if self.cur is not None and self.cur_busy and self._kind in ("move", "sync"):
+        # planner.cpp Planner::synchronize (M400) and a move waiting for a free block end
+        # once the planner is empty, whether or not busy: lines are being sent (M113)
+        if self.cur is not None and self._kind in ("move", "sync"):
             self.cur_done = min(self.cur_done, t + self.line_time)
 
     def _stepped_at(self, t: float) -> list[float]:
