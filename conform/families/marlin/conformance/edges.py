@@ -343,6 +343,21 @@ def _m302_back(was: list[str]) -> bytes:
         f"M302 S{st.EXTRUDE_MINTEMP} P0\n".encode()
 
 
+def _warm(s: Session, setter: str, group: int, target: int, until: float, start: float
+          ) -> float:
+    """``setter`` S``target`` (M104 / M140), then M105 every 0.5 s (2 min at most) until the
+    heater (``group`` of _TEMPS: 1 hotend, 3 bed) reads ``until`` or more; its last reading."""
+    s.talk(f"{setter} S{target}\n".encode())
+    hot = start
+    for _ in range(240):
+        s.wait(0.5)
+        m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
+        hot = float(m.group(group)) if m else hot
+        if hot >= until:
+            break
+    return hot
+
+
 def extrude_above_limit(s: Session) -> Outcome:
     """M302 S<now + 8> (the limit, cold extrusion not allowed), the hotend heated past it and
     the bed left cold: G1 E1 extrudes (temperature.h tooColdToExtrude compares the hotend's
@@ -355,14 +370,7 @@ def extrude_above_limit(s: Session) -> Outcome:
     limit = round(now) + 8
     try:
         s.talk(f"M302 S{limit} P0\n".encode())
-        s.talk(f"M104 S{limit + 6}\n".encode())
-        hot = now
-        for _ in range(120):
-            s.wait(0.5)
-            m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
-            hot = float(m.group(1)) if m else hot
-            if hot >= limit + 3:
-                break
+        hot = _warm(s, "M104", 1, limit + 6, limit + 3, now)
         s.talk(b"G92 E0\nM82\n")
         printed = _only(s.talk(b"G1 E1 F300\n"), s)
         s.talk(b"M400\n", timeout=10.0)
@@ -391,14 +399,7 @@ def slope_checks(s: Session) -> Outcome:
     if now is None:
         return False, want, why
     try:
-        s.talk(f"M104 S{round(now) + 26}\n".encode())
-        hot = now
-        for _ in range(240):
-            s.wait(0.5)
-            m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
-            hot = float(m.group(1)) if m else hot
-            if hot >= now + 25.5:
-                break
+        _warm(s, "M104", 1, round(now) + 26, now + 25.5, now)
         s.target.send(f"M109 R{max(round(now) - 15, 0)}\n".encode())
         t0 = s.target.now()
         got = s.collect(until=lambda ls: s.oks(ls) >= 1, timeout=250.0, linger=0.1)
@@ -460,13 +461,8 @@ def wait_bounded(code: str, cool: bool, near: bool = False) -> Callable[[Session
         try:
             start = now
             if cool:
-                s.talk(f"{setter} S{round(now) + 15}\n".encode())
-                for _ in range(240):
-                    s.wait(0.5)
-                    m = _TEMPS.search(" ".join(s.talk(b"M105\n").lines))
-                    start = float(m.group(group)) if m else start
-                    if start >= (round(now) + 14.95 if near else now + 12):
-                        break
+                start = _warm(s, setter, group, round(now) + 15,
+                              round(now) + 14.95 if near else now + 12, now)
             target = round(start) - 8 if cool else round(now) + 12
             s.talk(b"M155 S1\n", linger=0.0)
             if near:
