@@ -115,13 +115,13 @@ def eeprom_read_empty(code: str) -> Callable[[Session], Outcome]:
 
 def reports_go_on(s: Session) -> Outcome:
     """M155 S1, then M155 without S (M155.cpp: only seenval('S') sets the interval), an
-    unknown command, M115 and M110 without N: the reports go on every second (the
-    auto-reporter runs in idle(), untouched by these), and each command is answered at once
-    (none of them waits for the planner or stops it)."""
+    unknown command with an S word, M115 and M110 without N: the reports go on every second
+    (the auto-reporter runs in idle(), untouched by these), and each command is answered at
+    once (none of them waits for the planner or stops it)."""
     problems = []
     try:
         s.talk(b"M155 S1\n")
-        for command in ("M155", "M9997", "M115", "M110"):
+        for command in ("M155", "M9997 S0", "M115", "M110"):
             got = s.talk(f"{command}\n".encode(), timeout=3.0)
             ok_t = next((t for t, x in zip(got.times, got.lines, strict=True)
                          if _ok_kind(s, x)), None)
