@@ -57,17 +57,17 @@ _RETRIEVED = re.compile(r"^echo:V\d+ stored settings retrieved \(\d+ bytes; crc 
 # -- settings and replies (no opt-in) ---------------------------------------------------------
 
 def m575_other_port(s: Session) -> Outcome:
-    """M575 P1 with each shorthand rate (M575.cpp: 24..1152 times 100, 250 and 500 times
+    """M575 P5 with each shorthand rate (M575.cpp: 24..1152 times 100, 250 and 500 times
     1000, 19 38 57 115 the rates they stand for) and with 1000 (no shorthand: implausible).
-    A one-port build (no HAS_MULTI_SERIAL) answers a plausible rate for port 1 with a plain ok
-    and leaves its port as it is."""
+    Port 5 is none of the ports M575 can set (set1 P0, set2 P1, set3 P2, or P-99 for all), so
+    a plausible rate is answered with a plain ok and no port is touched, in any build."""
     shorthands = (24, 96, 192, 384, 576, 1152, 250, 500, 19, 38, 57, 115)
     wrong = []
     for b in shorthands:
-        got = _only(s.talk(f"M575 P1 B{b}\n".encode()), s)
+        got = _only(s.talk(f"M575 P5 B{b}\n".encode()), s)
         if got:
             wrong.append(f"B{b}: {' | '.join(got)}")
-    got = _only(s.talk(b"M575 P1 B1000\n"), s)
+    got = _only(s.talk(b"M575 P5 B1000\n"), s)
     if got != ["echo:?(B)aud rate implausible."]:
         wrong.append(f"B1000: {' | '.join(got) or 'ok alone'}")
     return not wrong, "ok alone for B" + ",".join(map(str, shorthands)) + \
@@ -529,9 +529,9 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
                     "stored: the defaults loaded", eeprom_read_empty("M501")),
     ]
     if spec.command("M575", v) is not None:
-        out.append(MarlinCheck(f"{vid}/M575.cpp/reply/m575-p1-shorthands", cmd["M575"] +
-                               " (the shorthand switch; port 1 absent without "
-                               "HAS_MULTI_SERIAL)", "M575 P1 B<shorthand>: a plain ok each; "
+        out.append(MarlinCheck(f"{vid}/M575.cpp/reply/m575-p5-shorthands", cmd["M575"] +
+                               " (the shorthand switch; P5: no port's set1/2/3)",
+                               "M575 P5 B<shorthand>: a plain ok each; "
                                "B1000 implausible", m575_other_port))
         out.append(MarlinCheck(f"{vid}/M575.cpp/reply/m575-port-0", cmd["M575"] + " (port "
                                "-99 or 0: set1)", "M575 B250 and M575 P0 B250000: Serial 0 "
