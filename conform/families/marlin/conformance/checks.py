@@ -549,11 +549,12 @@ def generate(spec: MarlinSpec, vid: str, profile: str = "quick") -> list[MarlinC
     if v.on("ADVANCED_OK"):
         out.append(MarlinCheck(f"{vid}/{Q}/reply/advanced-ok", c["ok_adv"],
                                "ok N<n> P<planner free> B<queue free>", advanced_ok))
-    from conform.families.marlin.conformance import depth, fromstate, reader
+    from conform.families.marlin.conformance import depth, edges, fromstate, reader
 
     out += depth.generate(spec, vid, profile)
     out += fromstate.generate(spec, vid, profile)
     out += reader.generate(spec, vid, profile)
+    out += edges.generate(spec, vid, profile)
     return sorted(out, key=lambda c: ("/halt/" in c.id, c.kills))
 
 

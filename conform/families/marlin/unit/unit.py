@@ -485,7 +485,9 @@ class MarlinUnit:
         self.stepped = self._stepped_at(t)
         self.planner.clear()
         self.position = list(self.stepped)
-        if self.cur is not None and self.cur_busy and self._kind in ("move", "sync"):
+        # planner.cpp Planner::synchronize (M400) and a move waiting for a free block end
+        # once the planner is empty, whether or not busy: lines are being sent (M113)
+        if self.cur is not None and self._kind in ("move", "sync"):
             self.cur_done = min(self.cur_done, t + self.line_time)
 
     def _stepped_at(self, t: float) -> list[float]:
@@ -569,8 +571,10 @@ class MarlinUnit:
                 self.relative = self.e_relative = code == "G91"
             else:
                 self.e_relative = code == "M83"
-        elif kind == "autoreport_temp":
-            self.temp_every = words.get("S", 0.0)
+        elif kind == "autoreport_temp" and "S" in words:
+            # M155.cpp: only S with a value (parser.seenval) sets the interval; M155 alone
+            # leaves the reports as they are
+            self.temp_every = words["S"]
             self.next_temp = t + self.temp_every if self.temp_every > 0 else math.inf
         elif kind == "autoreport_pos":
             self.pos_every = words.get("S", 0.0)
