@@ -21,7 +21,8 @@ at rest) and §13.5.9 (HALT brakes at A, on into the queued C vectors if it must
   cruises at V·XM, not at B.
 - ``H/planning/spill-diagonal``: H spilling into queued diagonal and A-axis C vectors, with VN
   (path = the dominant axis) and with VK (path = X, Y, Z Euclidean, never less than the
-  dominant axis): where the brake ends depends on each vector's path length.
+  dominant axis): where the brake ends depends on each vector's path length; PF read while G
+  runs on from there.
 - ``XM/planning/max-rate``: XM200 on V at the variant's max rate: every axis stays within the
   max rate (GVE64 §1, §14.1), VN and VK.
 """
@@ -94,17 +95,20 @@ def planning_checks(b: Any) -> None:
                *_at_rest(b, 2.0)],
               clause=b.clause("XM"))
     # the first C: 0.5 s up (1250 pulses), then 5000 pulses/s; H 0.75 s in leaves 500 pulses of
-    # it and 750 more to brake: through (300,400) and into the A-axis vector
+    # it and 750 more to brake: through (300,400) and into the A-axis vector. Where the brake
+    # ends follows when H arrived, which a link does not fix: it is read by PF while G runs on
+    # from there (under way: exact in-process, within the moving tolerance on a link); the
+    # position at rest after all of them does not depend on it
     spill = [_c(b, 3000, 0, 0, 0), _c(b, 300, 400, 0, 0), _c(b, 0, 0, 0, 400),
              _c(b, 300, 400, 0, 0), _c(b, 1000, 0, 0, 0),
              dataclasses.replace(b.halt(), wait=0.75, subject=True),
-             *_read_position(b), b.cmd_step("F", [], subject=False),
-             b.cmd_step("SR", [6], subject=False), b.cmd_step("G", []), *_at_rest(b, 1.0)]
+             b.cmd_step("F", [], subject=False), b.cmd_step("SR", [6], subject=False),
+             b.cmd_step("G", []), *_reads_under_way(b, (0.0, 0.1, 0.1)), *_at_rest(b, 1.0)]
     vk = "VK" in v.commands and "VN" in v.commands and len(v.axes) >= 4
     if len(v.axes) >= 4:
         b.add("H", "planning/spill-diagonal", "H 0.75 s into a C of 3000 followed by C vectors "
-              "(300,400), (0,0,0,400), (300,400): the brake runs on into them, where it ends "
-              "and G, with VN" + (" and again with VK" if vk else ""),
+              "(300,400), (0,0,0,400), (300,400): the brake runs on into them; F, SR6, then G "
+              "and PF under way from where it ended, with VN" + (" and again with VK" if vk else ""),
               [*setup, *([b.raw("!0VN")] if vk else []), *spill,  # VN said: not left to A26
                *([b.raw("!0VK", subject=True), *spill, b.raw("!0VN")] if vk else [])],
               clause=_cites(b, "H", "C", "VK") if vk else _cites(b, "H", "C"))
