@@ -28,6 +28,7 @@ from conform.families.gve.conformance.motion_free import (
     queue_edge_steps,
     zero_line,
 )
+from conform.families.gve.conformance.planning import planning_checks
 from conform.families.gve.conformance.question_checks import question_checks
 from conform.families.gve.conformance.script import ENVIRONMENT, POSITION, Script, Step
 from conform.families.gve.protocol import encode_command
@@ -302,6 +303,7 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
     st6_checks(b)
     input_checks(b)
     in_motion_checks(b)
+    planning_checks(b)
     question_checks(b)
     _example_checks(b)
     return b.out

@@ -1,0 +1,94 @@
+"""The speed-planning read-backs (conform/families/gve/conformance/planning.py): where they run,
+the reference passes them, and a unit with the planning bug each is meant for FAILs it
+in-process while the checks that read at rest pass it."""
+
+from __future__ import annotations
+
+from conform.conformance.results import Grade
+from conform.conformance.runner import RunOptions
+from conform.families.gve.conformance.checks import generate
+from conform.families.gve.conformance.runner import Runner
+from conform.families.gve.conformance.suite import suite
+from conform.families.gve.conformance.target import GveEmuTarget
+from conform.families.gve.unit import Unit, kinematics, motion
+
+
+class _NoMaxRate(Unit):
+    """The max rate caps nothing: XM above 100 % drives an axis past it."""
+
+    def _power_up(self, t: float) -> None:
+        super()._power_up(t)
+        self._exec.max_rate = 0.0
+
+
+class _NoPause(Unit):
+    """T is answered and kept, but the vectors never pause after a stop."""
+
+    def _rebuild_params(self) -> None:
+        super()._rebuild_params()
+        self._exec.params = self._exec.params.replace(pause=0.0)
+
+
+class _EuclidSpillExecutor(motion.MotionExecutor):
+    __slots__ = ()
+
+    def halt(self, t: float) -> float:
+        # the vectors a brake runs on into measured along X, Y, Z even under VN
+        kept = motion.path_length
+        motion.path_length = lambda d, _vk: kinematics.path_length(d, True)
+        try:
+            return super().halt(t)
+        finally:
+            motion.path_length = kept
+
+
+class _EuclidSpill(Unit):
+    """HALT's brake runs on into the queued C vectors along their Euclidean length under VN."""
+
+    def _power_up(self, t: float) -> None:
+        super()._power_up(t)
+        ex = self._exec
+        self._exec = _EuclidSpillExecutor(axes=ex.axes, capacity=ex.capacity,
+                                          max_rate=ex.max_rate, params=ex.params)
+        self._exec.advance(t)
+
+
+def _run(spec, cls, patterns):
+    variant = spec.variant("gve64-v19")
+    dialect = spec.dialect()
+    target = GveEmuTarget(lambda: cls(variant, dialect), "emu")
+    checks = suite(spec, "gve64-v19", patterns=patterns, profile="full", machine=False)
+    return {c.key: c for c in Runner(spec, target, "gve64-v19", options=RunOptions()).run(checks).checks}
+
+
+def test_planning_checks_only_in_full_with_motion(spec):
+    quick = {c.key for c in generate(spec, "gve64-v19")}
+    still = {c.key for c in generate(spec, "gve64-v19", deep=True, motion=False)}
+    full = {c.key for c in generate(spec, "gve64-v19", deep=True, motion=True)}
+    planning = {k for k in full if "/planning/" in k}
+    assert {"C/planning/short-from-rest", "T/planning/pause", "H/planning/spill-diagonal",
+            "XM/planning/max-rate", "H/planning/while-braking"} <= planning
+    assert not {k for k in quick | still if "/planning/" in k}
+
+
+def test_the_reference_passes_every_planning_check(spec):
+    got = _run(spec, Unit, ["*/planning/*"])
+    assert len(got) >= 7
+    assert all(c.grade is Grade.PASS for c in got.values()), {k: c.detail for k, c in got.items()}
+
+
+def test_no_max_rate_fails_the_max_rate_check(spec):
+    got = _run(spec, _NoMaxRate, ["*/XM/planning/max-rate", "*/L/position-1"])
+    assert got["XM/planning/max-rate"].grade is Grade.FAIL, got["XM/planning/max-rate"].detail
+    assert got["L/position-1"].grade is Grade.PASS
+
+
+def test_no_pause_after_a_stop_fails_the_pause_check(spec):
+    got = _run(spec, _NoPause, ["*/T/planning/pause"])
+    assert got["T/planning/pause"].grade is Grade.FAIL, got["T/planning/pause"].detail
+
+
+def test_a_brake_measuring_vn_vectors_euclidean_fails_spill_diagonal(spec):
+    got = _run(spec, _EuclidSpill, ["*/H/planning/spill-diagonal", "*/H/in-motion/brake-spill"])
+    assert got["H/planning/spill-diagonal"].grade is Grade.FAIL, got["H/planning/spill-diagonal"].detail
+    assert got["H/in-motion/brake-spill"].grade is Grade.PASS  # along X only: both lengths agree
