@@ -14,7 +14,7 @@ from conform.families.gve.unit.vectors import MIN_SPEED
 
 MOTION_FREE = {"%/inta-answers", "L/checksum-below", "C/checksum-below", "*E/count-below",
                "*E/refused-inside", "N<axis>/counter-top", "SW/inta-twice",
-               "timing/split-line", "timing/watchdog-bare"}
+               "framing/split-line", "framing/bare-address"}
 
 
 class _OneCache(Unit):
@@ -169,11 +169,11 @@ def test_inta_written_twice_clearing_it_fails_inta_twice(spec):
 
 
 def test_a_watchdog_firing_at_once_fails_split_line(spec):
-    _fails(spec, _WatchdogAtOnce, "timing/split-line")
+    _fails(spec, _WatchdogAtOnce, "framing/split-line")
 
 
 def test_a_bare_begun_line_dropped_fails_watchdog_bare(spec):
-    _fails(spec, _BareSilent, "timing/watchdog-bare", "timing/watchdog")
+    _fails(spec, _BareSilent, "framing/bare-address", "timing/watchdog")
 
 
 def test_a_short_back_off_fails_w_back_off(spec):

@@ -17,9 +17,9 @@ Every run, motion-free:
   (GVE64 §13.5.6: 32-bit signed counters; specs/gve/variants.toml ranges.pulses).
 - ``SW/inta-twice``: SW6 writing INTA while INTA is already set leaves it set (GVE64 §13.5.12:
   "SW6 – zapíše do ST6 byte x"; only a 1->0 change of INTA resumes).
-- ``timing/split-line``: a line whose tail comes 5 ms after its head is one line, answered as
+- ``framing/split-line``: a line whose tail comes 5 ms after its head is one line, answered as
   such under every A13 alternative (the shortest watchdog is 20 ms from the ``!``).
-- ``timing/watchdog-bare``: ``!0`` alone and ``!0V100`` without CR are both begun lines
+- ``framing/bare-address``: ``!0`` alone and ``!0V100`` without CR are both begun lines
   (GVE64 §13.7): under each A13 alternative both are answered 2, or neither.
 
 Full profile with the motion opt-in:
@@ -111,12 +111,12 @@ def corner_checks(b: Any) -> None:
                   b.raw(f"!0SW6,{inta:02X}", subject=True), sr6, flags],
               clause=_cites(b, "SW", "SR"))
     # the watchdog (A13): a line in two pieces; a bare begun line
-    b.add(None, "timing/split-line", "a line sent in two pieces 5 ms apart is one line: "
+    b.add(None, "framing/split-line", "a line sent in two pieces 5 ms apart is one line: "
           "answered once, as a whole", [
               RESET, Step(line=b"!0V1", answer=False),
               Step(line=b"00\r", wait=0.005, subject=True), flags],
           clause=_answers_clause(b))
-    b.add(None, "timing/watchdog-bare", "'!0' without more and '!0V100' without CR: each is a "
+    b.add(None, "framing/bare-address", "'!0' without more and '!0V100' without CR: each is a "
           "begun line, both answered 2 when the watchdog runs out, or neither", [
               RESET, Step(line=b"!0", subject=True, timeout=1.5),
               Step(line=b"!0V100", subject=True, timeout=1.5), b.raw("!0V100"), flags],
