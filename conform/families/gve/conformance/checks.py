@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from conform.conformance.results import INFO, MUST
+from conform.families.gve.conformance.corner_states import corner_checks
 from conform.families.gve.conformance.from_state import from_held_checks, from_state_checks
 from conform.families.gve.conformance.in_motion import (
     in_motion_checks,
@@ -301,6 +302,7 @@ def generate(spec: Any, variant_id: str, *, travel: int = 100000,
     from_held_checks(b)
     motion_free_checks(b)
     st6_checks(b)
+    corner_checks(b)
     input_checks(b)
     in_motion_checks(b)
     planning_checks(b)
