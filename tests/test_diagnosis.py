@@ -455,7 +455,15 @@ def test_grbl_line_cut_while_the_sender_polls(tmp_path):
 SENDER = r"""
 import sys, time, serial
 port = serial.serial_for_url(sys.argv[1], 115200, timeout=0.01)
-inflight, i, t_poll, buf = [], 0, 0.0, b""
+# as a real sender connects: a soft reset, then the banner, before the first line (a line sent
+# while the unit starts up is never answered, and a counting sender would wait for it for good)
+port.write(b"\x18")
+buf, t_end = b"", time.monotonic() + 20.0
+while b"Grbl" not in buf:
+    if time.monotonic() > t_end:
+        sys.exit("no banner within 20 s")
+    buf += port.read(256)
+inflight, i, t_poll, buf = [], 0, 0.0, buf.split(b"Grbl", 1)[1].split(b"\n", 1)[-1]
 while True:
     line = b"G1X%dY%dF3000\n" % (i % 10, i % 7)
     if sum(inflight) + len(line) <= 127:
@@ -502,6 +510,11 @@ def test_sender_process_killed_through_the_proxy(tmp_path):
                                   stdout=subprocess.PIPE)
         # killed mid-job, once 30 lines are out (however long a loaded machine takes to get
         # there), not after a fixed while
+        import selectors
+
+        with selectors.DefaultSelector() as sel:
+            sel.register(sender.stdout, selectors.EVENT_READ)
+            assert sel.select(60.0), "the sender sent no 30 lines within 60 s"
         assert sender.stdout.readline() == b"streaming\n"
         sender.send_signal(signal.SIGKILL)
         sender.wait(10)

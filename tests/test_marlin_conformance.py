@@ -131,8 +131,11 @@ def test_the_default_run_over_a_pty_skips_only_what_needs_an_opt_in(tmp_path, mo
     needs = ("needs --allow-motion", "needs --allow-eeprom", "needs CONFORM_MARLIN_ALLOW_HEATERS=1")
     assert skipped and all(any(n in c["detail"] for n in needs) for c in skipped)
     assert all(any(n in c["detail"] for c in skipped) for n in needs)
-    passed = [c for c in checks if c["grade"] == "PASS"]
-    assert len(passed) + len(skipped) + 1 == len(checks)      # the banner: a reset (DTR)
+    # besides the banner (a reset, DTR): the checks only an emulator answers in-process (M575
+    # on the port in use, M31 past an hour, M501/M504 once the EEPROM holds settings) say so
+    rest = [c for c in checks if c["grade"] not in ("PASS", "SKIPPED")]
+    assert 1 <= len(rest) <= 4 and all(c["grade"] == "NOT-APPLICABLE" or "/banner" in c["id"]
+                                       for c in rest), [(c["id"], c["grade"]) for c in rest]
     assert "checks that move or halt the unit SKIPPED (no --allow-motion)" in summary
 
 
@@ -147,11 +150,12 @@ def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch):
     monkeypatch.setenv("CONFORM_MARLIN_ALLOW_HEATERS", "1")
     checks, summary = _run_over_a_pty(tmp_path, "--allow-motion", "--max-steps", "100000",
                                       "--allow-eeprom")
-    grades = [c["grade"] for c in checks]
     skipped = [c for c in checks if c["grade"] == "SKIPPED"]
     assert {c["id"].rsplit("/", 1)[-1] for c in skipped} == {"m112", "m112-while-busy"}
     assert all(checks[-1]["id"] in c["detail"] for c in skipped)
-    assert grades.count("PASS") == len(checks) - len(skipped) - 1      # the banner (DTR)
+    rest = [c for c in checks if c["grade"] not in ("PASS", "SKIPPED")]   # as in the default run
+    assert 1 <= len(rest) <= 4 and all(c["grade"] == "NOT-APPLICABLE" or "/banner" in c["id"]
+                                       for c in rest), [(c["id"], c["grade"]) for c in rest]
     assert "left halted" in checks[-1]["detail"]
     assert "checks that heat run (CONFORM_MARLIN_ALLOW_HEATERS=1)" in summary
 
