@@ -190,14 +190,29 @@ def _normalize(linked: bool, interrupted: bool = False) -> Callable[[list[str]],
     return normalize
 
 
+EMULATED_ONLY = {
+    "probe-no-contact": "whether the probe touches follows the machine's probe input",
+}
+"""Courses run only on an emulated unit (the reference's input stands for the machine's), and
+why not on a real one; in-process their answers are compared exactly."""
+
+
+def emulated_only(why: str | None, check: Callable[[Session], Outcome]
+                  ) -> Callable[[Session], Outcome]:
+    """``check`` behind a link only where ``why`` is None; else not applicable there, saying why."""
+    if why is None:
+        return check
+
+    def run(s: Session) -> Outcome:
+        if not s.target.emulated:
+            return None, "an emulated unit", f"not applicable: {why}"
+        return check(s)
+    return run
+
+
 def _run(course: Course, interrupted: frozenset[str] = INTERRUPTED
          ) -> Callable[[Session], Outcome]:
     def run(s: Session) -> Outcome:
-        if course.name == "probe-no-contact" and not s.target.emulated:
-            # whether G38.3 touches follows the machine's probe input, which only the
-            # reference's stands for; the course's answers are compared in-process
-            return None, "an emulated unit", ("not applicable: whether the probe touches "
-                                              "follows the machine's probe input")
         from conform.families.grbl.conformance.from_state import _put_back, needs
         from conform.families.grbl.conformance.machine import Pair
         from conform.families.grbl.unit.model import GrblUnit
@@ -254,5 +269,6 @@ def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     EEPROM (a setting, a startup line: :func:`.from_state.needs`)."""
     from conform.families.grbl.conformance.from_state import needs
 
-    return [GrblCheck(f"{vid}/in_motion/course/{c.name}", c.cite, c.title, _run(c), motion=True,
+    return [GrblCheck(f"{vid}/in_motion/course/{c.name}", c.cite, c.title,
+                      emulated_only(EMULATED_ONLY.get(c.name), _run(c)), motion=True,
                       eeprom=needs(_sent(c))[1]) for c in COURSES]

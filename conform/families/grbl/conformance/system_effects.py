@@ -24,13 +24,11 @@ in its EEPROM, over what is stored there).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 from conform.families.grbl.conformance.from_state import READ_ALL, READ_EEPROM, Row, needs
 from conform.families.grbl.conformance.from_state import _run as _run_row
-from conform.families.grbl.conformance.in_motion import LEAD, Course, _poll
+from conform.families.grbl.conformance.in_motion import LEAD, Course, _poll, emulated_only
 from conform.families.grbl.conformance.in_motion import _run as _run_followed
-from conform.families.grbl.conformance.session import GrblCheck, Outcome, Session
+from conform.families.grbl.conformance.session import GrblCheck
 from conform.families.grbl.spec.load import GrblSpec
 
 _SYS = "src:system.c system_execute_line"
@@ -115,24 +113,16 @@ def _sent(course: Course) -> tuple[bytes, ...]:
     return tuple(x for x in course.steps if isinstance(x, bytes))
 
 
-def _emulated_only(name: str, check: Callable[[Session], Outcome]
-                   ) -> Callable[[Session], Outcome]:
-    def run(s: Session) -> Outcome:
-        if name in EMULATED_ONLY and not s.target.emulated:
-            return None, "an emulated unit", f"not applicable: {EMULATED_ONLY[name]}"
-        return check(s)
-    return run
-
 
 def generate(spec: GrblSpec, vid: str) -> list[GrblCheck]:
     """The rows (with the EEPROM opt-in: a wrong unit might store what a right one refuses)
     and the courses (motion; EEPROM where they write a setting)."""
     out = [GrblCheck(f"{vid}/system_effects/effect/{row.name}", row.cite, row.title,
-                     _emulated_only(row.name, _run_row(row)), motion=needs(row.steps)[0],
+                     emulated_only(EMULATED_ONLY.get(row.name), _run_row(row)), motion=needs(row.steps)[0],
                      eeprom=True)
            for row in ROWS]
     out += [GrblCheck(f"{vid}/system_effects/course/{c.name}", c.cite, c.title,
-                      _emulated_only(c.name, _run_followed(c, INTERRUPTED)), motion=True,
+                      emulated_only(EMULATED_ONLY.get(c.name), _run_followed(c, INTERRUPTED)), motion=True,
                       eeprom=needs(_sent(c))[1]) for c in COURSES]
     return out
 
