@@ -5,6 +5,7 @@ profile, every opt-in, no state machine), against the target of 90 % killed.
     pip install -e '.[mutation]'
     python bench/bench_mutation.py [--family gve|grbl|marlin ...] [--sample N] [--seed S]
                                    [--jobs J] [--out DIR] [--all-files] [--every-variant]
+                                   [--every-alternative]
                                    [--mutant ID ...]
 
 A mutant is KILLED when the run reports a FAIL or an ERROR, stops, crashes or runs out of
@@ -14,7 +15,11 @@ of the unit modules the unmutated run imports and whose functions the emulator's
 module only the suite's side runs, such as grbl's adopt.py, is left out and named;
 ``--all-files``: every file in unit/, the control socket's and fault injection's too;
 ``--every-variant``: each mutant is tested by every variant's checks in turn, each on its own
-emulator, so that code only a build with some option runs is reached too). Equivalent mutants
+emulator, so that code only a build with some option runs is reached too;
+``--every-alternative``: each mutant is also tested under the family's open-question
+alternatives (GVE's A1..A29: a few dialects that together hold every alternative, each run
+with reference and emulator in that dialect), so that code only another dialect runs is
+reached too). Equivalent mutants
 are listed, each with why, in
 ``<out>/<family>-equivalent.toml`` and left out of the denominator:
 score = killed / (sampled - equivalent). Written per family: ``<family>-survivors.txt`` (each
@@ -85,18 +90,18 @@ def run_child(job: dict, wall_limit: float) -> dict:
     return out
 
 
-def baseline(family: str, every_variant: bool = False) -> tuple[dict, float]:
+def baseline(family: str, reach: dict[str, bool]) -> tuple[dict, float]:
     """The unmutated runs: the plain one (which unit modules it imports), then the one whose
     emulator runs the copy of those modules, which must pass as well (its CPU time sets the
     timeout)."""
-    plain = run_child({"family": family, "stop": False, "every_variant": every_variant},
+    plain = run_child({"family": family, "stop": False} | reach,
                       wall_limit=900)
     if plain.get("outcome") != "survived":
         fail(f"{family}: the unmutated run does not pass ({plain.get('why')}); mutants cannot be "
              "judged against it")
     t0 = time.perf_counter()
     out = run_child({"family": family, "stop": False, "shadow": True,
-                     "modules": plain["unit_modules"], "every_variant": every_variant},
+                     "modules": plain["unit_modules"]} | reach,
                     wall_limit=900)
     wall = time.perf_counter() - t0
     if out.get("outcome") != "survived" or out.get("not_pass") != plain.get("not_pass"):
@@ -105,7 +110,7 @@ def baseline(family: str, every_variant: bool = False) -> tuple[dict, float]:
     if out.get("not_pass"):
         print(f"  {family}: unmutated run grades other than PASS: {out['not_pass']}")
     traced = run_child({"family": family, "stop": False, "shadow": True, "trace": True,
-                        "modules": plain["unit_modules"], "every_variant": every_variant},
+                        "modules": plain["unit_modules"]} | reach,
                        wall_limit=900)
     if traced.get("outcome") != "survived":
         fail(f"{family}: the traced run of the unit's copy does not pass ({traced.get('why')})")
@@ -129,7 +134,7 @@ def unit_files(family: str, base: dict, all_files: bool
 
 
 def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: list[str],
-          every_variant: bool = False) -> list[dict]:
+          reach: dict[str, bool]) -> list[dict]:
     """Run each point's mutant in its own interpreter; one record per point."""
     records: list[dict] = []
 
@@ -144,8 +149,7 @@ def judge(family: str, points: list[Point], cpu_limit: int, jobs: int, modules: 
         except SyntaxError as exc:
             return rec | {"outcome": "invalid", "why": f"not Python: {exc.msg}"}
         job = {"family": family, "shadow": True, "modules": modules,
-               "module": module_name(point.path), "code": code, "cpu_limit": cpu_limit,
-               "every_variant": every_variant}
+               "module": module_name(point.path), "code": code, "cpu_limit": cpu_limit} | reach
         out = run_child(job, wall_limit=cpu_limit * 10 + 60)   # the CPU limit judges; this catches a stuck child
         return rec | {k: out.get(k) for k in ("outcome", "why", "not_pass", "cpu_s")}
 
@@ -185,7 +189,8 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
         fail(str(exc))
     cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    base, base_wall = baseline(family, args.every_variant)
+    reach = {"every_variant": args.every_variant, "every_alternative": args.every_alternative}
+    base, base_wall = baseline(family, reach)
     cpu_limit = max(10, int(TIMEOUT_FACTOR * base["cpu_s"] + 0.999) + 2)
     files, skipped, suite_side = unit_files(family, base, args.all_files)
     left_out: Counter[str] = Counter()
@@ -206,8 +211,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
              f"emulator's unit: {', '.join(suite_side)}" if suite_side else "")
           + f"; unmutated run {base['checks']} checks, {base['cpu_s']:.2f} s CPU; "
           f"timeout {cpu_limit} s CPU")
-    records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"],
-                    args.every_variant)
+    records = judge(family, chosen, cpu_limit, args.jobs, base["unit_modules"], reach)
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime)
     count = {k: sum(1 for r in records if r["outcome"] == k)
@@ -262,6 +266,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every-variant", action="store_true",
                     help="test each mutant with every variant's checks, each on its own "
                          "emulator (code that only a build with some option runs is reached)")
+    ap.add_argument("--every-alternative", action="store_true",
+                    help="also test each mutant under the open questions' other alternatives "
+                         "(a few dialects that together hold each one; families without open "
+                         "questions: no effect), reference and emulator alike")
     ap.add_argument("--mutant", action="append", default=[], metavar="ID",
                     help="run only this mutant (an id from a survivors file; repeatable)")
     args = ap.parse_args(argv)
@@ -284,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {f: bench_family(f, args, out_dir) for f in families}
     summary = {"families": results, "sample": args.sample, "seed": args.seed, "jobs": args.jobs,
                "target": TARGET, "profile": "full", "all_files": args.all_files,
-               "every_variant": args.every_variant,
+               "every_variant": args.every_variant, "every_alternative": args.every_alternative,
                "met": all(r["score"] >= TARGET for r in results.values())}
     print(json.dumps(summary))
     unmatched = [m for m in args.mutant if match_key(m) not in args.matched]

@@ -333,37 +333,65 @@ class Shadow(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
 
 def run_checks(family: str, stop_at_failure: bool = True, shadow: Shadow | None = None,
-               modules: list[str] = (), every_variant: bool = False) -> dict[str, object]:
+               modules: list[str] = (), every_variant: bool = False,
+               every_alternative: bool = False) -> dict[str, object]:
     """The family's checks on its emulator (default variant, full profile, no state
     machine, every opt-in as an emulator gets): the first failure's check, or the counts.
     ``shadow``: the emulator's unit is built from that copy of the unit package (``modules``:
     the unit modules to copy), the suite's own reference units from the original.
     ``every_variant``: each variant's checks on its own emulator in turn (code that only a
-    build with some option runs is reached by that variant's run), up to the first failure."""
+    build with some option runs is reached by that variant's run), up to the first failure.
+    ``every_alternative``: each variant's checks also under the dialects of
+    :func:`covering_dialects`, reference and emulator alike."""
+    import tempfile
+
     from conform.families import family as family_named
 
     fam = family_named(family)
     vids = [v.id for v in fam.variants()] if every_variant else [fam.default_variant]
     out: dict[str, object] = {}
     checks, not_pass = 0, {}
-    for vid in vids:
-        out = _run_variant(fam, vid, stop_at_failure, shadow, modules)
-        checks += int(out["checks"])  # type: ignore[call-overload]
-        not_pass |= out.get("not_pass") or {}  # type: ignore[operator]
-        if out["failed"]:
-            break
+    with tempfile.TemporaryDirectory(prefix="conform-mutation-") as tmp:
+        dialects: list[tuple[str, str | None]] = [("", None)]
+        for n, choices in enumerate(covering_dialects(fam) if every_alternative else (), 1):
+            path = Path(tmp) / f"dialect-{n}.toml"
+            path.write_text("[dialect]\n" + "".join(f'{q} = "{a}"\n' for q, a in choices.items()))
+            dialects.append((f"dialect {n} ({', '.join(f'{q}={a}' for q, a in choices.items())})",
+                             str(path)))
+        for vid in vids:
+            for name, dialect_file in dialects:
+                out = _run_variant(fam, vid, stop_at_failure, shadow, modules, dialect_file)
+                checks += int(out["checks"])  # type: ignore[call-overload]
+                not_pass |= {f"{name}: {k}" if name else k: v
+                             for k, v in (out.get("not_pass") or {}).items()}  # type: ignore[union-attr]
+                if out["failed"]:
+                    if name:
+                        out["failed"] = f"[{name}] {out['failed']}"
+                    return out | {"checks": checks, "not_pass": not_pass}
     return out | {"checks": checks, "not_pass": not_pass}
 
 
+def covering_dialects(fam) -> list[dict[str, str]]:  # noqa: ANN001
+    """Dialects that together hold every non-default alternative of the family's open
+    questions: the k-th holds each question's k-th other alternative (where it has one), so a
+    question with n alternatives is covered in n - 1 dialects. A family without open questions:
+    none."""
+    questions = getattr(fam.load_tables(), "questions", None) or {}
+    others = {q.id: [a for a in q.alternatives if a != q.default] for q in questions.values()}
+    depth = max((len(a) for a in others.values()), default=0)
+    return [{q: alts[k] for q, alts in others.items() if k < len(alts)} for k in range(depth)]
+
+
 def _run_variant(fam, vid: str, stop_at_failure: bool, shadow: Shadow | None,  # noqa: ANN001
-                 modules: list[str]) -> dict[str, object]:
+                 modules: list[str], dialect_file: str | None = None) -> dict[str, object]:
     from conform.conformance.plan import Permissions
     from conform.conformance.results import Grade
     from conform.conformance.runner import RunOptions
 
     perms = Permissions.of(True, False, None, False)
+    in_dialect = {"dialect_file": dialect_file} if dialect_file else {}
     target, _ = fam.open_target(f"emu:{vid}", baud=115200, permissions=perms,
-                                inputs_control=None)
+                                inputs_control=None, **in_dialect)
     unit_of = None
     if shadow is not None:
         copies = shadow.install(list(modules))
@@ -385,7 +413,7 @@ def _run_variant(fam, vid: str, stop_at_failure: bool, shadow: Shadow | None,  #
         checks = fam.plan_checks(vid, permissions=perms, profile=PROFILE, patterns=(),
                                  machine=False)
         runner = fam.runner(target, vid, options=RunOptions(profile=PROFILE, seed=0),
-                            permissions=perms)
+                            permissions=perms, **in_dialect)
         try:
             run = runner.run(checks, progress)
         except _FirstFailure:
@@ -431,7 +459,8 @@ def child_main() -> int:
         _trace_copy(ran)
     result = run_checks(job["family"], stop_at_failure=job.get("stop", True), shadow=shadow,
                         modules=job.get("modules") or every,
-                        every_variant=bool(job.get("every_variant")))
+                        every_variant=bool(job.get("every_variant")),
+                        every_alternative=bool(job.get("every_alternative")))
     if job.get("trace"):
         sys.setprofile(None)
         threading.setprofile(None)
