@@ -234,7 +234,7 @@ def bench_family(family: str, args: argparse.Namespace, out_dir: Path) -> dict:
            "cpu_per_mutant_s": round(cpu / max(1, len(records)), 2),
            "points_left_out": dict(left_out), "files_not_imported": skipped,
            "files_suite_side": suite_side,
-           "baseline_cpu_s": base["cpu_s"], "baseline_wall_s": round(base_wall, 2)}
+           "baseline_cpu_s": base["cpu_s"], "baseline_wall_s": round(base_wall, 2)} | reach
     if not args.mutant:
         write_outputs(out_dir, family, records, equivalent,
                       {"family": family, "seed": args.seed, "sampled": len(records)} | res)

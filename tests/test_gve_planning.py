@@ -4,6 +4,12 @@ in-process while the checks that read at rest pass it."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
+import pytest
+
 from conform.conformance.results import Grade
 from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate
@@ -11,6 +17,7 @@ from conform.families.gve.conformance.runner import Runner
 from conform.families.gve.conformance.suite import suite
 from conform.families.gve.conformance.target import GveEmuTarget
 from conform.families.gve.unit import Unit, kinematics, motion
+from tests import emulated
 
 
 class _NoMaxRate(Unit):
@@ -92,3 +99,24 @@ def test_a_brake_measuring_vn_vectors_euclidean_fails_spill_diagonal(spec):
     got = _run(spec, _EuclidSpill, ["*/H/planning/spill-diagonal", "*/H/in-motion/brake-spill"])
     assert got["H/planning/spill-diagonal"].grade is Grade.FAIL, got["H/planning/spill-diagonal"].detail
     assert got["H/in-motion/brake-spill"].grade is Grade.PASS  # along X only: both lengths agree
+
+
+@pytest.mark.slow
+def test_the_motion_checks_pass_over_a_pty(tmp_path):
+    """`conform run` of every in-motion and planning check (full profile, --allow-motion)
+    against `conform emulate serve` on a pty: none FAILs on a correct unit, though where a
+    brake ends follows when H arrived, which a link does not fix to the pulse (brake-spill
+    and while-braking read that only under way, or where it does not depend on it)."""
+    proc, path, _ = emulated.serve("serve", "gve64-v19", "--baud", "115200")
+    try:
+        p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
+                            "gve64-v19", "--baud", "115200", "--report", str(tmp_path), "-q",
+                            "--profile", "full", "--allow-motion", "--max-steps", "250000",
+                            "--check", "*/in-motion*", "--check", "*/planning/*"],
+                           capture_output=True, text=True, timeout=600)
+    finally:
+        emulated.stop(proc)
+    assert p.returncode == 0, p.stdout + p.stderr
+    checks = json.loads((tmp_path / "results.json").read_text())["checks"]
+    assert len(checks) >= 14
+    assert [(c["id"], c["grade"]) for c in checks if c["grade"] != "PASS"] == []

@@ -4,7 +4,9 @@ ok, `conform run` passes against it, and a real unit is left halted when a run i
 
 from __future__ import annotations
 
+import fnmatch
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -98,10 +100,13 @@ def test_conform_run_over_the_pty(tmp_path):
         stop(proc)
 
 
-def _run_over_a_pty(tmp_path, *opt_ins: str) -> tuple[list[dict], str]:
-    """`conform run` of every check against `conform emulate serve marlin-2.1` on a pty at
-    1 000 000 Bd (M575's fastest rate; the runner treats the pty as a real board): its
-    checks (none FAIL or ERROR, at least 150) and its summary."""
+def _run_over_a_pty(tmp_path, *opt_ins: str, least: int = 150, said: tuple[str, ...] = (
+        "put back what M503, M220, M221 read before each check", "EEPROM checks end with M500",
+        "motion checks home (G28)", "leave the unit halted until it is reset")
+                    ) -> tuple[list[dict], str]:
+    """`conform run` against `conform emulate serve marlin-2.1` on a pty at 1 000 000 Bd
+    (M575's fastest rate; the runner treats the pty as a real board): its checks (none FAIL or
+    ERROR, at least ``least``) and its summary, which says each of ``said``."""
     proc, path, _ = emulated.serve("serve", "marlin-2.1", "--baud", "1000000")
     try:
         p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", path, "--variant",
@@ -111,13 +116,11 @@ def _run_over_a_pty(tmp_path, *opt_ins: str) -> tuple[list[dict], str]:
     finally:
         stop(proc)
     checks = json.loads((tmp_path / "results.json").read_text())["checks"]
-    assert len(checks) >= 150
+    assert len(checks) >= least
     assert [(c["id"], c["actual"]) for c in checks if c["grade"] in ("FAIL", "ERROR")] == []
     summary = (tmp_path / "summary.md").read_text()
-    for said in ("put back what M503, M220, M221 read before each check",
-                 "EEPROM checks end with M500", "motion checks home (G28)",
-                 "leave the unit halted until it is reset"):
-        assert said in summary, said
+    for sentence in said:
+        assert sentence in summary, sentence
     return checks, summary
 
 
@@ -139,17 +142,57 @@ def test_the_default_run_over_a_pty_skips_only_what_needs_an_opt_in(tmp_path, mo
     assert "checks that move or halt the unit SKIPPED (no --allow-motion)" in summary
 
 
+OPT_IN = ("--allow-motion", "--max-steps", "100000", "--allow-eeprom")
+# The opt-in run's checks in parts that run side by side, each against its own emulator: the
+# heater checks wait on the emulated heater's real clock (330 s of the whole run's 560 s, the
+# M109 R slope alone 127 s). A check goes to the first part one of whose patterns it matches;
+# every other check, the halt checks with them, to "rest".
+OPT_IN_PARTS = {
+    "heat-slope": ("*/heat/m109-r-slope-checks",),
+    "heat-cooling": ("*/heat/m1?0-r-cool*",),
+    "heat": ("*/heat/*", "*/keepalive/busy-while-heating"),
+    "motion": ("*/G0_G1.cpp/*", "*/G28.cpp/*", "*/M206_M428.cpp/*", "*/M92.cpp/*",
+               "*/M200-M205.cpp/*"),
+}
+
+
+def _opt_in_parts() -> dict[str, list[str]]:
+    """Every check of the opt-in run (as `conform run --list` plans it), by part."""
+    out = subprocess.run([sys.executable, "-m", "conform", "run", "--target", "emu:marlin-2.1",
+                          "--variant", "marlin-2.1", *OPT_IN, "--list"], capture_output=True,
+                         text=True, timeout=120, env=os.environ | {"CONFORM_MARLIN_ALLOW_HEATERS": "1"})
+    assert out.returncode == 0, out.stderr
+    parts: dict[str, list[str]] = {name: [] for name in [*OPT_IN_PARTS, "rest"]}
+    for cid in (line.split("\t", 1)[0] for line in out.stdout.splitlines() if line.strip()):
+        part = next((name for name, globs in OPT_IN_PARTS.items()
+                     if any(fnmatch.fnmatchcase(cid, g) for g in globs)), "rest")
+        parts[part].append(cid)
+    return parts
+
+
 @pytest.mark.slow
-def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch):
-    """Every opt-in (--allow-motion, --allow-eeprom, the heaters): nothing FAILs or ERRORs;
-    of the three halt checks only the last runs (the others SKIPPED naming it) and the unit
-    is left halted; the report says what the run changed on the unit. Most of its wall time
-    (about 190 s of checks) is the unit's own: the first G28 (16 s on this build), M109/M190's
-    10 s residency, dwells and moves timed on the real clock, and 0.1 s after each checked
-    answer for a late line."""
+@pytest.mark.parametrize("part", [*OPT_IN_PARTS, "rest"])
+def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch, part):
+    """Every opt-in (--allow-motion, --allow-eeprom, the heaters), in parts (OPT_IN_PARTS)
+    that together hold every check once: nothing FAILs or ERRORs; of the three halt checks
+    only the last runs (the others SKIPPED naming it) and the unit is left halted; the report
+    says what the run changed on the unit. Most of the wall time is the unit's own: the first
+    G28 (16 s on this build), M109/M190's 10 s residency and the heater's slopes, dwells and
+    moves timed on the real clock, and 0.1 s after each checked answer for a late line."""
     monkeypatch.setenv("CONFORM_MARLIN_ALLOW_HEATERS", "1")
-    checks, summary = _run_over_a_pty(tmp_path, "--allow-motion", "--max-steps", "100000",
-                                      "--allow-eeprom")
+    parts = _opt_in_parts()
+    assert sum(map(len, parts.values())) >= 150 and all(parts.values()), \
+        {name: len(ids) for name, ids in parts.items()}   # no part left empty by a rename
+    ids = parts[part]
+    selected = [a for cid in ids for a in ("--check", cid)]
+    if part != "rest":
+        checks, summary = _run_over_a_pty(tmp_path, *OPT_IN, *selected, least=len(ids),
+                                          said=("checks that heat run",) * part.startswith("heat"))
+        assert sorted(c["id"] for c in checks) == sorted(ids)
+        assert [(c["id"], c["grade"]) for c in checks if c["grade"] != "PASS"] == []
+        return
+    checks, summary = _run_over_a_pty(tmp_path, *OPT_IN, *selected, least=len(ids))
+    assert sorted(c["id"] for c in checks) == sorted(ids)
     skipped = [c for c in checks if c["grade"] == "SKIPPED"]
     assert {c["id"].rsplit("/", 1)[-1] for c in skipped} == {"m112", "m112-while-busy"}
     assert all(checks[-1]["id"] in c["detail"] for c in skipped)

@@ -100,15 +100,18 @@ def in_motion_checks(b: Any) -> None:
            *_reads_under_way(b, (0.3, 0.4, 0.3, 0.3, 0.3, 0.3, 0.3)), *_at_rest(b, 1.5)],
           clause=_cites(b, "C", "V", "PF"))
     # HALT too late to stop within the running vector: the brake runs on into the next one
-    # (§13.5.9, SR6 "INTA=1 RUN=0/1"); then G runs the rest
+    # (§13.5.9, SR6 "INTA=1 RUN=0/1"); then G runs the rest. Where the brake ends follows when
+    # H arrived, which a link does not fix to the pulse (13 pulses for 2.6 ms at 5000/s): it
+    # is read by PF as G sets off from there (exact in-process, within the tolerance for
+    # motion under way on a link); ST6 and F at rest, and the position after all of it, do
+    # not depend on it
     b.add("H", "in-motion/brake-spill", "H 0.7 s into three 3000-pulse C vectors at V5000 A10 "
-          "(rest needs 1250 pulses, 750 are left): where the brake ends, ST6 and F; G then "
-          "runs the rest, PF read under way and at rest",
+          "(rest needs 1250 pulses, 750 are left): ST6 and F once it stopped; G then runs the "
+          "rest, PF read as it sets off from where the brake ended and under way; at rest",
           [*setup, b.raw("!0A10"), b.raw("!0V5000"), *[b.raw(f"!0C{_vec(b, 3000, 0, 0, 0)}")] * 3,
            dataclasses.replace(b.halt(), wait=0.7, subject=True),
-           *_read_position(b), b.cmd_step("F", [], subject=False),
-           b.cmd_step("SR", [6], subject=False), b.cmd_step("G", []),
-           *_reads_under_way(b, (0.2, 0.4)), *_at_rest(b, 2.5)],
+           b.cmd_step("F", [], subject=False), b.cmd_step("SR", [6], subject=False),
+           b.cmd_step("G", []), *_reads_under_way(b, (0.0, 0.2, 0.4)), *_at_rest(b, 2.5)],
           clause=_cites(b, 'H', 'G', 'SR'))
     # VK: the path speed along the Euclidean length, capped by VL so no axis outruns its limit
     if "VK" in v.commands and "VL" in v.commands:

@@ -15,8 +15,8 @@ at rest) and §13.5.9 (HALT brakes at A, on into the queued C vectors if it must
   and too short to brake to 1000: it brakes all the way, the next one takes over its speed.
 - ``T/planning/pause``: T24, a lone C that ends at rest and the next C sent just after it: PF
   and XM sent during the pause before that one starts (planned, not moving yet).
-- ``H/planning/while-braking``: H while an L is already on its final ramp: the brake starts
-  from the speed of that moment, not from V.
+- ``H/planning/while-braking``: H while an L is already on its final ramp, a C queued behind it:
+  the brake starts from the speed of that moment, not from V, and ends where the L ends.
 - ``XM/planning/b-below-v``: XM on a long C with B below V: a long vector (``$`` and more) still
   cruises at V·XM, not at B.
 - ``H/planning/spill-diagonal``: H spilling into queued diagonal and A-axis C vectors, with VN
@@ -78,10 +78,14 @@ def planning_checks(b: Any) -> None:
                b.cmd_step("PF", [], subject=True, kind=POSITION),
                *_reads_under_way(b, (0.1, 0.2, 0.3, 0.3)), *_at_rest(b, 1.0)],
               clause=_cites(b, "T", "XM", "PF"))
-    # L of 6000: 0.5 s up, 0.7 s at 5000, 0.5 s down; H 1.45 s in, at about 2500 pulses/s
-    b.add("H", "planning/while-braking", "an L of 6000 at V5000, H 1.45 s in while it brakes "
-          "at its end: where the brake ends, F and SR6; G, at rest",
-          [*setup, b.raw(f"!0L{_vec(b, 6000, -2000, 0, 0)}"),
+    # L of 6000: 0.5 s up, 0.7 s at 5000, 0.5 s down; H 1.45 s in, at about 2500 pulses/s:
+    # braking from that speed at A ends where the L ends, whenever on that ramp H arrives. The
+    # C queued behind it keeps ST6 off the knife-edge of "the vectors ran out while braking"
+    # (RUN=0), which an L ending at that very moment would be on a link
+    b.add("H", "planning/while-braking", "an L of 6000 at V5000 with a C queued behind it, H "
+          "1.45 s in while the L brakes at its end: where the brake ends, F and SR6 (the C is "
+          "left); G runs the C, at rest",
+          [*setup, b.raw(f"!0L{_vec(b, 6000, -2000, 0, 0)}"), _c(b, 0, 1000, 0, 0),
            dataclasses.replace(b.halt(), wait=1.45, subject=True),
            *_read_position(b), b.cmd_step("F", [], subject=False),
            b.cmd_step("SR", [6], subject=False), b.cmd_step("G", []), *_at_rest(b, 1.0)],

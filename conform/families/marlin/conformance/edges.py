@@ -312,6 +312,7 @@ def quickstop_no_keepalive(s: Session) -> Outcome:
     put(s, State(st.defaults(s.v), "FR:100%", "echo:E0 Flow: 100%"))
     try:
         s.talk(b"M113 S0\nG92 X0 Y0 Z0 E0\n")
+        start = _where(s)
         s.talk(b"G1 X50 F600\n", linger=0.0)
         s.target.send(b"M400\n")
         s.wait(1.0)
@@ -328,10 +329,13 @@ def quickstop_no_keepalive(s: Session) -> Outcome:
     problems = []
     if len(oks) != 2 or not lo <= oks[0] <= hi:
         problems.append(f"oks at {', '.join(f'{x:.2f}' for x in oks) or 'none'} s after M410")
-    if pos is None or not 5.0 <= pos[0] <= 20.0:
-        problems.append(f"then {_shown(pos)}")
+    # how far X went, from its stepper count (M114's Count, at M92's defaults): the logical X
+    # M410 takes from the steppers also carries what G92 and M206 shifted
+    went = None if pos is None or start is None else (pos[4] - start[4]) / s.v.steps_per_mm[0]
+    if went is None or not 5.0 <= went <= 20.0:
+        problems.append(f"then {_shown(pos)}" + ("" if went is None else f" ({went:.2f} mm on X)"))
     return not problems, f"M400's ok {lo:.1f} .. {hi:.1f} s after M410, then M410's; X part " \
-        "way (5 .. 20)", "; ".join(problems) or "as expected"
+        "way (5 .. 20 mm by its count)", "; ".join(problems) or "as expected"
 
 
 # -- heat (and motion) ------------------------------------------------------------------------

@@ -566,6 +566,13 @@ class MarlinUnit:
             for i, a in enumerate("XYZE"):
                 if a in words:
                     self.position[i] = words[a]
+            # G92.cpp sync_plan_position -> planner.cpp set_machine_position_mm: with no block
+            # queued the steppers take the new position at once (stepper.set_position), else a
+            # sync block behind the queued ones sets them when its turn comes (buffer_sync_block)
+            if self.planner:
+                self.planner.append((self.planner[-1][0], list(self.position)))
+            else:
+                self.stepped = list(self.position)
         elif kind == "set" and code in ("G90", "G91", "M82", "M83"):
             if code in ("G90", "G91"):
                 self.relative = self.e_relative = code == "G91"
