@@ -11,6 +11,7 @@ import time
 from contextlib import contextmanager
 
 import pytest
+import serial
 from test_conformance import UnitEndpoint  # the reference unit behind an endpoint
 
 from conform.cli.main import main
@@ -47,10 +48,28 @@ def served(variant: str, *extra: str, control: str | None = None, mutant: str | 
         assert emu.stdout is not None
         port = emu.stdout.readline().strip()
         assert port.startswith("/dev/"), port
+        _answering(port)
         yield port
     finally:
         emu.terminate()
         emu.wait(10)
+
+
+def _answering(port: str, within: float = 30.0) -> None:
+    """Wait until the emulator answers ``!0?`` (it identifies itself; nothing changes), as a
+    unit is switched on before a run: on a loaded machine its first answers can come later
+    than the run's first timeouts, and a late one would be taken for the next line's."""
+    link = serial.Serial(port, 115200, timeout=0.5)
+    try:
+        deadline = time.monotonic() + within
+        while time.monotonic() < deadline:
+            link.write(b"!0?\r")
+            if link.read_until(b"\r"):
+                break
+        time.sleep(0.2)   # what else was on its way, then nothing left for the run to read
+        link.reset_input_buffer()
+    finally:
+        link.close()
 
 
 def _grades(run):
