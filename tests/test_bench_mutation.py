@@ -82,3 +82,21 @@ def test_ids_stay_when_lines_are_added_elsewhere(tmp_path, monkeypatch):
     # on the def line only the default's number: its annotations are never evaluated, and
     # its '*' is no product
     assert {p.operator for p in before if p.line == 4} == {"core/NumberReplacer"}
+
+
+def test_the_covering_dialects_hold_every_alternative_once():
+    """--every-alternative: each non-default alternative of every GVE open question is in
+    exactly one of the dialects, each a dialect the tables accept; a family without open
+    questions has none."""
+    from conform.families import family
+
+    gve = family("gve")
+    questions = gve.load_tables().questions
+    dialects = mutation_lib.covering_dialects(gve)
+    assert len(dialects) == max(len(q.alternatives) for q in questions.values()) - 1
+    held = sorted((q, a) for d in dialects for q, a in d.items())
+    assert held == sorted((q.id, a) for q in questions.values() for a in q.alternatives
+                          if a != q.default)
+    for d in dialects:
+        gve.load_tables().dialect(d)   # a UserError if any choice were not an alternative
+    assert mutation_lib.covering_dialects(family("grbl")) == []
