@@ -18,6 +18,7 @@ import serial
 # how long an answer may take before it counts as lost: an emulator on a loaded machine can be
 # a few hundred ms late, and a late answer taken for lost is a second line in flight
 TIMEOUT = 0.4
+QUIET = 0.25
 
 
 def summed(body: str) -> str:
@@ -45,9 +46,22 @@ class Link:
         return line.decode("latin-1")
 
     def settle(self) -> None:
-        time.sleep(0.05)
-        self.port.reset_input_buffer()
+        """After an answer taken for lost: wait until the line has been quiet for QUIET s
+        (at most 3 s), dropping what comes, so that a late answer is not read as the next
+        command's (one answer behind, every later command would be a second in flight)."""
         self.buf = b""
+        start = last = time.monotonic()
+        while (now := time.monotonic()) - last < QUIET and now - start < 3.0:
+            if self.port.read(self.port.in_waiting or 1):
+                last = time.monotonic()
+
+    def send(self, body: str) -> None:
+        """One command; what is already waiting is left over from before (the sender is
+        strictly simplex, and nothing it sent is unanswered): dropped, not read as its answer."""
+        if self.buf or self.port.in_waiting:
+            self.port.reset_input_buffer()
+            self.buf = b""
+        self.port.write(self.line(body))
 
     def parse(self, text: str | None) -> tuple[int, list[str]] | None:
         """(code incl. INTA, fields) of a clean answer, else None."""
@@ -71,7 +85,7 @@ class Link:
     def ask(self, body: str, tries: int = 40) -> tuple[int, list[str]]:
         """A command that may be repeated safely: send until a clean answer."""
         for _ in range(tries):
-            self.port.write(self.line(body))
+            self.send(body)
             ans = self.parse(self.read_line())
             if ans is not None:
                 return ans
@@ -80,7 +94,7 @@ class Link:
 
     def repeat(self) -> tuple[str | None, tuple[int, list[str]] | None]:
         """`>`: (the echoed line, its answer) or (None, None) when damaged."""
-        self.port.write(self.line(">"))
+        self.send(">")
         echo = self.read_line()
         if echo is None or not echo.startswith("!"):
             return None, None
@@ -116,7 +130,7 @@ def main() -> int:
             inta_seen = False
             resume(link)
             continue
-        link.port.write(link.line(body))
+        link.send(body)
         ans = link.parse(link.read_line())
         if ans is None and vector:
             ans = recover(link, body, before)
