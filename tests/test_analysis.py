@@ -236,16 +236,19 @@ def test_truncated_capture_is_analysed_as_far_as_it_goes(tmp_path: Path) -> None
     pairs = [(b"!0C%d,0,0\r" % i, b"0\r") for i in range(3000)]
     full = record(tmp_path / "full.mcap", simplex(pairs))
     data = full.read_bytes()
-    # cut inside the last chunk's record: where a fixed fraction of the file falls follows how
-    # the recorder's writer thread happened to gather the chunks (the message indexes and the
-    # summary after them can be a third of the file)
+    # cut inside the chunk that holds the session's middle: where a fixed fraction of the file
+    # falls, or what the last chunk holds, follows how the recorder's writer thread happened to
+    # gather the chunks (the indexes and summary after them can be a third of the file, and
+    # the record written at close can be a chunk of its own)
     with full.open("rb") as f:
-        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
-                        key=lambda c: c.chunk_start_offset)
-    assert len(chunks) >= 2, "the capture must hold more than one chunk to be cut between them"
-    last = chunks[-1]
+        chunks = list(make_reader(f).get_summary().chunk_indexes)
+    first = min(c.message_start_time for c in chunks)
+    middle = (first + max(c.message_end_time for c in chunks)) // 2
+    mid = min((c for c in chunks if c.message_end_time >= middle),
+              key=lambda c: c.message_end_time)
+    assert mid.message_start_time > first, "the session's first half is in chunks before it"
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(data[: last.chunk_start_offset + last.chunk_length // 2])
+    cut.write_bytes(data[: mid.chunk_start_offset + mid.chunk_length // 2])
     a = analyze(cut)
     assert not a.raw.status.complete
     assert 0 < len(a.exchanges) < 3000
