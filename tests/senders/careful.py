@@ -28,10 +28,37 @@ def summed(body: str) -> str:
 
 class Link:
     def __init__(self, port: str, checksums: bool) -> None:
+        self.path = port
         self.port = serial.Serial(port, 115200, timeout=0.02)
         self.cs = False
         self.want_cs = checksums
         self.buf = b""
+
+    def reopen(self) -> None:
+        """The link dropped (a cable pulled): open the port again once it is back (up to 30 s);
+        what was in flight counts as lost, and the caller recovers through `>` and `@`."""
+        try:
+            self.port.close()
+        except (serial.SerialException, OSError):
+            pass
+        self.buf = b""
+        deadline = time.monotonic() + 30.0
+        while True:
+            try:
+                self.port = serial.Serial(self.path, 115200, timeout=0.02)
+                return
+            except (serial.SerialException, OSError):
+                if time.monotonic() > deadline:
+                    raise SystemExit("careful: the port did not come back") from None
+                time.sleep(0.1)
+
+    def read_some(self) -> bytes | None:
+        """What has come (b"" for nothing yet), or None when the link dropped (reopened)."""
+        try:
+            return self.port.read(self.port.in_waiting or 1)
+        except (serial.SerialException, OSError):
+            self.reopen()
+            return None
 
     def line(self, body: str) -> bytes:
         return ((summed("!0" + body) if self.cs else "!0" + body) + "\r").encode()
@@ -41,7 +68,10 @@ class Link:
         while b"\r" not in self.buf:
             if time.monotonic() > end:
                 return None
-            self.buf += self.port.read(self.port.in_waiting or 1)
+            got = self.read_some()
+            if got is None:
+                return None
+            self.buf += got
         line, _, self.buf = self.buf.partition(b"\r")
         return line.decode("latin-1")
 
@@ -52,16 +82,19 @@ class Link:
         self.buf = b""
         start = last = time.monotonic()
         while (now := time.monotonic()) - last < QUIET and now - start < 3.0:
-            if self.port.read(self.port.in_waiting or 1):
+            if self.read_some() != b"":
                 last = time.monotonic()
 
     def send(self, body: str) -> None:
         """One command; what is already waiting is left over from before (the sender is
         strictly simplex, and nothing it sent is unanswered): dropped, not read as its answer."""
-        if self.buf or self.port.in_waiting:
-            self.port.reset_input_buffer()
-            self.buf = b""
-        self.port.write(self.line(body))
+        try:
+            if self.buf or self.port.in_waiting:
+                self.port.reset_input_buffer()
+                self.buf = b""
+            self.port.write(self.line(body))
+        except (serial.SerialException, OSError):
+            self.reopen()   # the line is lost with the link: its answer will not come
 
     def parse(self, text: str | None) -> tuple[int, list[str]] | None:
         """(code incl. INTA, fields) of a clean answer, else None."""
