@@ -9,13 +9,10 @@ import subprocess
 import sys
 
 import pytest
+from test_gve_in_motion import _run  # the checks of `patterns` against a unit of class `cls`
 
 from conform.conformance.results import Grade
-from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate
-from conform.families.gve.conformance.runner import Runner
-from conform.families.gve.conformance.suite import suite
-from conform.families.gve.conformance.target import GveEmuTarget
 from conform.families.gve.unit import Unit, kinematics, motion
 from tests import emulated
 
@@ -58,14 +55,6 @@ class _EuclidSpill(Unit):
         self._exec = _EuclidSpillExecutor(axes=ex.axes, capacity=ex.capacity,
                                           max_rate=ex.max_rate, params=ex.params)
         self._exec.advance(t)
-
-
-def _run(spec, cls, patterns):
-    variant = spec.variant("gve64-v19")
-    dialect = spec.dialect()
-    target = GveEmuTarget(lambda: cls(variant, dialect), "emu")
-    checks = suite(spec, "gve64-v19", patterns=patterns, profile="full", machine=False)
-    return {c.key: c for c in Runner(spec, target, "gve64-v19", options=RunOptions()).run(checks).checks}
 
 
 def test_planning_checks_only_in_full_with_motion(spec):
