@@ -321,8 +321,15 @@ def grbl_recordings(d: Path) -> list[Entry]:
             for p in sorted(folder.glob("*.transcript"))]
 
 
-def proxied(d: Path) -> list[Entry]:
-    """Real programs through ``conform proxy`` (a minute or two of wall clock)."""
+# the proxied sessions in parts that can run side by side (each in its own directory, through
+# its own proxies): ``proxied(d, part)`` runs one, ``proxied(d)`` all
+PROXIED_PARTS = ("grbl-conform-send", "grbl-streamer", "grbl-other-senders",
+                 "gve-marlin-conform-send", "marlin-senders")
+
+
+def proxied(d: Path, part: str | None = None) -> list[Entry]:
+    """Real programs through ``conform proxy`` (a minute or two of wall clock; a part of
+    ``PROXIED_PARTS`` alone, a quarter of that)."""
     import importlib.util
     import sys
 
@@ -337,6 +344,8 @@ def proxied(d: Path) -> list[Entry]:
     out: list[Entry] = []
 
     def add(name: str, family: str, label: str, variant: str, cmd: list[str], **kw) -> None:
+        if part is not None and _proxied_part(name) != part:
+            return
         cap, _r = run(d, variant, cmd, name=name, **kw)
         out.append((name, family, label, cap))
 
@@ -373,6 +382,18 @@ def proxied(d: Path) -> list[Entry]:
         add("marlin-octoprint", "marlin", "completed", "marlin-2.1",
             script("marlin_octoprint.py", str(mjob), python=octo), baud=250000)
     return out
+
+
+def _proxied_part(name: str) -> str:
+    """Which of ``PROXIED_PARTS`` the proxied session ``name`` belongs to."""
+    for prefix in ("grbl-conform-send", "grbl-streamer"):
+        if name.startswith(prefix):
+            return prefix
+    if name.startswith("grbl-"):
+        return "grbl-other-senders"
+    if name.endswith("-conform-send"):
+        return "gve-marlin-conform-send"
+    return "marlin-senders"
 
 
 def _interpreter(env: str, venv: str, module: str) -> str | None:

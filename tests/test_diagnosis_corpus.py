@@ -15,6 +15,7 @@ import pytest
 from diag_corpus import (
     CALIBRATION_CORPUS,
     GRBL_RECORDED,
+    PROXIED_PARTS,
     RECORDINGS,
     REPO,
     calibration_corpus,
@@ -246,15 +247,18 @@ def test_marlin_diagnoses_its_own_halt_and_kill(tmp_path):
 
 
 @pytest.mark.slow
-def test_real_senders_through_the_proxy(tmp_path):
+@pytest.mark.parametrize("part", PROXIED_PARTS)
+def test_real_senders_through_the_proxy(tmp_path, part):
     """conform send (grbl both methods, GVE, Marlin), grbl-streamer both modes, a stream.py
-    like sender, printcore: completed; conform send stopped by SIGTERM: stopped by the
-    sender (once "link-lost")."""
-    rows = judge(proxied(tmp_path))
+    like sender, bCNC, printcore, OctoPrint: completed; conform send stopped by SIGTERM: stopped
+    by the sender (once "link-lost"). In parts, side by side."""
+    rows = judge(proxied(tmp_path, part))
+    assert rows, f"no proxied session in part {part}"
     print(json.dumps(matrix(rows)))
     _check(rows)
-    halt = next(r for r in rows if r["name"] == "grbl-conform-send-sigterm")
-    assert halt["headline"].startswith("Stopped by the sender")
+    if part == "grbl-conform-send":
+        halt = next(r for r in rows if r["name"] == "grbl-conform-send-sigterm")
+        assert halt["headline"].startswith("Stopped by the sender")
 
 
 @pytest.mark.slow
