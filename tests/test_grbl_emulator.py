@@ -4,6 +4,7 @@ by `conform analyze`."""
 
 from __future__ import annotations
 
+import functools
 import json
 import subprocess
 import sys
@@ -69,32 +70,50 @@ def test_conform_run_over_the_pty(emulator, tmp_path):
 
 
 # every check over the pty, in PARTS runs side by side (each on its own emulator): over a link a
-# check waits for grbl's answers, its reset banner and the settings it restores (~300 checks)
+# check waits for grbl's answers, its reset banner and the settings it restores (~400 checks)
 PARTS = 4
 
 
-def _every_check() -> list[str]:
-    from conform.families.grbl.conformance.checks import generate
+@functools.cache
+def _parts() -> list[list[str]]:
+    """Every check, in PARTS of about the same length: the longest first, each to the part
+    with the least so far, by the run's own estimate (the reference unit's virtual clock). Each
+    part keeps the run's order: the from-state rows come last, after other checks have left
+    the machine at a fractional position, which the reference adopts in whole steps where the
+    unit's parser stands after the reset that starts each row (main.c gc_sync_position)."""
+    from conform.conformance.target import EmuTarget
+    from conform.families import family
+    from conform.families.grbl.conformance.checks import GrblRunner, generate
 
-    # The from-state rows come last in each part, after other checks have left the machine
-    # at a fractional position: the reference adopts it in whole steps, where the unit's parser
-    # stands after the reset that starts each row (main.c gc_sync_position).
-    ids = [c.id for c in generate(G, "grbl-1.1f")]
-    assert any("/from_state/" in x for x in ids)
-    return ids
+    checks = generate(G, "grbl-1.1f")
+    assert any("/from_state/" in c.id for c in checks)
+    sim = EmuTarget(lambda: family("grbl").make_unit("grbl-1.1f"), "estimate", baud=115200)
+    cost = GrblRunner(sim, "grbl-1.1f", allow_motion=True, allow_eeprom=True
+                      ).estimate_run(checks).per_check
+    parts: list[list[str]] = [[] for _ in range(PARTS)]
+    load = [0.0] * PARTS
+    for c in sorted(checks, key=lambda c: -cost[c.id]):
+        k = load.index(min(load))
+        parts[k].append(c.id)
+        load[k] += cost[c.id]
+    order = {c.id: n for n, c in enumerate(checks)}
+    return [sorted(part, key=order.__getitem__) for part in parts]
 
 
 def test_the_parts_hold_every_check_once():
-    ids = _every_check()
-    parts = [ids[k::PARTS] for k in range(PARTS)]
+    from conform.families.grbl.conformance.checks import generate
+
+    ids = [c.id for c in generate(G, "grbl-1.1f")]
+    parts = _parts()
     assert sorted(x for part in parts for x in part) == sorted(ids) and len(set(ids)) == len(ids)
+    assert all(part for part in parts)
     assert all(not set(x) & set("*?[") for x in ids)   # each id is a glob matching only itself
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("part", range(PARTS))
 def test_every_check_over_the_pty(emulator, tmp_path, part):
-    chosen = _every_check()[part::PARTS]
+    chosen = _parts()[part]
     p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", emulator,
                         "--variant", "grbl-1.1f", "--allow-motion", "--allow-eeprom",
                         "--report", str(tmp_path), "-q",

@@ -8,7 +8,15 @@ import time
 import pytest
 
 from conform.errors import LinkError
-from conform.link import Forwarder, PortGone, PtyEndpoint, Tap, TcpServerEndpoint, open_port
+from conform.link import (
+    Forwarder,
+    PortGone,
+    PtyEndpoint,
+    Reopener,
+    Tap,
+    TcpServerEndpoint,
+    open_port,
+)
 
 
 def read_until(endpoint, n: int, timeout: float = 2.0) -> bytes:
@@ -56,6 +64,41 @@ def test_pty_symlink_is_a_stable_name(tmp_path):
             port.write(b"x")
             assert read_until(pty, 1) == b"x"
     assert not link.exists()
+
+
+def test_a_reopened_pty_path_never_reaches_another_pty():
+    """The kernel hands a closed pty's number to the next pty opened anywhere: a proxy or a
+    sniffer reopening /dev/pts/N after its pty went away must not reach another program's
+    port. While the reopener lives, the number stays taken and the path stays gone."""
+    first = PtyEndpoint()
+    path = first.device
+    again = Reopener(path, 115200)
+    again().close()
+    first.close()
+    held = [PtyEndpoint() for _ in range(8)]     # the lowest free numbers go first
+    try:
+        assert path not in [pty.device for pty in held]
+        with pytest.raises(LinkError) as err:
+            again()
+        assert path in str(err.value) and "\n" not in str(err.value)
+        again.close()                            # let go: the number is free again
+    finally:
+        for pty in held:
+            pty.close()
+
+
+def test_the_same_pty_opens_again_and_a_symlink_follows_its_new_pty(tmp_path):
+    with PtyEndpoint() as pty:
+        again = Reopener(pty.device, 115200)
+        for _ in range(2):
+            again().close()
+    again.close()
+    link = tmp_path / "unit"
+    again = Reopener(str(link), 115200)
+    for _ in range(2):     # made again for each new pty, as check-sender and --reconnect do
+        with PtyEndpoint(link=link) as pty, again() as port:
+            port.write(b"x")
+            assert read_until(pty, 1) == b"x"
 
 
 def test_open_port_failure_is_one_line_link_error(tmp_path):

@@ -24,7 +24,7 @@ from conform.errors import UserError
 from conform.link.endpoint import Endpoint
 from conform.link.forward import Forwarder, Tap
 from conform.link.peerwatch import PeerWatch
-from conform.link.ports import open_port
+from conform.link.ports import Reopener
 from conform.link.pty import PtyEndpoint
 from conform.stops import STOP_SIGNALS
 
@@ -32,6 +32,7 @@ from conform.stops import STOP_SIGNALS
 class _Live:
     runner: Forwarder | Tap
     recorder: Recorder
+    _reopeners: list[Reopener]
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until stopped; ``True`` if it has stopped."""
@@ -65,6 +66,11 @@ class _Live:
     def close(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def _let_go(self) -> None:
+        """Let the ports' pty numbers go, once nothing will reopen them (``Reopener``)."""
+        for reopen in self._reopeners:
+            reopen.close()
+
 
 class ProxyCapture(_Live):
     """A pty for the sender, forwarded both ways to the unit, every byte recorded."""
@@ -85,12 +91,14 @@ class ProxyCapture(_Live):
         self.unit_url = unit_url
         self.baud = baud
         self._last = {"host": float("-inf"), "unit": float("-inf")}
-        opener = open_unit or (lambda: open_port(unit_url, baud))
+        self._reopeners = [] if open_unit else [Reopener(unit_url, baud)]
+        opener = open_unit or self._reopeners[0]
         unit = opener()
         try:
             self.host = PtyEndpoint(link=link)
         except OSError:
             unit.close()
+            self._let_go()
             raise
         self.host_path = self.host.path
         try:
@@ -104,6 +112,7 @@ class ProxyCapture(_Live):
         except Exception:
             self.host.close()
             unit.close()
+            self._let_go()
             raise
         self.recorder.link_event("open", f"sender pty {self.host_path}", side="host")
         self.recorder.link_event("open", f"{unit_url} at {baud} Bd", side="unit")
@@ -135,6 +144,7 @@ class ProxyCapture(_Live):
         dropped = dict(self.runner.dropped)
         for side in ("host", "unit"):
             self.runner.endpoint(side).close()
+        self._let_go()
         self.recorder.link_event("close", "capture finished", side="session")
         if any(dropped.values()):
             self.recorder.log("warning", f"bytes not delivered (port down): {dropped}")
@@ -159,14 +169,14 @@ class SniffCapture(_Live):
         flush_interval: float = 0.25,
         read_size: int = 256,
     ) -> None:
-        def opener(url: str) -> Callable[[], Endpoint]:
-            return lambda: open_port(url, baud)
-
-        host = opener(host_url)()
+        open_host, open_unit = Reopener(host_url, baud), Reopener(unit_url, baud)
+        self._reopeners = [open_host, open_unit]
+        host = open_host()
         try:
-            unit = opener(unit_url)()
+            unit = open_unit()
         except Exception:
             host.close()
+            self._let_go()
             raise
         try:
             self.recorder = Recorder(
@@ -178,6 +188,7 @@ class SniffCapture(_Live):
         except Exception:
             host.close()
             unit.close()
+            self._let_go()
             raise
         self.merger = Merger(baud, read_size=read_size, host_lines=_host_lines(variant))
         self._lock = threading.Lock()
@@ -187,8 +198,8 @@ class SniffCapture(_Live):
                                  side="unit")
         self.runner = Tap(
             host, unit, on_chunk=self._chunk, on_event=self._event, clock=self.recorder.now,
-            reopen_host=opener(host_url) if reconnect else None,
-            reopen_unit=opener(unit_url) if reconnect else None, read_size=read_size,
+            reopen_host=open_host if reconnect else None,
+            reopen_unit=open_unit if reconnect else None, read_size=read_size,
         )
         self._ticker = threading.Thread(target=self._tick, name="merge-tick", daemon=True)
         self.runner.start()
@@ -214,6 +225,7 @@ class SniffCapture(_Live):
             self._emit(self.merger.flush())
         for side in ("host", "unit"):
             self.runner.endpoint(side).close()
+        self._let_go()
         self.recorder.link_event("close", "capture finished", side="session")
         self.recorder.close({"late_chunks": self.merger.late,
                              "ended_by": self.failure or "stop"})

@@ -6,7 +6,7 @@ Everything here offers the ``Endpoint`` interface (``name``, ``read(max, timeout
 
 from conform.link.endpoint import Endpoint, PortGone, WriteTimeout
 from conform.link.forward import Forwarder, Tap
-from conform.link.ports import SerialEndpoint, open_port
+from conform.link.ports import Reopener, SerialEndpoint, open_port
 from conform.link.pty import PtyEndpoint
 from conform.link.tcp import TcpServerEndpoint
 
@@ -15,6 +15,7 @@ __all__ = [
     "Forwarder",
     "PortGone",
     "PtyEndpoint",
+    "Reopener",
     "SerialEndpoint",
     "Tap",
     "TcpServerEndpoint",

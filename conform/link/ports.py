@@ -10,7 +10,9 @@ to the wire.
 
 from __future__ import annotations
 
+import os
 import select
+import stat
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -151,6 +153,52 @@ def _open(url: str, baud: int, timeout: float | None, write_timeout: float | Non
     except (serial.SerialException, ValueError, OSError) as exc:
         raise LinkError(f"{url}: cannot open: {_one_line(exc)}") from None
     return SerialEndpoint(port, url, timeout)
+
+
+_PTY_MAJORS = range(136, 144)   # Unix98 pty slaves (the kernel's devices.txt)
+
+
+def _is_pty(path: str) -> bool:
+    """Whether ``path`` is a pty's device node itself (not a symlink to one)."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in _PTY_MAJORS
+
+
+class Reopener:
+    """Opens ``url`` now and again after the port was lost (``--reconnect``).
+
+    The kernel gives a closed pty's number to the next pty anyone opens, so a pty's device
+    path /dev/pts/N opened again after its pty went away would reach another program's port.
+    While a reopener lives it holds the first pty it opened (a descriptor it never reads), so
+    the number cannot pass on: once that pty is gone the path stays gone. A symlink, the
+    stable name made again for each new pty, is followed as it points.
+    """
+
+    def __init__(self, url: str, baud: int) -> None:
+        self.url = url
+        self.baud = baud
+        self._hold: int | None = None
+        self._first = True
+
+    def __call__(self) -> SerialEndpoint:
+        port = open_port(self.url, self.baud)
+        if self._first:
+            self._first = False
+            if _is_pty(self.url):
+                try:
+                    self._hold = os.open(self.url, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+                except OSError:
+                    pass
+        return port
+
+    def close(self) -> None:
+        """Let the pty's number go (at the end of the run that reopens it)."""
+        hold, self._hold = self._hold, None
+        if hold is not None:
+            os.close(hold)
 
 
 _HELD: dict[tuple[str, int], SerialEndpoint | None] = {}

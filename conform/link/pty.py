@@ -120,7 +120,15 @@ class PtyEndpoint:
             raise PortGone(f"{self.path}: write failed: {exc.strerror}") from None
 
     def close(self) -> None:
-        """Close both sides (the peer then sees EIO: an unplugged port) and drop the link."""
+        """Drop the link, then close both sides (the peer then sees EIO: an unplugged port).
+        In that order: once closed, the pty's number goes to the next pty anyone opens, and a
+        peer reopening the link must not reach that one."""
+        if self._link is not None and self._master is not None and os.path.islink(self._link):
+            try:
+                if os.readlink(self._link) == self.device:
+                    os.unlink(self._link)
+            except OSError:
+                pass
         for attr in ("_master", "_slave"):
             fd = getattr(self, attr)
             setattr(self, attr, None)
@@ -129,12 +137,6 @@ class PtyEndpoint:
                     os.close(fd)
                 except OSError:
                     pass
-        if self._link is not None and os.path.islink(self._link):
-            try:
-                if os.readlink(self._link) == self.device:
-                    os.unlink(self._link)
-            except OSError:
-                pass
 
     def __enter__(self) -> PtyEndpoint:
         return self

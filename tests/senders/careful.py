@@ -10,6 +10,7 @@ sending vectors, wait until the input that caused it (SR4) is released, then `G`
 Exit 0 when every job line was acknowledged, 1 otherwise.
 """
 
+import os
 import sys
 import time
 
@@ -19,6 +20,7 @@ import serial
 # a few hundred ms late, and a late answer taken for lost is a second line in flight
 TIMEOUT = 0.4
 QUIET = 0.25
+PARENT = os.getppid()
 
 
 def summed(body: str) -> str:
@@ -44,6 +46,10 @@ class Link:
         self.buf = b""
         deadline = time.monotonic() + 30.0
         while True:
+            if os.getppid() != PARENT:
+                # whoever judged it is gone (killed): its port is not coming back, and a
+                # pty number it named may already be another program's port
+                raise SystemExit("careful: the program that ran it is gone")
             try:
                 self.port = serial.Serial(self.path, 115200, timeout=0.02)
                 return
