@@ -542,10 +542,15 @@ def test_emulator_link_fault_is_named(tmp_path):
     import serial
 
     rec = tmp_path / "emu.mcap"
+    # reopened through the stable name (--link), as a sender that reconnects must: the pty's
+    # own number goes to whichever pty is opened next while the line is down, on this machine
+    # another test's emulator
+    link = tmp_path / "unit"
     emu = _conform("emulate", GVE, "--faults", "disconnect=0.4,downtime=2", "--seed", "3",
-                   "--record", str(rec))
+                   "--record", str(rec), "--link", str(link))
     try:
-        path = emu.stdout.readline().decode().strip()
+        emu.stdout.readline()
+        path = str(link)
         port = None   # opened in the loop: on a loaded machine the line may drop (0.4 s after
         # the emulator's start) before the first open, and the pty is away for the downtime
         t_end = time.monotonic() + 7.0

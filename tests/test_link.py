@@ -87,6 +87,27 @@ def test_a_reopened_pty_path_never_reaches_another_pty():
             pty.close()
 
 
+def test_an_unplugged_pty_keeps_its_number_until_closed():
+    """An emulator's line down (--faults disconnect): the peer is hung up and the device node
+    goes, but no other pty can take the number until the emulator lets it go."""
+    pty = PtyEndpoint()
+    port = open_port(pty.device, 115200)
+    pty.unplug()
+    with pytest.raises(PortGone):
+        for _ in range(20):
+            port.read(10, 0.05)
+    port.close()
+    with pytest.raises(LinkError):
+        open_port(pty.device, 115200)
+    others = [PtyEndpoint() for _ in range(4)]
+    try:
+        assert pty.device not in [o.device for o in others]
+    finally:
+        for o in others:
+            o.close()
+        pty.close()
+
+
 def test_the_same_pty_opens_again_and_a_symlink_follows_its_new_pty(tmp_path):
     with PtyEndpoint() as pty:
         again = Reopener(pty.device, 115200)

@@ -105,7 +105,16 @@ def open_endpoint(tcp_port: int | None, link_path: str | None
     except OSError as exc:
         raise UserError(f"cannot create a pty{' at ' + link_path if link_path else ''}: "
                         f"{exc.strerror or exc}") from None
-    return pty, lambda: PtyEndpoint(link=link_path)
+    current = [pty]
+
+    def reopen() -> Endpoint:
+        # the unplugged pty held its number while the line was down (PtyEndpoint.unplug):
+        # let it go now, so that the new pty most likely takes that number again
+        current[0].close()
+        current[0] = PtyEndpoint(link=link_path)
+        return current[0]
+
+    return pty, reopen
 
 
 @dataclass

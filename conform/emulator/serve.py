@@ -343,7 +343,8 @@ class Emulator:
         self._link_event("disconnect", "fault injection: link dropped")
         self.report(f"fault: link down for {self.injector.config.downtime:g} s")
         if self.reopen is not None:
-            self.endpoint.close()
+            unplug = getattr(self.endpoint, "unplug", None)   # a pty: keeps its number
+            (unplug or self.endpoint.close)()
 
     def _while_down(self, now: float) -> None:
         self._run_control(now)

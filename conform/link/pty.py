@@ -119,16 +119,31 @@ class PtyEndpoint:
         except OSError as exc:
             raise PortGone(f"{self.path}: write failed: {exc.strerror}") from None
 
-    def close(self) -> None:
-        """Drop the link, then close both sides (the peer then sees EIO: an unplugged port).
-        In that order: once closed, the pty's number goes to the next pty anyone opens, and a
-        peer reopening the link must not reach that one."""
+    def unplug(self) -> None:
+        """Hang up the peer (it sees EIO; the device node goes) but keep the pty's number
+        taken until ``close``: while a line is down, a peer reopening the old path finds
+        nothing rather than the next pty anyone opened, which the kernel would give it."""
+        self._drop_link()
+        master, self._master = self._master, None
+        if master is not None:
+            try:
+                os.close(master)
+            except OSError:
+                pass
+
+    def _drop_link(self) -> None:
         if self._link is not None and self._master is not None and os.path.islink(self._link):
             try:
                 if os.readlink(self._link) == self.device:
                     os.unlink(self._link)
             except OSError:
                 pass
+
+    def close(self) -> None:
+        """Drop the link, then close both sides (the peer then sees EIO: an unplugged port).
+        In that order: once closed, the pty's number goes to the next pty anyone opens, and a
+        peer reopening the link must not reach that one."""
+        self._drop_link()
         for attr in ("_master", "_slave"):
             fd = getattr(self, attr)
             setattr(self, attr, None)
