@@ -43,14 +43,19 @@ def test_pty_read_times_out_empty():
         assert time.monotonic() - t0 >= 0.04
 
 
-def test_closing_the_pty_unplugs_the_peer():
-    pty = PtyEndpoint()
-    port = open_port(pty.path, 115200)
-    pty.close()
+def _sees_it_gone(port) -> None:
+    """The peer's reads end in PortGone (within a second), and it closes its port."""
     with pytest.raises(PortGone):
         for _ in range(20):
             port.read(10, 0.05)
     port.close()
+
+
+def test_closing_the_pty_unplugs_the_peer():
+    pty = PtyEndpoint()
+    port = open_port(pty.path, 115200)
+    pty.close()
+    _sees_it_gone(port)
     with pytest.raises(PortGone):
         pty.read(10, 0.01)
 
@@ -93,10 +98,7 @@ def test_an_unplugged_pty_keeps_its_number_until_closed():
     pty = PtyEndpoint()
     port = open_port(pty.device, 115200)
     pty.unplug()
-    with pytest.raises(PortGone):
-        for _ in range(20):
-            port.read(10, 0.05)
-    port.close()
+    _sees_it_gone(port)
     with pytest.raises(LinkError):
         open_port(pty.device, 115200)
     others = [PtyEndpoint() for _ in range(4)]

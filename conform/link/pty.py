@@ -124,12 +124,17 @@ class PtyEndpoint:
         taken until ``close``: while a line is down, a peer reopening the old path finds
         nothing rather than the next pty anyone opened, which the kernel would give it."""
         self._drop_link()
-        master, self._master = self._master, None
-        if master is not None:
-            try:
-                os.close(master)
-            except OSError:
-                pass
+        self._close_fds("_master")
+
+    def _close_fds(self, *attrs: str) -> None:
+        for attr in attrs:
+            fd = getattr(self, attr)
+            setattr(self, attr, None)
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
 
     def _drop_link(self) -> None:
         if self._link is not None and self._master is not None and os.path.islink(self._link):
@@ -144,14 +149,7 @@ class PtyEndpoint:
         In that order: once closed, the pty's number goes to the next pty anyone opens, and a
         peer reopening the link must not reach that one."""
         self._drop_link()
-        for attr in ("_master", "_slave"):
-            fd = getattr(self, attr)
-            setattr(self, attr, None)
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+        self._close_fds("_master", "_slave")
 
     def __enter__(self) -> PtyEndpoint:
         return self
