@@ -158,7 +158,7 @@ class Metrics:
             for k, (n, q) in sorted(self.by_cmd.items())}
         nb = int(min(600, max(10, duration)))
         edges = np.linspace(t0, t0 + duration, nb + 1)
-        width = np.diff(edges)
+        width = duration / nb   # the bins are equal: a capture's end may sit at t0 in floats
         series = pd.DataFrame({
             "t": edges[:-1] - t0,
             "exchanges_per_s": self.answered_t.histogram(edges) / width,

@@ -65,16 +65,20 @@ class Session:
         """Send ``data``; collect until ``answers`` ok lines (one per line sent) came."""
         want = data.count(b"\n") if answers is None else answers
         try:
-            self.target.send(data)
+            sent, _ = self.target.send(data)
         except Exception as exc:  # noqa: BLE001 - a link failure is the harness's
             raise HarnessError(f"{type(exc).__name__}: {exc}") from None
         return self.collect(until=lambda ls: self.oks(ls) >= want, timeout=timeout,
-                            linger=linger)
+                            linger=linger, since=sent)
 
-    def collect(self, *, until: Any = None, timeout: float = 2.0, linger: float = 0.1) -> Talk:
+    def collect(self, *, until: Any = None, timeout: float = 2.0, linger: float = 0.1,
+                since: float | None = None) -> Talk:
+        """Lines until ``until`` holds (then ``linger`` more) or ``timeout``; the Talk's t0 is
+        ``since`` when given: the moment before the bytes were written, since a unit on another
+        core can read them before the write returns and a time taken after it runs short."""
         t = self.target
-        t0 = t.now()
-        deadline = t0 + timeout
+        t0 = t.now() if since is None else since
+        deadline = t.now() + timeout
         lines: list[str] = []
         times: list[float] = []
         done_at: float | None = None
