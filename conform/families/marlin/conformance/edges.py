@@ -294,7 +294,7 @@ def homing_from_z5(s: Session) -> Outcome:
     pos = _where(s)
     problems = []
     if took is None or not lo <= took <= lo + HOMING_SLACK:
-        problems.append("no ok" if took is None else f"G28 took {took:.2f} s")
+        problems.append("no ok" if took is None else f"G28 took {took:.3f} s")
     if pos is None or [round(x, 2) for x in pos[:3]] + pos[4:] != [0.0] * 6:
         problems.append(f"after M410 {_shown(pos)}")
     return not problems, f"G28 ok after {lo:.2f} .. {lo + HOMING_SLACK:.2f} s; after M410 " \

@@ -92,7 +92,7 @@ def second_homing(s: Session) -> Outcome:
     want = [0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0]
     problems = []
     if took is None or not lo <= took <= lo + HOMING_SLACK:
-        problems.append("no ok" if took is None else f"G28 took {took:.2f} s")
+        problems.append("no ok" if took is None else f"G28 took {took:.3f} s")
     if pos is None or [round(x, 2) for x in pos] != want:
         problems.append(_shown(pos))
     return not problems, f"G28 ok after {lo:.2f} .. {lo + HOMING_SLACK:.2f} s; then " \
