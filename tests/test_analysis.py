@@ -307,6 +307,7 @@ def test_report_and_parquet_api(tmp_path: Path) -> None:
     assert len(ex) == len(a.exchanges)
 
 
+@pytest.mark.slow
 def test_report_plots_over_time_and_time_range(tmp_path: Path) -> None:
     from conform.analysis.plots import all_plots
     from conform.cli.main import main

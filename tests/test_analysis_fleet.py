@@ -52,6 +52,7 @@ def test_fleet_on_local_processes_writes_one_dataset_and_a_summary(tmp_path):
     assert "mill-2" in paths["html"].read_text()
 
 
+@pytest.mark.slow
 def test_fleet_cli_exit_status_and_report(tmp_path, capsys):
     root = fleet_dir(tmp_path)
     with pytest.raises(SystemExit) as ex:
@@ -126,6 +127,7 @@ def test_a_fleet_holds_grbl_and_unknown_captures_too(tmp_path):
     assert "| router-1 | shift | grbl | clean |" in paths["markdown"].read_text()
 
 
+@pytest.mark.slow
 def test_one_machine_is_said_in_the_singular(tmp_path, capsys):
     good = Path(__file__).resolve().parent.parent / "captures" / "good-rs232.mcap"
     with pytest.raises(SystemExit):
@@ -146,6 +148,7 @@ def _md_table(text: str, heading: str) -> list[dict[str, str]]:
     return [dict(zip(head, r, strict=True)) for r in body]
 
 
+@pytest.mark.slow
 def test_fleet_cli_writes_every_table_session_reports_and_a_styled_report(tmp_path, capsys,
                                                                          monkeypatch):
     """`--report fleet/ --parquet t/` on a folder: each session's own report under the
@@ -187,6 +190,7 @@ def test_fleet_cli_writes_every_table_session_reports_and_a_styled_report(tmp_pa
     assert (fleet / "sessions" / "mill-1" / "careless-noisy" / "findings.json").exists()
 
 
+@pytest.mark.slow
 def test_a_machines_starved_time_is_its_sessions_starved_time(tmp_path, capsys):
     """usb-latency's queue runs dry (the session report's starvations and starved seconds):
     the machine's row says the same starved seconds as its sessions' rows and the session's

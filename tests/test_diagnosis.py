@@ -313,6 +313,7 @@ def test_bundle_round_trips_through_analyze(tmp_path):
     assert p.returncode == 2 and p.stderr.strip() == f"conform: {bad}: the bundle holds no capture"
 
 
+@pytest.mark.slow
 def test_hostile_captures_are_diagnosed_or_named_never_a_traceback(tmp_path):
     from hostile_captures import corpus
 
