@@ -7,6 +7,7 @@ produced by the reference unit; deviant units must disagree with it where they d
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -130,13 +131,32 @@ def test_bad_input_on_the_command_line(tmp_path) -> None:
     no_variant.write_text("> M105\n< ok\n")
     for args, says in (
         ((str(bad), "--variant", "marlin-2.1"), "not an MCAP capture nor a UTF-8 transcript"),
-        ((str(no_variant),), "names no variant: give --variant"),
+        ((str(no_variant),), "names no variant and its folder has no VARIANT file: give --variant"),
         ((str(tmp_path / "missing"), "--variant", "marlin-2.1"), "cannot read"),
     ):
         r = conform("emulate", "judge", *args)
         assert r.returncode == 2, r.stderr
         assert says in r.stderr and "Traceback" not in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_folders_variant_file_names_the_variant(tmp_path) -> None:
+    """A folder of one firmware's recordings names its variant once, in ``VARIANT`` (as the
+    recordings' README does): its transcripts are judged without --variant; an unknown id is
+    one line naming that file; --variant still wins."""
+    shutil.copy(FACTS, tmp_path / "facts.transcript")
+    (tmp_path / "VARIANT").write_text("marlin-2.1\n")
+    r = conform("emulate", "judge", str(tmp_path / "facts.transcript"))
+    assert r.returncode == 0 and "AGREES with the reference marlin-2.1" in r.stdout, r.stderr
+    r = conform("emulate", "judge", str(tmp_path / "facts.transcript"), "--variant", "grbl-1.1f")
+    assert r.returncode == 2 and "not grbl-1.1f" in r.stderr, r.stderr
+    (tmp_path / "VARIANT").write_text("marlin-9\n")
+    r = conform("emulate", "judge", str(tmp_path / "facts.transcript"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == [
+        f"conform: {tmp_path / 'VARIANT'}: 'marlin-9' is not a variant (known: "
+        + r.stderr.split("(known: ", 1)[1].strip()], r.stderr
+    assert "marlin-2.1" in r.stderr.split("(known: ", 1)[1]
 
 
 def test_the_readme_path_works_from_a_clean_cwd(tmp_path) -> None:

@@ -22,6 +22,7 @@ from conform.cli.params import (
     VARIANT,
     quiet_option,
     seed_option,
+    variant_ids,
 )
 from conform.errors import UserError
 
@@ -163,9 +164,17 @@ def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool)
     from conform.families import family_for_variant
 
     transcript = read_transcript(recording)
-    name = variant or transcript.variant
+    name, named_by = variant, "--variant"
+    if not name and transcript.variant:
+        name, named_by = transcript.variant, recording
     if not name:
-        raise UserError(f"{recording}: the recording names no variant: give --variant")
+        name, named_by = _folder_variant(recording)
+    if not name:
+        raise UserError(f"{recording}: the recording names no variant and its folder has no "
+                        "VARIANT file: give --variant")
+    known = variant_ids()
+    if name not in known:
+        raise UserError(f"{named_by}: {name!r} is not a variant (known: {', '.join(known)})")
     fam = family_for_variant(name)
     verdict = judge_recording(transcript, fam, name, settle)
     if as_json:
@@ -174,3 +183,17 @@ def judge_cmd(recording: str, variant: str | None, settle: float, as_json: bool)
         for line in render(verdict):
             click.echo(line)
     sys.exit(0 if verdict.agrees else 1)
+
+
+def _folder_variant(recording: str) -> tuple[str | None, str]:
+    """The variant a folder of recordings names in its ``VARIANT`` file (its first word), as
+    a folder of one firmware's recordings does: then the files in it need no --variant.
+    Returns it and the file's path (for an error that names where it came from)."""
+    from pathlib import Path
+
+    path = Path(recording).parent / "VARIANT"
+    try:
+        words = path.read_text(encoding="utf-8", errors="replace").split()
+    except OSError:
+        return None, str(path)
+    return (words[0] if words else None), str(path)

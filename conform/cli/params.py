@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 MAX_BAUD = 10_000_000  # above any RS232 converter; a typo guard, not a hardware limit
 
 
-def _variant_ids() -> list[str]:
+def variant_ids() -> list[str]:
     """Every family's variants, in the registry's order (conform.families)."""
     from conform.families import families
 
@@ -45,14 +45,14 @@ class VariantType(click.ParamType):
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
         text = str(value).strip()
-        known = _variant_ids()
+        known = variant_ids()
         if text not in known:
             self.fail(f"{text!r} is not a variant (known: {', '.join(known)})", param, ctx)
         return text
 
     def shell_complete(self, ctx: click.Context, param: click.Parameter,
                        incomplete: str) -> list[CompletionItem]:
-        return [CompletionItem(v) for v in _variant_ids() if v.startswith(incomplete)]
+        return [CompletionItem(v) for v in variant_ids() if v.startswith(incomplete)]
 
 
 class TargetType(click.ParamType):
@@ -70,7 +70,7 @@ class TargetType(click.ParamType):
         parts = text.split(":")
         if len(parts) > 3:
             self.fail(f"{text!r}: expected emu:VARIANT[:MUTANT]", param, ctx)
-        known = _variant_ids()
+        known = variant_ids()
         if len(parts) > 1 and not parts[1]:
             self.fail(f"{text!r} names no variant: emu:VARIANT (one of {', '.join(known)}), "
                       "or emu alone for the default", param, ctx)
@@ -89,7 +89,7 @@ class TargetType(click.ParamType):
     def shell_complete(self, ctx: click.Context, param: click.Parameter,
                        incomplete: str) -> list[CompletionItem]:
         if incomplete.startswith("emu"):
-            return [CompletionItem(f"emu:{v}") for v in _variant_ids()
+            return [CompletionItem(f"emu:{v}") for v in variant_ids()
                     if f"emu:{v}".startswith(incomplete)]
         return [CompletionItem(incomplete, type="file")]
 
