@@ -13,7 +13,7 @@ from test_conformance_link import served  # conform emulate serve (or a mutant) 
 from conform.conformance.results import Grade
 from conform.conformance.runner import RunOptions
 from conform.families.gve.conformance.checks import generate, select
-from conform.families.gve.conformance.expect import reply_mismatch
+from conform.families.gve.conformance.expect import moving_tolerance, reply_mismatch
 from conform.families.gve.conformance.motion_free import zero_line
 from conform.families.gve.conformance.runner import Runner
 from conform.families.gve.conformance.safety import Guard, hazards
@@ -132,6 +132,28 @@ def test_bytes_after_the_cr_are_judged_with_the_answer():
     ref = GveReply(b"!0PF\r", 0.0, [b"0,1,2,3"])
     plus = GveReply(b"!0PF\r", 0.0, [b"0,+1,2,3"])
     assert "not an integer" in reply_mismatch(pos, ref, plus, True, 5)
+
+
+def test_a_position_under_way_may_lie_anywhere_the_reading_could_have_been_taken():
+    """At 125 000 pulses/s the reference read X=181 124 with its answer back in 2 ms. A target
+    whose answer took 198 ms longer (a loaded emulator, a busy unit) took its reading up to
+    198 ms later: 25 000 pulses further is within reach then, and not when it answered as
+    promptly as the reference; the gap between the two writes counts the same way."""
+    pos = Step(line=b"!0PF\r", kind="position")
+    ref = GveReply(b"!0PF\r", 1.565, [b"0,181124,-456,789"], t_rx=1.567, moving=True)
+    further = [b"0,206124,-456,789"]
+    slow = GveReply(b"!0PF\r", 1.565, further, t_rx=1.765)
+    prompt = GveReply(b"!0PF\r", 1.565, further, t_rx=1.567)
+    assert moving_tolerance(125000, ref, slow) == pytest.approx(125000 * (0.198 + 0.05))
+    assert reply_mismatch(pos, ref, slow, True, moving_tolerance(125000, ref, slow)) is None
+    assert moving_tolerance(125000, ref, prompt) == pytest.approx(125000 * 0.05)
+    assert "not within 6250 of 181124" in reply_mismatch(pos, ref, prompt, True,
+                                                         moving_tolerance(125000, ref, prompt))
+    written_later = GveReply(b"!0PF\r", 1.765, further, t_rx=1.767)
+    assert reply_mismatch(pos, ref, written_later, True,
+                          moving_tolerance(125000, ref, written_later)) is None
+    unanswered = GveReply(b"!0PF\r", 1.565, [])
+    assert moving_tolerance(125000, ref, unanswered) == pytest.approx(125000 * 0.05)
 
 
 FRAMING = ["framing/answers", "V/valid", "F/valid", "PF/valid", "SR/word-2", "H/idle"]

@@ -170,6 +170,18 @@ def _trailing_mismatch(expected: bytes, actual: bytes, loose: bool) -> str | Non
     return f"bytes after the answer's CR: {_shown(actual)}"
 
 
+def moving_tolerance(max_rate: float, expected: Reply, actual: Reply) -> float:
+    """How far an axis under way may read from the reference's position: the max rate over the
+    time the two readings may lie apart. A unit takes its position between the moment the line
+    is written and the moment its answer is back, so the readings may differ by the gap between
+    the two writes, plus the time the target's answer took beyond the reference's (a unit that
+    is slow to answer read its position later), plus 50 ms for the link's timing."""
+    late = 0.0
+    if expected.t_rx is not None and actual.t_rx is not None:
+        late = max(0.0, (actual.t_rx - actual.t_tx) - (expected.t_rx - expected.t_tx))
+    return max_rate * (abs(expected.t_tx - actual.t_tx) + late + 0.05)
+
+
 def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loose: bool,
                    tol: float) -> str | None:
     """Why ``actual`` is not an answer the reference allows for ``step`` (None if it is)."""
@@ -262,7 +274,7 @@ def judge(ref: Reference, script: Script, actual: Sequence[Reply | None], *, loo
     def tol_of(e: Reply | None, a: Reply | None) -> float:
         if not loose or e is None or a is None:
             return 0.0
-        return max_rate * (abs(e.t_tx - a.t_tx) + 0.05)
+        return moving_tolerance(max_rate, e, a)
 
     expected = ref.transcript(script)
     miss = first_mismatch(script, expected, actual, loose, tol_of)

@@ -26,7 +26,13 @@ from conform.conformance.results import INFO, CheckResult, Grade, LogEntry
 from conform.conformance.target import HarnessError, Reply
 from conform.errors import LinkError
 from conform.families.gve.conformance.checks import Check, answer_kind, answer_shape, clause_number
-from conform.families.gve.conformance.expect import answers_differ, first_mismatch, reply_mismatch, show
+from conform.families.gve.conformance.expect import (
+    answers_differ,
+    first_mismatch,
+    moving_tolerance,
+    reply_mismatch,
+    show,
+)
 from conform.families.gve.conformance.safety import SafetyRefusal, hazards
 from conform.families.gve.conformance.script import ENVIRONMENT, Step
 from conform.families.gve.conformance.target import POLL_LINE, GveEmuTarget
@@ -185,7 +191,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             self.actual.append(a)
             tol = 0.0
             if loose:
-                tol = float(v.max_rate) * (abs(a.t_tx - e.t_tx) + 0.05)
+                tol = moving_tolerance(float(v.max_rate), e, a)
             why = reply_mismatch(step, e, a, loose, tol)
             if why is not None:
                 self._differs(len(self.script) - 1, why, e, a)
@@ -202,7 +208,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             def tol_of(x: Reply | None, y: Reply | None) -> float:
                 if not loose or x is None or y is None:
                     return 0.0
-                return float(v.max_rate) * (abs(x.t_tx - y.t_tx) + 0.05)
+                return moving_tolerance(float(v.max_rate), x, y)
 
             for q in questions:
                 for alt in spec.questions[q].alternatives:
