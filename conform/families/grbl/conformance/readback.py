@@ -19,6 +19,7 @@ from conform.families.grbl.unit.adopt import UnitState
 _PARAM = re.compile(r"^\[(G5[4-9]|G28|G30|G92|TLO|PRB):([^\]]*)\]$")
 _SETTING = re.compile(r"^\$(\d+)=(.*)$")
 _STARTUP = re.compile(r"^\$N(\d+)=(.*)$")
+READBACK_TIMEOUT = 6.0  # seconds for one read-back answer (real grbl answers in milliseconds)
 
 
 def _numbers(text: str, scale: float) -> list[float]:
@@ -28,7 +29,7 @@ def _numbers(text: str, scale: float) -> list[float]:
 def read_eeprom(session: Any) -> UnitState:
     """Settings (``$$``), startup lines (``$N``) and build info (``$I``)."""
     s = UnitState()
-    for x in session.talk(b"$$\n").lines:
+    for x in session.talk(b"$$\n", timeout=READBACK_TIMEOUT).lines:
         m = _SETTING.match(x)
         if m:
             try:
@@ -36,12 +37,12 @@ def read_eeprom(session: Any) -> UnitState:
             except ValueError:
                 raise HarnessError(f"unreadable setting line {x!r}") from None
     lines = {}
-    for x in session.talk(b"$N\n").lines:
+    for x in session.talk(b"$N\n", timeout=READBACK_TIMEOUT).lines:
         m = _STARTUP.match(x)
         if m:
             lines[int(m.group(1))] = m.group(2)
     s.startup = [lines.get(i, "") for i in range(max(lines, default=-1) + 1)]
-    for x in session.talk(b"$I\n").lines:
+    for x in session.talk(b"$I\n", timeout=READBACK_TIMEOUT).lines:
         if x.startswith("[VER:") and x.endswith("]"):
             s.build_info = x[5:-1].split(":", 1)[1] if x.count(":") >= 2 else ""
     return s
@@ -57,7 +58,9 @@ def read_state(session: Any, known: UnitState
     said: list[tuple[bytes, list[str]]] = []
 
     def ask(data: bytes) -> list[str]:
-        lines = session.talk(data, status=data.count(b"?")).lines
+        # a read-back is no timing check: a unit (or an emulator on a loaded machine) may take
+        # seconds to answer, and only an answer that never comes is the harness's error
+        lines = session.talk(data, status=data.count(b"?"), timeout=READBACK_TIMEOUT).lines
         said.append((data, lines))
         return lines
 
