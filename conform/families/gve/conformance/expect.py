@@ -182,6 +182,18 @@ def moving_tolerance(max_rate: float, expected: Reply, actual: Reply) -> float:
     return max_rate * (abs(expected.t_tx - actual.t_tx) + late + 0.05)
 
 
+def tolerance_of(max_rate: float, loose: bool) -> Callable[[Reply | None, Reply | None], float]:
+    """The position tolerance for each (expected, actual) pair of answers: ``moving_tolerance``
+    on a link, none in-process (where the two run on one clock)."""
+
+    def tol(expected: Reply | None, actual: Reply | None) -> float:
+        if not loose or expected is None or actual is None:
+            return 0.0
+        return moving_tolerance(max_rate, expected, actual)
+
+    return tol
+
+
 def reply_mismatch(step: Step, expected: Reply | None, actual: Reply | None, loose: bool,
                    tol: float) -> str | None:
     """Why ``actual`` is not an answer the reference allows for ``step`` (None if it is)."""
@@ -271,11 +283,7 @@ def judge(ref: Reference, script: Script, actual: Sequence[Reply | None], *, loo
           questions: Sequence[str] = (), max_rate: float = 0.0) -> Verdict:
     """Grade a target's transcript of ``script`` against the reference (see module doc)."""
 
-    def tol_of(e: Reply | None, a: Reply | None) -> float:
-        if not loose or e is None or a is None:
-            return 0.0
-        return moving_tolerance(max_rate, e, a)
-
+    tol_of = tolerance_of(max_rate, loose)
     expected = ref.transcript(script)
     miss = first_mismatch(script, expected, actual, loose, tol_of)
     if miss is None:

@@ -29,9 +29,9 @@ from conform.families.gve.conformance.checks import Check, answer_kind, answer_s
 from conform.families.gve.conformance.expect import (
     answers_differ,
     first_mismatch,
-    moving_tolerance,
     reply_mismatch,
     show,
+    tolerance_of,
 )
 from conform.families.gve.conformance.safety import SafetyRefusal, hazards
 from conform.families.gve.conformance.script import ENVIRONMENT, Step
@@ -133,6 +133,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
     families = _families(v, allowed, target.emulated)
     unit_cls = runner.ref.unit_cls
     loose = runner.loose
+    tol_of = tolerance_of(float(v.max_rate), loose)
 
     class Sequences(RuleBasedStateMachine):
         def __init__(self) -> None:
@@ -189,10 +190,7 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
                 t, stray = self.ref.send(step.line)
                 e = Reply(step.line, t, stray=stray)
             self.actual.append(a)
-            tol = 0.0
-            if loose:
-                tol = moving_tolerance(float(v.max_rate), e, a)
-            why = reply_mismatch(step, e, a, loose, tol)
+            why = reply_mismatch(step, e, a, loose, tol_of(e, a))
             if why is not None:
                 self._differs(len(self.script) - 1, why, e, a)
 
@@ -204,11 +202,6 @@ def build_machine(runner: Any, shared: _Shared, examples: int, steps: int) -> ty
             else:  # shrinking a known failure: only the failing command's own questions
                 questions = ref.candidate_questions(script[index:index + 1], (), False)
             base = shared.dialect
-
-            def tol_of(x: Reply | None, y: Reply | None) -> float:
-                if not loose or x is None or y is None:
-                    return 0.0
-                return moving_tolerance(float(v.max_rate), x, y)
 
             for q in questions:
                 for alt in spec.questions[q].alternatives:
