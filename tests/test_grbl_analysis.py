@@ -239,6 +239,67 @@ def test_several_job_lines_in_flight_is_counting():
     assert a.metrics["streaming_method"] == "character-counting"
 
 
+
+def test_a_counting_sender_whose_first_fill_was_paced_is_counting():
+    """grbl-streamer's character counting through a proxy on a loaded machine (a CI run): its
+    first fill went out a line or two at a time, each answered by the idle planner before the
+    next, so no line was more than one ahead of its answer; then, with the planner full, it
+    kept six lines unanswered at every send, one line per answer. The steady state tells."""
+    lines = [b"G1X%dY%dF1000" % (i % 9, i % 4) for i in range(40)]
+    host, unit, t, sent = [(0.0, lines[0] + b"\n")], [], 0.0, 1
+    for answered in range(len(lines)):
+        t += 0.002 if answered < 5 else 0.05
+        unit.append((t, b"ok\r\n"))
+        for _ in range(2 if answered < 5 else 1):    # five answers make room for two lines
+            if sent < len(lines):
+                t += 0.001
+                host.append((t, lines[sent] + b"\n"))
+                sent += 1
+    m = analyze_streams(host, unit, spec=G).metrics
+    assert (m["answered"], m["max_job_lines_in_flight"], m["max_bytes_in_flight"]) == (40, 6, 6 * 12)
+    assert m["job_lines_back_to_back"] == 5               # each one line past its answer
+    assert m["streaming_method"] == "character-counting", m
+
+
+def _sender_taking_poll_oks_for_its_own(lines, polls_at, *, move=0.05):
+    """A send-response sender that writes its next job line on every ok, a `$G`'s too (what
+    grbl-streamer's incremental mode does with its poll thread's `$G`): each poll answered
+    mid-job leaves it one more line ahead for good. grbl answers in order, a move ``move``
+    after the one before (a full planner), a `$G` at once."""
+    host, unit, pending, sent, due = [(0.0, lines[0] + b"\n")], [], ["J"], 1, move
+    polls = list(polls_at)
+    for step in range(1, 100_000):
+        t = step * 0.001
+        if polls and t >= polls[0]:
+            polls.pop(0)
+            host.append((t, b"$G\n"))
+            pending.append("G")
+        if pending and t >= due:
+            kind = pending.pop(0)
+            unit.append((t, (b"[GC:G1 G54 G17 G21 G90 G94 M5 M9 T0 F1000 S0]\r\n" if kind == "G"
+                             else b"") + b"ok\r\n"))
+            if sent < len(lines):                       # any ok: the next line
+                host.append((t + 0.0005, lines[sent] + b"\n"))
+                pending.append("J")
+                sent += 1
+            if pending:
+                due = t + (0.001 if pending[0] == "G" else move)
+        if not pending and sent == len(lines):
+            return sorted(host), unit
+    raise AssertionError("the simulated session did not end")
+
+
+def test_a_send_response_sender_ahead_only_by_poll_oks_it_took_is_send_response():
+    """Three `$G` polls mid-job, each ok taken for a job line's: four job lines in flight from
+    then on, none sent beyond one per answer. Its depth is what the polls' answers lent it, so
+    it is no counting sender."""
+    lines = [b"G1X%dY%dF1000" % (i % 9, i % 4) for i in range(40)]
+    host, unit = _sender_taking_poll_oks_for_its_own(lines, [0.3, 0.6, 0.9])
+    m = analyze_streams(host, unit, spec=G).metrics
+    assert (m["lines"], m["answered"], m["max_job_lines_in_flight"]) == (43, 43, 4)
+    assert m["job_lines_back_to_back"] == 0
+    assert m["streaming_method"] == "send-response", m
+
 def _grouped_counting_traffic(lines, *, window=5, batch=3, gap=0.03):
     """A counting sender that is slow to read: its answers reach it ``batch`` at a time (one
     read), and it writes as many lines as they made room for in one write (one read on the

@@ -294,11 +294,28 @@ def analyze_streams(host: list[Chunk] | list[tuple[float, float, bytes]],
                      default=0)
     beyond_full = sum(1 for e, b in zip(job, beyond.tolist(), strict=True)
                       if b and e.bytes_in_flight > limit)
+    # the steady state tells as well: once the planner is full and its answers pace the
+    # sender, a counting one keeps a buffer's worth of job lines unanswered at every send, a
+    # send-response one its line alone (two where an ok was stamped late). Its first fill
+    # alone can look paced: on a loaded machine it may write the burst a line at a time, each
+    # answered by an idle planner before the next. Two things inflate the depth, and are
+    # allowed for: a sender may take a $G's ok for its job line's and go one line ahead for
+    # good (grbl-streamer does), so each answer to a non-job line during the job is taken off;
+    # a lost answer shifts the in-order pairing for every later line, so only when every line
+    # was answered.
+    keeps_ahead = False
+    if len(job) and not unanswered:
+        other_done = np.sort(np.fromiter(
+            (d for e in exchanges if not is_job_line(e.text)
+             and (d := _done_at(e)) > job_sent[0]), float))
+        credit = np.searchsorted(other_done, job_sent, "left")
+        keeps_ahead = float(np.median(job_in_flight - credit)) >= 3
     if not hb and not ub:
         method = "empty"
     elif not job:
         method = "none"
-    elif back_to_back == 0 or (most_ahead <= 1 and back_to_back <= len(job) // 4):
+    elif not keeps_ahead and (back_to_back == 0
+                              or (most_ahead <= 1 and back_to_back <= len(job) // 4)):
         method = "send-response"
     elif beyond_full <= len(job) // 4:
         method = "character-counting"
