@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import termios
 import time
 
 import serial
@@ -134,7 +135,7 @@ def test_faults_over_the_control_socket(tmp_path):
             try:
                 port = serial.Serial(link, 115200, timeout=0.05)
                 break
-            except (serial.SerialException, OSError):
+            except (serial.SerialException, OSError, termios.error):
                 time.sleep(0.05)
         assert os.path.islink(link)
         assert read_lines(port, 2, timeout=3) == ["", V.banner]   # the board restarted

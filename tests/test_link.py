@@ -124,6 +124,28 @@ def test_the_same_pty_opens_again_and_a_symlink_follows_its_new_pty(tmp_path):
             assert read_until(pty, 1) == b"x"
 
 
+def test_a_line_that_hangs_up_while_it_is_opened_is_a_link_error(monkeypatch):
+    """pyserial opens the device, then flushes it; a line dropped in between (an adapter
+    pulled, an emulator's line going down) makes that flush fail with termios.error, which
+    is no OSError: open_port says so in one line instead of letting it through."""
+    import serial.serialposix as posix
+
+    pty = PtyEndpoint()
+    flush = posix.termios.tcflush
+
+    def hang_up_first(fd, queue):
+        pty.unplug()                      # the line drops between open() and the flush
+        return flush(fd, queue)
+
+    monkeypatch.setattr(posix.termios, "tcflush", hang_up_first)
+    try:
+        with pytest.raises(LinkError) as err:
+            open_port(pty.device, 115200)
+    finally:
+        pty.close()
+    assert pty.device in str(err.value) and "\n" not in str(err.value)
+
+
 def test_open_port_failure_is_one_line_link_error(tmp_path):
     with pytest.raises(LinkError) as err:
         open_port(str(tmp_path / "no-such-tty"), 115200)

@@ -22,6 +22,18 @@ import serial
 from conform.errors import LinkError
 from conform.link.endpoint import PortGone, WriteTimeout
 
+try:
+    from termios import error as _TermiosError
+except ImportError:                     # no termios (Windows): pyserial raises SerialException
+    class _TermiosError(Exception):     # type: ignore[no-redef]
+        pass
+
+
+# What opening a port can raise. pyserial lets termios.error (not an OSError) through when the
+# line hangs up between opening the device and flushing it: a USB adapter pulled, or an
+# emulator's pty dropping its line, at that moment.
+OPEN_ERRORS: tuple[type[Exception], ...] = (serial.SerialException, ValueError, OSError, _TermiosError)
+
 
 class SerialEndpoint:
     """A pyserial port with ``read(max, timeout)`` that returns as soon as bytes arrive."""
@@ -150,7 +162,7 @@ def _open(url: str, baud: int, timeout: float | None, write_timeout: float | Non
             do_not_open=True,
         )
         port.open()
-    except (serial.SerialException, ValueError, OSError) as exc:
+    except OPEN_ERRORS as exc:
         raise LinkError(f"{url}: cannot open: {_one_line(exc)}") from None
     return SerialEndpoint(port, url, timeout)
 

@@ -12,9 +12,13 @@ Exit 0 when every job line was acknowledged, 1 otherwise.
 
 import os
 import sys
+import termios
 import time
 
 import serial
+
+# what a dropped line raises: pyserial lets termios.error (no OSError) through from a flush
+LINK_ERRORS = (serial.SerialException, OSError, termios.error)
 
 # how long an answer may take before it counts as lost: an emulator on a loaded machine can be
 # a few hundred ms late, and a late answer taken for lost is a second line in flight
@@ -41,7 +45,7 @@ class Link:
         what was in flight counts as lost, and the caller recovers through `>` and `@`."""
         try:
             self.port.close()
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             pass
         self.buf = b""
         deadline = time.monotonic() + 30.0
@@ -53,7 +57,7 @@ class Link:
             try:
                 self.port = serial.Serial(self.path, 115200, timeout=0.02)
                 return
-            except (serial.SerialException, OSError):
+            except LINK_ERRORS:
                 if time.monotonic() > deadline:
                     raise SystemExit("careful: the port did not come back") from None
                 time.sleep(0.1)
@@ -62,7 +66,7 @@ class Link:
         """What has come (b"" for nothing yet), or None when the link dropped (reopened)."""
         try:
             return self.port.read(self.port.in_waiting or 1)
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             self.reopen()
             return None
 
@@ -99,7 +103,7 @@ class Link:
                 self.port.reset_input_buffer()
                 self.buf = b""
             self.port.write(self.line(body))
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             self.reopen()   # the line is lost with the link: its answer will not come
 
     def parse(self, text: str | None) -> tuple[int, list[str]] | None:

@@ -25,9 +25,13 @@ send-response   one line at a time: the next only after the answer to the last
 
 import collections
 import sys
+import termios
 import time
 
 import serial
+
+# what a dropped line raises: pyserial lets termios.error (no OSError) through from a flush
+LINK_ERRORS = (serial.SerialException, OSError, termios.error)
 
 PORT, JOB = sys.argv[1], sys.argv[2]
 MODE = sys.argv[3] if len(sys.argv) > 3 else "good"
@@ -40,7 +44,7 @@ def open_port(deadline):
     while True:
         try:
             return serial.Serial(PORT, 115200, timeout=0.01)
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.05)
@@ -59,13 +63,13 @@ class Sender:
     def write(self, data):
         try:
             self.port.write(data)
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             self.reconnect()
 
     def reconnect(self):
         try:
             self.port.close()
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             pass
         time.sleep(0.1)
         self.port = open_port(time.monotonic() + 10)
@@ -77,7 +81,7 @@ class Sender:
     def lines_in(self):
         try:
             self.buf += self.port.read(self.port.in_waiting or 1)
-        except (serial.SerialException, OSError):
+        except LINK_ERRORS:
             self.reconnect()
         while b"\n" in self.buf:
             line, _, self.buf = self.buf.partition(b"\n")

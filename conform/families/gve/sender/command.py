@@ -213,6 +213,7 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
     from conform.families.gve.conformance.target import variant_for_firmware
     from conform.families.gve.sender.job import load_job
     from conform.families.gve.sender.probe import probe_unit
+    from conform.link.ports import OPEN_ERRORS
 
     # the job is read before the port is touched: a bad file or a motion job without
     # --allow-motion never reaches the unit; it is read again for the variant `?` finds
@@ -222,7 +223,7 @@ def _send_port(job: str, gopts: dict, spec: object, variant: str | None, target:
                         "--allow-motion")
     try:
         port = serial.serial_for_url(target, baudrate=baud, timeout=0.05, write_timeout=2.0)
-    except (serial.SerialException, ValueError, OSError) as exc:
+    except OPEN_ERRORS as exc:
         raise LinkError(f"{target}: cannot open: {exc}") from None
     try:
         try:
