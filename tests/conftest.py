@@ -1,10 +1,13 @@
 import pytest
+from rewrite_cache import leave_plugins_alone, rewrite_for_workers
 
-from conform.families.gve.spec import load_spec
+leave_plugins_alone()     # before anything of conform's is imported here (rewrite_cache.py)
 
 
 @pytest.fixture(scope="session")
 def spec():
+    from conform.families.gve.spec import load_spec
+
     return load_spec()
 
 
@@ -82,11 +85,15 @@ def pytest_runtest_makereport(item, call):
 def pytest_configure(config):
     """Started as `python -m pytest &` from a script, the suite (and each worker) inherits
     SIGINT ignored, and Python then leaves Ctrl-C without its KeyboardInterrupt: the tests
-    that interrupt a run in-process need it back."""
+    that interrupt a run in-process need it back. The controller rewrites the test modules'
+    asserts once for all the workers (rewrite_cache.py)."""
     import signal
+    from pathlib import Path
 
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None):
+        rewrite_for_workers(config, Path(__file__).parent)   # once, before the workers start
 
 
 @pytest.hookimpl(tryfirst=True)
