@@ -101,8 +101,8 @@ def pytest_collection_modifyitems(config, items):
     """Tests of a module that builds something once for the module (a fixture of module
     scope: a mutant report, a browser, a recorded storm) run in one worker, so that it is
     built once, and so do the tests of a costly session fixture (SHARED); and the slow tests
-    (ptys, subprocesses, real clocks) start first, so that the run does not end waiting on
-    one of them."""
+    (ptys, subprocesses, real clocks) start first, the longest of all (``long``) first of
+    them, so that the run does not end waiting on one of them."""
     for item in items:
         info = getattr(item, "_fixtureinfo", None)
         defs = info.name2fixturedefs.values() if info is not None else ()
@@ -111,4 +111,12 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.xdist_group(shared[0]))
         elif any(d[-1].scope == "module" for d in defs if d):
             item.add_marker(pytest.mark.xdist_group(item.module.__name__))
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    items.sort(key=lambda item: (-_seconds(item), item.get_closest_marker("slow") is None))
+
+
+def _seconds(item) -> float:
+    """What a ``long`` test's mark says it takes on a quiet machine: the longest start first,
+    one to a worker, while the short ones fill the gaps (pyproject.toml keeps xdist from
+    reordering the groups by their size)."""
+    mark = item.get_closest_marker("long")
+    return float(mark.args[0]) if mark is not None else 0.0

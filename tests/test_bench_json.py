@@ -66,6 +66,7 @@ def test_bench_ends_with_json(script, args, keys):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("script,args,keys", SLOW_CASES, ids=[c[0] for c in SLOW_CASES])
+@pytest.mark.long(55)
 def test_slow_bench_ends_with_json(script, args, keys):
     out = last_json(script, args)
     check(out, keys)

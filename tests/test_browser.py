@@ -230,6 +230,7 @@ def test_marlin_analysis_report_first_screen(browser, tmp_path, capsys):
     assert all(ok for _alt, ok in plots), plots
 
 
+@pytest.mark.long(57)
 def test_fleet_report_loads_and_names_its_counts(browser, tmp_path, capsys):
     out = tmp_path / "fleet"
     with pytest.raises(SystemExit):

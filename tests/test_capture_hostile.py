@@ -20,6 +20,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 @pytest.mark.slow
+@pytest.mark.long(96)
 def test_hostile_corpus(tmp_path):
     paths = corpus(tmp_path / "corpus", bomb_bytes=1 << 30, count=6)
     intact = {name: intact_info(data, tmp_path) for name, data in base_files().items()}

@@ -43,6 +43,7 @@ def expected_host(n: int) -> bytes:
 
 
 @pytest.mark.slow
+@pytest.mark.long(45)
 def test_sigkill_at_random_moments_loses_at_most_the_last_second(tmp_path):
     rng = random.Random(20240611)
     env = dict(os.environ, PYTHONPATH=str(REPO))

@@ -123,6 +123,7 @@ def test_every_tour_command_writes_under_the_tour_folder_or_reports():
 
 
 @pytest.mark.slow
+@pytest.mark.long(82)
 def test_the_tour_leaves_no_untracked_file(tmp_path):
     """The tour's commands (those that finish by themselves on an emulator) run in a fresh
     repository holding the project's .gitignore: afterwards git sees no new file."""

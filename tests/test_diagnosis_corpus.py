@@ -248,6 +248,7 @@ def test_marlin_diagnoses_its_own_halt_and_kill(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("part", PROXIED_PARTS)
+@pytest.mark.long(48)
 def test_real_senders_through_the_proxy(tmp_path, part):
     """conform send (grbl both methods, GVE, Marlin), grbl-streamer both modes, a stream.py
     like sender, bCNC, printcore, OctoPrint: completed; conform send stopped by SIGTERM: stopped

@@ -310,6 +310,7 @@ def test_max_steps_skips_a_directed_check_that_moves_further():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [3, 17])
+@pytest.mark.long(51)
 def test_random_sequences_agree_over_a_pty_from_where_the_machine_stands(tmp_path, seed):
     """The opt-in sequences against `conform emulate serve grbl-1.1f` on a pty: nothing the
     target answers changes what is drawn (no hypothesis abort), and the machine moved off 0

@@ -116,6 +116,7 @@ def test_the_parts_hold_every_check_once():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("part", range(PARTS))
+@pytest.mark.long(100)
 def test_every_check_over_the_pty(emulator, tmp_path, part):
     chosen = _parts()[part]
     p = subprocess.run([sys.executable, "-m", "conform", "run", "--target", emulator,

@@ -79,6 +79,7 @@ def test_flags_follow_what_the_lines_do():
 
 
 @pytest.mark.slow
+@pytest.mark.long(103)
 def test_over_a_pty_the_default_run_writes_nothing_and_the_opt_in_puts_back(tmp_path):
     """Against `conform emulate serve grbl-1.1f` standing off 0 with a G55 offset: a default
     run does the 17 rows that write nothing and skips the rest; with the opt-ins every row

@@ -45,6 +45,7 @@ def report(mutants_run):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(MUTANTS))
+@pytest.mark.long(130)
 def test_each_mutant_is_killed_by_the_check_meant_for_it(report, name):
     m = report[name]
     assert m["killed"], m

@@ -90,6 +90,7 @@ def test_stream_py_counting_mode_streams_on_after_an_alarm(tmp_path):
     assert g["alarm/alarm-stops"] is Grade.FAIL
 
 
+@pytest.mark.long(74)
 def test_stream_py_counting_mode_fails_only_where_stream_py_really_does(tmp_path):
     """Every scenario, at 115 200 Bd and on the slow link: stream.py's counting mode keeps
     within the buffer and loses nothing (its wake-up's answers are its own, however late the

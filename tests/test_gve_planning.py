@@ -91,6 +91,7 @@ def test_a_brake_measuring_vn_vectors_euclidean_fails_spill_diagonal(spec):
 
 
 @pytest.mark.slow
+@pytest.mark.long(71)
 def test_the_motion_checks_pass_over_a_pty(tmp_path):
     """`conform run` of every in-motion and planning check (full profile, --allow-motion)
     against `conform emulate serve` on a pty: none FAILs on a correct unit, though where a

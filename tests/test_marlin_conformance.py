@@ -34,6 +34,7 @@ def test_reference_units_pass_every_check(vid):
 
 
 @pytest.mark.slow
+@pytest.mark.long(190)
 def test_every_mutant_is_caught(marlin_mutant_report):
     report = marlin_mutant_report     # what `conform run --mutants` runs (conftest.py)
     assert {m["name"] for m in report} == set(MUTANTS)
@@ -125,6 +126,7 @@ def _run_over_a_pty(tmp_path, *opt_ins: str, least: int = 150, said: tuple[str, 
 
 
 @pytest.mark.slow
+@pytest.mark.long(87)
 def test_the_default_run_over_a_pty_skips_only_what_needs_an_opt_in(tmp_path, monkeypatch):
     """Without opt-ins every check that moves, halts, writes the EEPROM or heats is SKIPPED
     and says which opt-in it needs; the rest PASS (about 80 s of checks)."""
@@ -172,6 +174,7 @@ def _opt_in_parts() -> dict[str, list[str]]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("part", [*OPT_IN_PARTS, "rest"])
+@pytest.mark.long(135)
 def test_the_opt_in_run_over_a_pty_passes_every_check(tmp_path, monkeypatch, part):
     """Every opt-in (--allow-motion, --allow-eeprom, the heaters), in parts (OPT_IN_PARTS)
     that together hold every check once: nothing FAILs or ERRORs; of the three halt checks

@@ -35,6 +35,7 @@ def conform(*args, timeout=900):
 
 @pytest.mark.slow
 @needs_octoprint
+@pytest.mark.long(77)
 def test_octoprint_is_graded_as_its_source_behaves(tmp_path):
     p = conform("check-sender", "--variant", "marlin-2.1", "--report", str(tmp_path), "--json",
                 "--scenario", "noisy", "--scenario", "lost-ok", "--scenario", "reset",

@@ -32,6 +32,7 @@ def check_sender(tmp_path, program, *scenarios, timeout=None):
 
 
 @pytest.mark.slow
+@pytest.mark.long(45)
 def test_a_careful_sender_passes_every_scenario(tmp_path):
     code, checks = check_sender(tmp_path, "marlin_careful.py")
     bad = {k: c["actual"] for k, c in checks.items() if c["grade"] in ("FAIL", "DEVIATION", "ERROR")}

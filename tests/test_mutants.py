@@ -16,6 +16,7 @@ def mutant_report(spec):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(MUTANTS))
+@pytest.mark.long(120)
 def test_mutant_is_caught_by_its_check(mutant_report, name):
     m = mutant_report[name]
     assert m["killed"], f"{name} survived"

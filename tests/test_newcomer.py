@@ -374,6 +374,7 @@ def _wait_until_caught(pid: int, sig: int, bound: float = 60.0) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long(45)
 def test_proxy_stopped_by_sigint_always_finishes_within_its_bound(tmp_path, emulate):
     """50 proxies stopped by SIGINT at random moments — half started as a shell's background
     job (`conform proxy … &`: SIGINT ignored at start) and signalled while still loading, half

@@ -21,6 +21,7 @@ def _run(args: list[str], **kw) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.long(130)
 def test_wheel_install_finds_its_tables(tmp_path):
     wheels = tmp_path / "whl"
     built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps",
